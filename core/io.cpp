@@ -1,0 +1,133 @@
+#include "core/io.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace mcms {
+
+namespace fs = std::filesystem;
+
+void WriteFileAtomically(const fs::path& path, const std::function<void(std::ostream&)>& write) {
+  if (path.has_parent_path() && !path.parent_path().empty()) {
+    std::error_code ec;
+    fs::create_directories(path.parent_path(), ec);
+    if (ec) Throw("cannot create folder ", path.parent_path().string(), " for output ", path.string(), ": ", ec.message());
+  }
+  const fs::path tmp = path.string() + ".partial-" + std::to_string(::getpid());
+  try {
+    std::ofstream out(tmp, std::ios::binary);
+    if (!out) Throw("cannot write output file ", path.string());
+    write(out);
+    out.flush();
+    if (!out) Throw("error while writing output file ", path.string());
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw;
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    Throw("cannot move the finished output into place at ", path.string());
+  }
+}
+
+std::string ReadTextFile(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) Throw("cannot read ", path.string(), ": file missing or not readable");
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+namespace {
+std::vector<std::string> SplitCsvLine(const std::string& line) {
+  std::vector<std::string> cells;
+  std::string cell;
+  std::istringstream s(line);
+  while (std::getline(s, cell, ',')) {
+    const auto b = cell.find_first_not_of(" \t\r");
+    const auto e = cell.find_last_not_of(" \t\r");
+    cells.push_back(b == std::string::npos ? std::string() : cell.substr(b, e - b + 1));
+  }
+  if (!line.empty() && line.back() == ',') cells.emplace_back();
+  return cells;
+}
+}  // namespace
+
+CsvTable ReadCsv(const fs::path& path) {
+  std::istringstream in(ReadTextFile(path));
+  CsvTable t;
+  t.source = path;
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#' || line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    auto cells = SplitCsvLine(line);
+    if (t.header.empty()) {
+      t.header = std::move(cells);
+      continue;
+    }
+    if (cells.size() != t.header.size())
+      Throw(path.string(), " line ", lineno, ": expected ", t.header.size(), " columns as in the header, found ", cells.size());
+    t.rows.push_back(std::move(cells));
+    t.line_of_row.push_back(lineno);
+  }
+  if (t.header.empty()) Throw(path.string(), ": empty file, expected a CSV header row");
+  return t;
+}
+
+bool CsvTable::HasColumn(const std::string& name) const {
+  for (const auto& h : header)
+    if (h == name) return true;
+  return false;
+}
+
+int CsvTable::Column(const std::string& name) const {
+  for (size_t i = 0; i < header.size(); ++i)
+    if (header[i] == name) return static_cast<int>(i);
+  Throw(source.string(), ": missing column '", name, "' in the header");
+}
+
+double CsvTable::Number(size_t row, int column) const {
+  const std::string& cell = rows.at(row).at(column);
+  char* end = nullptr;
+  const double v = std::strtod(cell.c_str(), &end);
+  if (cell.empty() || end != cell.c_str() + cell.size() || !std::isfinite(v))
+    Throw(source.string(), " line ", line_of_row[row], ", column '", header[column], "': expected a finite number, found '", cell, "'");
+  return v;
+}
+
+Progress::Progress(std::string label, size_t total, bool quiet)
+    : label_(std::move(label)), total_(total), quiet_(quiet), tty_(::isatty(2)) {}
+
+void Progress::Update(size_t done) {
+  if (quiet_ || total_ == 0) return;
+  using clock = std::chrono::steady_clock;
+  const double now = std::chrono::duration<double>(clock::now().time_since_epoch()).count();
+  const double interval = tty_ ? 0.2 : 5.0;
+  if (done < total_ && last_ >= 0 && now - last_ < interval) return;
+  last_ = now;
+  std::fprintf(stderr, "%s%s: %zu/%zu (%.0f%%)%s", tty_ ? "\r" : "", label_.c_str(), done, total_,
+               100.0 * static_cast<double>(done) / static_cast<double>(total_), tty_ ? "" : "\n");
+  std::fflush(stderr);
+}
+
+void Progress::Finish() {
+  if (quiet_ || total_ == 0) return;
+  last_ = -1.0;
+  Update(total_);
+  if (tty_) std::fprintf(stderr, "\n");
+}
+
+}  // namespace mcms

@@ -1,0 +1,52 @@
+// File helpers shared by every module: atomic output (no half-written files),
+// plain-text reading with the file named in every error, CSV writing.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace mcms {
+
+// Writes a file through a temporary name in the same folder and renames it into
+// place only when `write` returned normally, so a failure leaves no partial file.
+void WriteFileAtomically(const std::filesystem::path& path,
+                         const std::function<void(std::ostream&)>& write);
+
+// Reads the whole file; InputError naming the file when it cannot be read.
+std::string ReadTextFile(const std::filesystem::path& path);
+
+// Simple CSV reading: a header row and numeric/text cells. Errors name file and row.
+struct CsvTable {
+  std::filesystem::path source;
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+  std::vector<int> line_of_row;  // 1-based line number in the file
+
+  // Column index; InputError naming the file and the column when absent.
+  int Column(const std::string& name) const;
+  bool HasColumn(const std::string& name) const;
+  // Number in a cell; InputError naming file, line and column when not a finite number.
+  double Number(size_t row, int column) const;
+};
+CsvTable ReadCsv(const std::filesystem::path& path);
+
+// Progress on stderr for long runs: "label: 37/120 frames (31%)", throttled to a few
+// updates per second, silent when quiet.
+class Progress {
+ public:
+  Progress(std::string label, size_t total, bool quiet = false);
+  void Update(size_t done);
+  void Finish();
+
+ private:
+  std::string label_;
+  size_t total_;
+  bool quiet_;
+  double last_ = -1.0;
+  bool tty_;
+};
+
+}  // namespace mcms

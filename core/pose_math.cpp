@@ -1,0 +1,73 @@
+#include "core/pose_math.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace mcms {
+
+Pose Pose::FromQuaternion(const Eigen::Quaterniond& q, const Vec3& t) {
+  return {q.normalized().toRotationMatrix(), t};
+}
+
+Pose Pose::FromRt(const double rt[6]) {
+  return {ExpSO3(Vec3(rt[0], rt[1], rt[2])), Vec3(rt[3], rt[4], rt[5])};
+}
+
+void Pose::ToRt(double rt[6]) const {
+  const Vec3 r = LogSO3(R);
+  for (int i = 0; i < 3; ++i) {
+    rt[i] = r[i];
+    rt[3 + i] = t[i];
+  }
+}
+
+Eigen::Quaterniond Pose::Quaternion() const {
+  Eigen::Quaterniond q(R);
+  q.normalize();
+  if (q.w() < 0) q.coeffs() *= -1.0;
+  return q;
+}
+
+Mat3 Skew(const Vec3& v) {
+  Mat3 S;
+  S << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return S;
+}
+
+Mat3 ExpSO3(const Vec3& r) {
+  const double th = r.norm();
+  if (th < 1e-12) return Mat3::Identity() + Skew(r);
+  return Eigen::AngleAxisd(th, r / th).toRotationMatrix();
+}
+
+Vec3 LogSO3(const Mat3& R) {
+  Eigen::AngleAxisd aa(R);
+  return aa.axis() * aa.angle();
+}
+
+Mat3 LeftJacobianSO3(const Vec3& r) {
+  const double th = r.norm();
+  const Mat3 K = Skew(r);
+  if (th < 1e-6) return Mat3::Identity() + 0.5 * K + K * K / 6.0;
+  const double th2 = th * th;
+  return Mat3::Identity() + (1.0 - std::cos(th)) / th2 * K + (th - std::sin(th)) / (th2 * th) * K * K;
+}
+
+Pose BoxPlus(const Pose& T, const Vec6& d) {
+  return {ExpSO3(d.head<3>()) * T.R, T.t + d.tail<3>()};
+}
+
+Vec6 BoxMinus(const Pose& T, const Pose& T_hat) {
+  Vec6 d;
+  d.head<3>() = LogSO3(T.R * T_hat.R.transpose());
+  d.tail<3>() = T.t - T_hat.t;
+  return d;
+}
+
+double RotationAngle(const Mat3& R_a, const Mat3& R_b) {
+  // Through the quaternion: acos of the trace loses half the digits near zero.
+  const Eigen::Quaterniond q(R_a.transpose() * R_b);
+  return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w()));
+}
+
+}  // namespace mcms

@@ -1,0 +1,47 @@
+// Rigid transforms and the project's pose-perturbation layout (docs/conventions.md):
+//   R = Exp(dtheta) * R_hat,  p = p_hat + dp,  tangent vector [dtheta; dp].
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace mcms {
+
+using Vec2 = Eigen::Vector2d;
+using Vec3 = Eigen::Vector3d;
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+using Mat2 = Eigen::Matrix2d;
+using Mat3 = Eigen::Matrix3d;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+
+// A rigid transform T_a_b: p_a = R * p_b + t.
+struct Pose {
+  Mat3 R = Mat3::Identity();
+  Vec3 t = Vec3::Zero();
+
+  static Pose Identity() { return {}; }
+  static Pose FromQuaternion(const Eigen::Quaterniond& q, const Vec3& t);
+  // mrcal's rt = [rotation vector; translation].
+  static Pose FromRt(const double rt[6]);
+  void ToRt(double rt[6]) const;
+  Eigen::Quaterniond Quaternion() const;  // normalized, w >= 0
+
+  Vec3 operator*(const Vec3& p) const { return R * p + t; }
+  Pose operator*(const Pose& o) const { return {R * o.R, R * o.t + t}; }
+  Pose Inverse() const { return {R.transpose(), -(R.transpose() * t)}; }
+};
+
+Mat3 Skew(const Vec3& v);
+Mat3 ExpSO3(const Vec3& r);
+Vec3 LogSO3(const Mat3& R);
+// Left Jacobian of SO(3): d(Exp(r) v)/dr = -[Exp(r) v]x * LeftJacobianSO3(r).
+Mat3 LeftJacobianSO3(const Vec3& r);
+
+// The tangent layout of every pose covariance: [dtheta; dp].
+Pose BoxPlus(const Pose& T, const Vec6& delta);
+Vec6 BoxMinus(const Pose& T, const Pose& T_hat);  // T = BoxPlus(T_hat, result)
+
+// Angle of the relative rotation R_a^T R_b, radians.
+double RotationAngle(const Mat3& R_a, const Mat3& R_b);
+
+}  // namespace mcms

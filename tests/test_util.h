@@ -1,0 +1,56 @@
+// Shared test helpers: where the real data lives, a central-difference Jacobian check.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include <Eigen/Core>
+
+namespace mcms::test {
+
+// ../shared/data beside the project, or $MCMS_DATA_DIR.
+inline std::filesystem::path DataRoot() {
+  if (const char* env = std::getenv("MCMS_DATA_DIR")) return env;
+  return std::filesystem::path(MCMS_SOURCE_DIR) / ".." / "shared" / "data";
+}
+
+// The folder of one real data set, or nullopt when it is not present.
+inline std::optional<std::filesystem::path> RealData(const std::string& name) {
+  const auto p = DataRoot() / name;
+  if (std::filesystem::is_directory(p)) return p;
+  return std::nullopt;
+}
+
+#define MCMS_REQUIRE_DATA(var, name)                                                           \
+  const auto var##_opt = ::mcms::test::RealData(name);                                        \
+  if (!var##_opt) GTEST_SKIP() << "skipped: real data not present: " << (::mcms::test::DataRoot() / name); \
+  const std::filesystem::path var = *var##_opt
+
+// Central differences of f: R^n -> R^m at x.
+inline Eigen::MatrixXd NumericJacobian(const std::function<Eigen::VectorXd(const Eigen::VectorXd&)>& f,
+                                       const Eigen::VectorXd& x, double h = 1e-6) {
+  const Eigen::VectorXd f0 = f(x);
+  Eigen::MatrixXd J(f0.size(), x.size());
+  for (int i = 0; i < x.size(); ++i) {
+    Eigen::VectorXd xp = x, xm = x;
+    xp[i] += h;
+    xm[i] -= h;
+    J.col(i) = (f(xp) - f(xm)) / (2 * h);
+  }
+  return J;
+}
+
+// A fresh scratch folder under the build tree.
+inline std::filesystem::path ScratchDir(const std::string& name) {
+  const auto p = std::filesystem::path(MCMS_BINARY_DIR) / "test-scratch" / name;
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
+  return p;
+}
+
+}  // namespace mcms::test

@@ -1,0 +1,324 @@
+#include "vision/camera_model.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/io.h"
+#include "vision/mrcal_c.h"
+
+namespace mcms {
+
+namespace fs = std::filesystem;
+static_assert(sizeof(mrcal_lensmodel_t) <= 32, "lensmodel storage too small");
+
+namespace {
+const mrcal_lensmodel_t& Lens(const unsigned char* raw) {
+  return *reinterpret_cast<const mrcal_lensmodel_t*>(raw);
+}
+}  // namespace
+
+CameraModel::CameraModel(const std::string& lensmodel, std::vector<double> intrinsics, int width, int height,
+                         const Pose& T_cam_rig)
+    : lensmodel_name_(lensmodel), intrinsics_(std::move(intrinsics)), width_(width), height_(height), T_cam_rig_(T_cam_rig) {
+  InitLens();
+}
+
+void CameraModel::InitLens() {
+  mrcal_lensmodel_t lens;
+  if (!mrcal_lensmodel_from_name(&lens, lensmodel_name_.c_str()) || !mrcal_lensmodel_type_is_valid(lens.type))
+    Throw("unknown or unconfigured lens model '", lensmodel_name_,
+          "'; expected an mrcal model name such as LENSMODEL_PINHOLE, LENSMODEL_OPENCV8 or "
+          "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=100");
+  if (!mrcal_lensmodel_metadata(&lens).has_gradients)
+    Throw("lens model '", lensmodel_name_, "' has no gradients in mrcal and cannot be used for estimation");
+  const int n = mrcal_lensmodel_num_params(&lens);
+  if (n != static_cast<int>(intrinsics_.size()))
+    Throw("lens model '", lensmodel_name_, "' takes ", n, " intrinsics, got ", intrinsics_.size());
+  for (double v : intrinsics_)
+    if (!std::isfinite(v)) Throw("lens model '", lensmodel_name_, "': intrinsics must be finite numbers");
+  if (width_ <= 0 || height_ <= 0) Throw("camera image size must be positive, got ", width_, "x", height_);
+  std::memcpy(lensmodel_, &lens, sizeof(lens));
+}
+
+bool CameraModel::CanProjectBehindCamera() const {
+  return mrcal_lensmodel_metadata(&Lens(lensmodel_)).can_project_behind_camera;
+}
+
+Vec2 CameraModel::Project(const Vec3& p_cam, Eigen::Matrix<double, 2, 3>* dq_dp,
+                          std::vector<double>* dq_dintrinsics) const {
+  mrcal_point3_t p{{p_cam.x(), p_cam.y(), p_cam.z()}};
+  mrcal_point2_t q;
+  mrcal_point3_t grad[2];
+  if (dq_dintrinsics) dq_dintrinsics->assign(2 * intrinsics_.size(), 0.0);
+  mrcal_project(&q, dq_dp ? grad : nullptr, dq_dintrinsics ? dq_dintrinsics->data() : nullptr, &p, 1,
+                &Lens(lensmodel_), intrinsics_.data());
+  if (dq_dp)
+    for (int r = 0; r < 2; ++r)
+      for (int c = 0; c < 3; ++c) (*dq_dp)(r, c) = grad[r].xyz[c];
+  return {q.x, q.y};
+}
+
+std::vector<Vec2> CameraModel::Project(const std::vector<Vec3>& p_cam) const {
+  std::vector<mrcal_point3_t> p(p_cam.size());
+  for (size_t i = 0; i < p.size(); ++i) p[i] = mrcal_point3_t{{p_cam[i].x(), p_cam[i].y(), p_cam[i].z()}};
+  std::vector<mrcal_point2_t> q(p.size());
+  if (!p.empty())
+    mrcal_project(q.data(), nullptr, nullptr, p.data(), static_cast<int>(p.size()), &Lens(lensmodel_), intrinsics_.data());
+  std::vector<Vec2> out(p.size());
+  for (size_t i = 0; i < p.size(); ++i) out[i] = {q[i].x, q[i].y};
+  return out;
+}
+
+std::optional<Vec3> CameraModel::Unproject(const Vec2& q) const { return Unproject(std::vector<Vec2>{q})[0]; }
+
+std::vector<std::optional<Vec3>> CameraModel::Unproject(const std::vector<Vec2>& qs) const {
+  std::vector<mrcal_point2_t> q(qs.size());
+  for (size_t i = 0; i < q.size(); ++i) q[i] = mrcal_point2_t{{qs[i].x(), qs[i].y()}};
+  std::vector<mrcal_point3_t> v(q.size());
+  std::vector<std::optional<Vec3>> out(q.size());
+  if (q.empty()) return out;
+  // mrcal_unproject reports failure for the whole batch; points that did not converge
+  // come back as NaN, which we turn into nullopt.
+  mrcal_unproject(v.data(), q.data(), static_cast<int>(q.size()), &Lens(lensmodel_), intrinsics_.data());
+  for (size_t i = 0; i < q.size(); ++i) {
+    const Vec3 d(v[i].x, v[i].y, v[i].z);
+    if (!d.allFinite() || d.norm() == 0.0) continue;
+    // Check the round trip: a non-converged solve does not reproject to q.
+    const Vec2 back = Project(d);
+    if (!back.allFinite() || (back - qs[i]).norm() > 1e-3) continue;
+    out[i] = d.normalized();
+  }
+  return out;
+}
+
+bool CameraModel::Sees(const Vec3& p_cam, double margin) const {
+  if (!(p_cam.z() > 0.0) && !CanProjectBehindCamera()) return false;
+  const Vec2 q = Project(p_cam);
+  return q.allFinite() && q.x() >= -0.5 + margin && q.y() >= -0.5 + margin && q.x() <= width_ - 0.5 - margin &&
+         q.y() <= height_ - 0.5 - margin;
+}
+
+CameraModel CameraModel::ReadCameramodel(const fs::path& path) {
+  if (!fs::exists(path)) Throw("camera model file ", path.string(), " does not exist");
+  mrcal_cameramodel_t* m = mrcal_read_cameramodel_file(path.c_str());
+  if (!m) Throw("cannot parse mrcal camera model ", path.string(), ": expected a .cameramodel file as written by mrcal");
+  std::unique_ptr<mrcal_cameramodel_t, void (*)(mrcal_cameramodel_t*)> guard(
+      m, [](mrcal_cameramodel_t* p) { mrcal_free_cameramodel(&p); });
+  char name[256];
+  if (!mrcal_lensmodel_name(name, sizeof(name), &m->lensmodel)) Throw("camera model ", path.string(), ": bad lens model");
+  const int n = mrcal_lensmodel_num_params(&m->lensmodel);
+  std::vector<double> intr(m->intrinsics, m->intrinsics + n);
+  try {
+    return CameraModel(name, intr, static_cast<int>(m->imagersize[0]), static_cast<int>(m->imagersize[1]),
+                       Pose::FromRt(m->rt_cam_ref));
+  } catch (const InputError& e) {
+    Throw("camera model ", path.string(), ": ", e.what());
+  }
+}
+
+void CameraModel::WriteCameramodel(const fs::path& path) const {
+  // We write the file ourselves: libmrcal 2.2's mrcal_write_cameramodel_file() prints
+  // with "%f", which keeps 6 decimals and destroys small distortion coefficients and
+  // rotations. The text is the same Python-literal format mrcal writes, at full
+  // precision; libmrcal and Debian's mrcal tools read it (tests check both).
+  double rt[6];
+  T_cam_rig_.ToRt(rt);
+  char buf[64];
+  auto num = [&](double v) {
+    std::snprintf(buf, sizeof(buf), "%.17g", v);
+    return std::string(buf);
+  };
+  std::ostringstream s;
+  s << "# generated by mcms\n{\n";
+  s << "    'lensmodel':  '" << lensmodel_name_ << "',\n\n";
+  s << "    # intrinsics are fx,fy,cx,cy,distortion0,distortion1,....\n";
+  s << "    'intrinsics': [ ";
+  for (size_t i = 0; i < intrinsics_.size(); ++i) s << (i ? ", " : "") << num(intrinsics_[i]);
+  s << ",],\n\n";
+  s << "    # extrinsics are rt_fromref\n    'extrinsics': [ ";
+  for (int i = 0; i < 6; ++i) s << (i ? ", " : "") << num(rt[i]);
+  s << ",],\n\n";
+  s << "    'imagersize': [ " << width_ << ", " << height_ << ",],\n}\n";
+  const std::string text = s.str();
+  WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
+}
+
+namespace {
+// OpenCV distortion counts -> mrcal model names.
+std::string LensFromDistortionCount(int n, const fs::path& path) {
+  switch (n) {
+    case 0: return "LENSMODEL_PINHOLE";
+    case 4: return "LENSMODEL_OPENCV4";
+    case 5: return "LENSMODEL_OPENCV5";
+    case 8: return "LENSMODEL_OPENCV8";
+    case 12: return "LENSMODEL_OPENCV12";
+  }
+  Throw(path.string(), ": distortion_coefficients has ", n, " values; expected 0, 4, 5, 8 or 12");
+}
+}  // namespace
+
+CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
+  if (!fs::exists(path)) Throw("camera file ", path.string(), " does not exist");
+  cv::FileStorage fs_in;
+  try {
+    fs_in.open(path.string(), cv::FileStorage::READ);
+  } catch (const cv::Exception& e) {
+    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.what());
+  }
+  if (!fs_in.isOpened()) Throw("cannot open OpenCV YAML ", path.string());
+  cv::Mat K, D, rvec, tvec;
+  fs_in["camera_matrix"] >> K;
+  if (K.empty()) fs_in["M1"] >> K;
+  fs_in["distortion_coefficients"] >> D;
+  if (D.empty()) fs_in["D1"] >> D;
+  int w = 0, h = 0;
+  fs_in["image_width"] >> w;
+  fs_in["image_height"] >> h;
+  if (K.rows != 3 || K.cols != 3) Throw(path.string(), ": field camera_matrix missing or not 3x3");
+  if (w <= 0 || h <= 0) Throw(path.string(), ": fields image_width and image_height missing or not positive");
+  K.convertTo(K, CV_64F);
+  std::vector<double> intr = {K.at<double>(0, 0), K.at<double>(1, 1), K.at<double>(0, 2), K.at<double>(1, 2)};
+  if (!D.empty()) {
+    D.convertTo(D, CV_64F);
+    D = D.reshape(1, 1);
+    for (int i = 0; i < D.cols; ++i) intr.push_back(D.at<double>(0, i));
+  }
+  const int ndist = D.empty() ? 0 : D.cols;
+  const std::string lens = LensFromDistortionCount(ndist, path);
+  Pose T;
+  fs_in["rvec"] >> rvec;
+  fs_in["tvec"] >> tvec;
+  if (!rvec.empty() && !tvec.empty()) {
+    rvec.convertTo(rvec, CV_64F);
+    tvec.convertTo(tvec, CV_64F);
+    if (rvec.total() != 3 || tvec.total() != 3) Throw(path.string(), ": rvec and tvec must have 3 values each");
+    double rt[6];
+    for (int i = 0; i < 3; ++i) {
+      rt[i] = rvec.at<double>(i);
+      rt[3 + i] = tvec.at<double>(i);
+    }
+    T = Pose::FromRt(rt);
+  }
+  try {
+    return CameraModel(lens, intr, w, h, T);
+  } catch (const InputError& e) {
+    Throw(path.string(), ": ", e.what());
+  }
+}
+
+void CameraModel::WriteOpenCvYaml(const fs::path& path) const {
+  const std::string& n = lensmodel_name_;
+  if (n != "LENSMODEL_PINHOLE" && n.rfind("LENSMODEL_OPENCV", 0) != 0)
+    Throw("cannot write ", path.string(), " as OpenCV YAML: lens model ", n, " has no OpenCV equivalent");
+  cv::Mat K = (cv::Mat_<double>(3, 3) << intrinsics_[0], 0, intrinsics_[2], 0, intrinsics_[1], intrinsics_[3], 0, 0, 1);
+  cv::Mat D(1, static_cast<int>(intrinsics_.size()) - 4, CV_64F);
+  for (int i = 0; i < D.cols; ++i) D.at<double>(0, i) = intrinsics_[4 + i];
+  double rt[6];
+  T_cam_rig_.ToRt(rt);
+  cv::Mat rvec = (cv::Mat_<double>(3, 1) << rt[0], rt[1], rt[2]);
+  cv::Mat tvec = (cv::Mat_<double>(3, 1) << rt[3], rt[4], rt[5]);
+  cv::FileStorage out(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY);
+  out << "image_width" << width_ << "image_height" << height_ << "camera_matrix" << K;
+  if (D.cols > 0) out << "distortion_coefficients" << D;
+  out << "rvec" << rvec << "tvec" << tvec;
+  const std::string text = out.releaseAndGetString();
+  WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
+}
+
+CameraModel CameraModel::Read(const fs::path& path) {
+  const std::string text = ReadTextFile(path);
+  const auto first = text.find_first_not_of(" \t\r\n");
+  if (first != std::string::npos && (text[first] == '{' || text[first] == '#')) return ReadCameramodel(path);
+  return ReadOpenCvYaml(path);
+}
+
+namespace {
+std::vector<double> NumberList(const YAML::Node& n, const std::string& what, const fs::path& path) {
+  if (!n || !n.IsSequence()) Throw(path.string(), ": field '", what, "' missing or not a list of numbers");
+  std::vector<double> v;
+  for (const auto& e : n) {
+    try {
+      v.push_back(e.as<double>());
+    } catch (const YAML::Exception&) {
+      Throw(path.string(), " line ", e.Mark().line + 1, ": field '", what, "' must hold numbers");
+    }
+  }
+  return v;
+}
+}  // namespace
+
+CameraRig CameraRig::Read(const fs::path& path) {
+  if (!fs::exists(path)) Throw("rig file ", path.string(), " does not exist");
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path.string());
+  } catch (const YAML::Exception& e) {
+    Throw("cannot parse rig file ", path.string(), ": ", e.what());
+  }
+  const YAML::Node cams = root["cameras"];
+  if (!cams || !cams.IsSequence() || cams.size() == 0)
+    Throw(path.string(), ": expected a non-empty list 'cameras'");
+  CameraRig rig;
+  for (size_t i = 0; i < cams.size(); ++i) {
+    const YAML::Node c = cams[i];
+    const std::string name = c["name"] ? c["name"].as<std::string>() : "cam" + std::to_string(i);
+    const std::string where = path.string() + ", camera " + name;
+    try {
+      if (c["model"]) {
+        fs::path model = c["model"].as<std::string>();
+        if (model.is_relative()) model = path.parent_path() / model;
+        rig.cameras.push_back(CameraModel::Read(model));
+      } else {
+        if (!c["lensmodel"]) Throw("needs either 'model' (a file) or 'lensmodel', 'intrinsics', 'imagersize'");
+        const auto size = NumberList(c["imagersize"], "imagersize", path);
+        if (size.size() != 2) Throw("'imagersize' must be [width, height]");
+        Pose T;
+        if (c["rt_cam_rig"]) {
+          const auto rt = NumberList(c["rt_cam_rig"], "rt_cam_rig", path);
+          if (rt.size() != 6) Throw("'rt_cam_rig' must have 6 numbers (rotation vector, translation in m)");
+          T = Pose::FromRt(rt.data());
+        }
+        rig.cameras.emplace_back(c["lensmodel"].as<std::string>(), NumberList(c["intrinsics"], "intrinsics", path),
+                                 static_cast<int>(size[0]), static_cast<int>(size[1]), T);
+      }
+    } catch (const InputError& e) {
+      Throw(where, ": ", e.what());
+    } catch (const YAML::Exception& e) {
+      Throw(where, ": ", e.what());
+    }
+    rig.names.push_back(name);
+  }
+  return rig;
+}
+
+void CameraRig::Write(const fs::path& path) const {
+  YAML::Emitter out;
+  out << YAML::BeginMap << YAML::Key << "cameras" << YAML::Value << YAML::BeginSeq;
+  out.SetDoublePrecision(17);
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    const CameraModel& c = cameras[i];
+    double rt[6];
+    c.T_cam_rig().ToRt(rt);
+    out << YAML::BeginMap;
+    out << YAML::Key << "name" << YAML::Value << (i < names.size() ? names[i] : "cam" + std::to_string(i));
+    out << YAML::Key << "lensmodel" << YAML::Value << c.LensModelName();
+    out << YAML::Key << "intrinsics" << YAML::Value << YAML::Flow << c.Intrinsics();
+    out << YAML::Key << "imagersize" << YAML::Value << YAML::Flow << std::vector<int>{c.Width(), c.Height()};
+    out << YAML::Key << "rt_cam_rig" << YAML::Value << YAML::Flow << std::vector<double>(rt, rt + 6);
+    out << YAML::EndMap;
+  }
+  out << YAML::EndSeq << YAML::EndMap;
+  const std::string text = out.c_str();
+  WriteFileAtomically(path, [&](std::ostream& o) { o << text << "\n"; });
+}
+
+}  // namespace mcms
