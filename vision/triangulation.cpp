@@ -1,0 +1,276 @@
+#include "vision/triangulation.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <string>
+
+#include "vision/sphere_projection.h"
+
+namespace mcms {
+
+bool TriangulationOptions::IsValid(std::string* why) const {
+  if (!(sphere_radius_m >= 0)) return (*why = "sphere_radius_m must be >= 0", false);
+  if (max_iterations < 1) return (*why = "max_iterations must be >= 1", false);
+  if (bias_outline_points < 8) return (*why = "bias_outline_points must be >= 8", false);
+  return true;
+}
+
+bool MatchingOptions::IsValid(std::string* why) const {
+  if (!(gate_px > 0) || !(gate_sigma > 0)) return (*why = "gate_px and gate_sigma must be positive", false);
+  if (min_views < 2) return (*why = "min_views must be >= 2", false);
+  if (!(max_chi2_per_dof > 0)) return (*why = "max_chi2_per_dof must be positive", false);
+  return triangulation.IsValid(why);
+}
+
+Mat2 WhiteningOf(const Mat2& cov) {
+  // cov = L_c L_c^T (lower); whitening W = L_c^-1 satisfies W^T W = cov^-1.
+  Eigen::LLT<Mat2> llt(cov);
+  return llt.matrixL().solve(Mat2::Identity());
+}
+
+namespace {
+
+// The predicted measurement of a point (the centre's projection, or the sphere
+// image's centroid) and its Jacobian with respect to p_rig (the bias's own
+// derivative is second order in r/|c| and left out).
+Vec2 Predict(const CameraModel& cam, const Vec3& p_rig, double radius, int outline_points,
+             Eigen::Matrix<double, 2, 3>* dq_dprig) {
+  const Vec3 p_cam = cam.T_cam_rig() * p_rig;
+  Eigen::Matrix<double, 2, 3> dq_dpcam;
+  Vec2 q = cam.Project(p_cam, dq_dprig ? &dq_dpcam : nullptr);
+  if (dq_dprig) *dq_dprig = dq_dpcam * cam.T_cam_rig().R;
+  if (radius > 0) q += SphereProjectionBias(cam, p_cam, radius, outline_points);
+  return q;
+}
+
+bool InFront(const CameraModel& cam, const Vec3& p_rig, double min_depth) {
+  const Vec3 p_cam = cam.T_cam_rig() * p_rig;
+  return cam.CanProjectBehindCamera() ? p_cam.norm() > min_depth : p_cam.z() > min_depth;
+}
+
+std::optional<Vec3> RayInRig(const CameraModel& cam, const Vec2& q, Vec3* origin) {
+  const auto d = cam.Unproject(q);
+  if (!d) return std::nullopt;
+  const Pose T_rig_cam = cam.T_cam_rig().Inverse();
+  *origin = T_rig_cam.t;
+  return T_rig_cam.R * *d;
+}
+
+// Least-squares point nearest to all rays; nullopt when the rays are nearly parallel.
+std::optional<Vec3> NearestPointToRays(const std::vector<Vec3>& origins, const std::vector<Vec3>& dirs) {
+  Mat3 A = Mat3::Zero();
+  Vec3 b = Vec3::Zero();
+  for (size_t i = 0; i < dirs.size(); ++i) {
+    const Mat3 P = Mat3::Identity() - dirs[i] * dirs[i].transpose();
+    A += P;
+    b += P * origins[i];
+  }
+  Eigen::SelfAdjointEigenSolver<Mat3> es(A);
+  if (es.eigenvalues()[0] < 1e-8 * es.eigenvalues()[2] || es.eigenvalues()[0] < 1e-10) return std::nullopt;
+  return A.ldlt().solve(b);
+}
+
+}  // namespace
+
+std::optional<TriangulatedPoint> TriangulateNView(const CameraRig& rig,
+                                                  const std::vector<std::vector<ImagePoint>>& points,
+                                                  const std::vector<PointObservation>& obs,
+                                                  const TriangulationOptions& options) {
+  if (obs.size() < 2) return std::nullopt;
+  std::vector<Vec3> origins, dirs;
+  for (const auto& o : obs) {
+    Vec3 c;
+    const auto d = RayInRig(rig.cameras[o.camera], points[o.camera][o.index].q, &c);
+    if (!d) return std::nullopt;
+    origins.push_back(c);
+    dirs.push_back(*d);
+  }
+  auto p0 = NearestPointToRays(origins, dirs);
+  if (!p0) return std::nullopt;
+  Vec3 p = *p0;
+  std::vector<Mat2> W(obs.size());
+  for (size_t k = 0; k < obs.size(); ++k) W[k] = WhiteningOf(points[obs[k].camera][obs[k].index].cov);
+
+  Mat3 H = Mat3::Zero();
+  double chi2 = 0, sq = 0;
+  for (int it = 0; it < options.max_iterations; ++it) {
+    H.setZero();
+    Vec3 g = Vec3::Zero();
+    chi2 = sq = 0;
+    for (size_t k = 0; k < obs.size(); ++k) {
+      const CameraModel& cam = rig.cameras[obs[k].camera];
+      if (!InFront(cam, p, 1e-3)) return std::nullopt;
+      Eigen::Matrix<double, 2, 3> J;
+      const Vec2 e = points[obs[k].camera][obs[k].index].q -
+                     Predict(cam, p, options.sphere_radius_m, options.bias_outline_points, &J);
+      const Vec2 r = W[k] * e;
+      const Eigen::Matrix<double, 2, 3> Jw = W[k] * J;
+      H += Jw.transpose() * Jw;
+      g += Jw.transpose() * r;
+      chi2 += r.squaredNorm();
+      sq += e.squaredNorm();
+    }
+    const Vec3 step = H.ldlt().solve(g);
+    if (!step.allFinite()) return std::nullopt;
+    p += step;
+    if (step.norm() < 1e-10) break;
+  }
+  // Final residuals and covariance at the solution.
+  H.setZero();
+  chi2 = sq = 0;
+  for (size_t k = 0; k < obs.size(); ++k) {
+    const CameraModel& cam = rig.cameras[obs[k].camera];
+    if (!InFront(cam, p, 1e-3)) return std::nullopt;
+    Eigen::Matrix<double, 2, 3> J;
+    const Vec2 e = points[obs[k].camera][obs[k].index].q -
+                   Predict(cam, p, options.sphere_radius_m, options.bias_outline_points, &J);
+    const Eigen::Matrix<double, 2, 3> Jw = W[k] * J;
+    H += Jw.transpose() * Jw;
+    chi2 += (W[k] * e).squaredNorm();
+    sq += e.squaredNorm();
+  }
+  TriangulatedPoint t;
+  t.p_rig = p;
+  t.cov = H.inverse();
+  if (!t.cov.allFinite()) return std::nullopt;
+  t.observations = obs;
+  t.chi2 = chi2;
+  t.rms_px = std::sqrt(sq / obs.size());
+  return t;
+}
+
+namespace {
+
+struct Candidate {
+  Vec3 p;
+  std::vector<PointObservation> obs;
+  double cost;  // sum of squared normalized reprojection errors
+};
+
+// The image point of camera c nearest to the prediction q, if within the gate.
+int NearestWithinGate(const std::vector<ImagePoint>& pts, const Vec2& q, const MatchingOptions& o, double* d2norm) {
+  int best = -1;
+  double best_d = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    const Vec2 e = pts[i].q - q;
+    const double sigma = std::sqrt(std::max(pts[i].cov(0, 0), pts[i].cov(1, 1)));
+    const double gate = std::max(o.gate_px, o.gate_sigma * sigma);
+    const double d = e.norm();
+    if (d > gate) continue;
+    if (best < 0 || d < best_d) {
+      best = static_cast<int>(i);
+      best_d = d;
+    }
+  }
+  if (best >= 0 && d2norm) *d2norm = best_d * best_d;
+  return best;
+}
+
+}  // namespace
+
+std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
+                                                   const std::vector<std::vector<ImagePoint>>& points,
+                                                   const MatchingOptions& options) {
+  const int ncam = static_cast<int>(rig.size());
+  // Rays of every image point, once.
+  std::vector<std::vector<std::optional<Vec3>>> dirs(ncam);
+  std::vector<Vec3> centres(ncam);
+  for (int c = 0; c < ncam; ++c) {
+    const Pose T_rig_cam = rig.cameras[c].T_cam_rig().Inverse();
+    centres[c] = T_rig_cam.t;
+    std::vector<Vec2> qs;
+    for (const auto& ip : points[c]) qs.push_back(ip.q);
+    auto d = rig.cameras[c].Unproject(qs);
+    for (auto& v : d)
+      if (v) v = T_rig_cam.R * *v;
+    dirs[c] = std::move(d);
+  }
+
+  const double r = options.triangulation.sphere_radius_m;
+  const int nb = options.triangulation.bias_outline_points;
+  std::vector<Candidate> cands;
+  for (int a = 0; a < ncam; ++a)
+    for (int b = a + 1; b < ncam; ++b)
+      for (size_t i = 0; i < points[a].size(); ++i) {
+        if (!dirs[a][i]) continue;
+        for (size_t j = 0; j < points[b].size(); ++j) {
+          if (!dirs[b][j]) continue;
+          const auto p = NearestPointToRays({centres[a], centres[b]}, {*dirs[a][i], *dirs[b][j]});
+          if (!p || !InFront(rig.cameras[a], *p, options.min_depth_m) ||
+              !InFront(rig.cameras[b], *p, options.min_depth_m))
+            continue;
+          // The pair itself must be consistent (the epipolar test in pixels).
+          Candidate cand{*p, {}, 0.0};
+          bool ok = true;
+          for (auto [c, k] : {std::pair<int, size_t>{a, i}, std::pair<int, size_t>{b, j}}) {
+            const Vec2 e = points[c][k].q - Predict(rig.cameras[c], *p, r, nb, nullptr);
+            const double sigma = std::sqrt(std::max(points[c][k].cov(0, 0), points[c][k].cov(1, 1)));
+            if (e.norm() > std::max(options.gate_px, options.gate_sigma * sigma)) {
+              ok = false;
+              break;
+            }
+            cand.cost += e.squaredNorm();
+            cand.obs.push_back({c, static_cast<int>(k)});
+          }
+          if (!ok) continue;
+          // Support from the other cameras.
+          for (int c = 0; c < ncam; ++c) {
+            if (c == a || c == b || !InFront(rig.cameras[c], *p, options.min_depth_m)) continue;
+            double d2 = 0;
+            const int k = NearestWithinGate(points[c], Predict(rig.cameras[c], *p, r, nb, nullptr), options, &d2);
+            if (k >= 0) {
+              cand.obs.push_back({c, k});
+              cand.cost += d2;
+            }
+          }
+          if (static_cast<int>(cand.obs.size()) >= options.min_views) cands.push_back(std::move(cand));
+        }
+      }
+  // Most views first, then best fit per view.
+  std::sort(cands.begin(), cands.end(), [](const Candidate& x, const Candidate& y) {
+    if (x.obs.size() != y.obs.size()) return x.obs.size() > y.obs.size();
+    return x.cost / x.obs.size() < y.cost / y.obs.size();
+  });
+  std::vector<std::vector<bool>> used(ncam);
+  for (int c = 0; c < ncam; ++c) used[c].assign(points[c].size(), false);
+  std::vector<TriangulatedPoint> out;
+  for (const Candidate& cand : cands) {
+    std::vector<PointObservation> obs;
+    for (const auto& o : cand.obs)
+      if (!used[o.camera][o.index]) obs.push_back(o);
+    // A candidate that lost views to better points is only kept if it keeps them all
+    // or still has enough views; re-ranking is not needed for the few points we see.
+    if (static_cast<int>(obs.size()) < options.min_views || obs.size() < cand.obs.size()) continue;
+    std::optional<TriangulatedPoint> t = TriangulateNView(rig, points, obs, options.triangulation);
+    // Remove outlier views while the fit is poor and views remain.
+    while (t && t->views() > options.min_views &&
+           t->chi2 / std::max(1, 2 * t->views() - 3) > options.max_chi2_per_dof) {
+      int worst = -1;
+      double worst_e = -1;
+      for (int k = 0; k < t->views(); ++k) {
+        const auto& o = t->observations[k];
+        const Mat2 W = WhiteningOf(points[o.camera][o.index].cov);
+        const double e =
+            (W * (points[o.camera][o.index].q - Predict(rig.cameras[o.camera], t->p_rig, r, nb, nullptr))).squaredNorm();
+        if (e > worst_e) {
+          worst_e = e;
+          worst = k;
+        }
+      }
+      auto reduced = t->observations;
+      reduced.erase(reduced.begin() + worst);
+      t = TriangulateNView(rig, points, reduced, options.triangulation);
+    }
+    if (!t) continue;
+    const int dof = 2 * t->views() - 3;
+    if (dof > 0 && t->chi2 / dof > options.max_chi2_per_dof) continue;
+    for (const auto& o : t->observations) used[o.camera][o.index] = true;
+    out.push_back(std::move(*t));
+  }
+  return out;
+}
+
+}  // namespace mcms
