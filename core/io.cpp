@@ -118,16 +118,20 @@ void Progress::Update(size_t done) {
   const double interval = tty_ ? 0.2 : 5.0;
   if (done < total_ && last_ >= 0 && now - last_ < interval) return;
   last_ = now;
+  printed_total_ = done >= total_;
   std::fprintf(stderr, "%s%s: %zu/%zu (%.0f%%)%s", tty_ ? "\r" : "", label_.c_str(), done, total_,
                100.0 * static_cast<double>(done) / static_cast<double>(total_), tty_ ? "" : "\n");
   std::fflush(stderr);
 }
 
 void Progress::Finish() {
-  if (quiet_ || total_ == 0) return;
-  last_ = -1.0;
-  Update(total_);
+  if (quiet_ || total_ == 0 || finished_) return;
+  if (!printed_total_) {
+    last_ = -1.0;
+    Update(total_);
+  }
   if (tty_) std::fprintf(stderr, "\n");
+  finished_ = true;
 }
 
 }  // namespace mcms

@@ -47,6 +47,7 @@ class Progress {
   bool quiet_;
   double last_ = -1.0;
   bool tty_;
+  bool printed_total_ = false, finished_ = false;
 };
 
 }  // namespace mcms

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# One-step set-up on Debian bookworm: install the missing Debian packages, build,
+# then either run the main job (demo) or the tests (test).
+#   scripts/setup.sh demo   # install + build + `mcms demo` on the embedded default scenario
+#   scripts/setup.sh test   # install + build + the whole test suite
+# Runs as root, or as a user with sudo. Builds into ./build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+mode="${1:-}"
+case "$mode" in
+  demo|test) ;;
+  *) echo "usage: scripts/setup.sh demo|test" >&2; exit 2 ;;
+esac
+
+packages=(
+  build-essential cmake pkg-config
+  libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
+  libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  mrcal python3-mrcal python3-opencv python3-numpy
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing missing Debian packages: ${missing[*]}"
+  sudo_cmd=()
+  if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
+  "${sudo_cmd[@]}" apt-get update -q
+  DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+jobs=$(nproc 2>/dev/null || echo 2)
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMCMS_WERROR=ON
+cmake --build build -j"$jobs"
+
+if [ "$mode" = demo ]; then
+  ./build/app/mcms demo -o mcms-demo
+else
+  ctest --test-dir build --output-on-failure -j"$jobs"
+fi

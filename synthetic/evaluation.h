@@ -1,0 +1,38 @@
+// Audit of tracked poses against the forward model's ground truth: errors and their
+// consistency with the covariance the tracker reported (NEES against chi-square).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/pose_math.h"
+#include "tracking/tracker.h"
+
+namespace mcms {
+
+struct PoseErrorSummary {
+  int frames = 0, ok = 0, degraded = 0, lost = 0;
+  int evaluated = 0;            // frames with a pose (ok or degraded)
+  double position_rms_m = 0;    // RMS of |p - p_true|
+  double position_max_m = 0;
+  double rotation_rms_rad = 0;  // RMS of the rotation angle error
+  double rotation_max_rad = 0;
+  // Normalized estimation error squared of [dtheta; dp] with the reported 6x6 covariance:
+  // its mean over the evaluated frames, and the two-sided 95 % band of that mean for an
+  // honest covariance (chi-square with 6 * evaluated dof, divided by evaluated).
+  double mean_nees = 0, nees_band_lo = 0, nees_band_hi = 0;
+  // RMS of the errors predicted by the covariances (sqrt of mean trace of the blocks).
+  double predicted_position_rms_m = 0, predicted_rotation_rms_rad = 0;
+  bool NeesInBand() const { return evaluated > 0 && mean_nees >= nees_band_lo && mean_nees <= nees_band_hi; }
+};
+
+// truth[i] is the true T_rig_target of results[i].
+PoseErrorSummary EvaluatePoses(const std::vector<FrameResult>& results, const std::vector<Pose>& truth);
+
+// Two-sided band [lo, hi] holding a chi-square(dof) variable with probability `p`.
+void Chi2Band(double dof, double p, double* lo, double* hi);
+
+// A human-readable report (mm, degrees).
+std::string FormatSummary(const PoseErrorSummary& s);
+
+}  // namespace mcms

@@ -1,0 +1,167 @@
+#include "tracking/sequence.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
+
+#include "core/error.h"
+#include "core/io.h"
+
+namespace mcms {
+
+namespace fs = std::filesystem;
+
+namespace {
+bool IsImageFile(const fs::path& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e == ".png" || e == ".pgm" || e == ".tif" || e == ".tiff" || e == ".jpg" || e == ".bmp";
+}
+std::optional<size_t> FrameNumber(const fs::path& p) {
+  const std::string s = p.stem().string();
+  std::string digits;
+  for (char ch : s)
+    if (std::isdigit(static_cast<unsigned char>(ch))) digits += ch;
+  if (digits.empty()) return std::nullopt;
+  return static_cast<size_t>(std::stoull(digits));
+}
+}  // namespace
+
+ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
+  if (!fs::is_directory(in.images_dir)) Throw("image folder ", in.images_dir.string(), " does not exist");
+  std::set<std::string> folders;
+  for (const auto& e : fs::directory_iterator(in.images_dir))
+    if (e.is_directory()) folders.insert(e.path().filename().string());
+  if (folders.empty())
+    Throw("image folder ", in.images_dir.string(), " is empty: expected one sub-folder of images per rig camera (",
+          rig.names.empty() ? std::string("cam0, ...") : rig.names.front() + ", ...", ")");
+  for (const auto& n : rig.names)
+    if (!folders.count(n))
+      Throw("image folder ", in.images_dir.string(), " has no sub-folder '", n, "' for rig camera '", n, "' (the rig has ",
+            rig.size(), " cameras, the folder holds ", folders.size(), ")");
+  if (folders.size() != rig.size()) {
+    std::string extra;
+    for (const auto& f : folders)
+      if (std::find(rig.names.begin(), rig.names.end(), f) == rig.names.end()) extra += (extra.empty() ? "" : ", ") + f;
+    Throw("camera count mismatch: the rig has ", rig.size(), " cameras but ", in.images_dir.string(), " holds ",
+          folders.size(), " camera folders (not in the rig: ", extra, ")");
+  }
+  std::map<size_t, std::vector<fs::path>> by_frame;
+  for (size_t c = 0; c < rig.size(); ++c) {
+    for (const auto& e : fs::directory_iterator(in.images_dir / rig.names[c])) {
+      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
+      const auto f = FrameNumber(e.path());
+      if (!f) continue;
+      auto& v = by_frame[*f];
+      v.resize(rig.size());
+      v[c] = e.path();
+    }
+  }
+  if (by_frame.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
+  ImageSequence seq;
+  for (auto& [f, paths] : by_frame) {
+    seq.frames.push_back(f);
+    paths.resize(rig.size());
+    seq.image_paths.push_back(paths);
+  }
+  // Image size check on the first image of each camera: a wrong rig is an error.
+  for (size_t c = 0; c < rig.size(); ++c) {
+    for (const auto& paths : seq.image_paths) {
+      if (paths[c].empty()) continue;
+      const cv::Mat im = cv::imread(paths[c].string(), cv::IMREAD_UNCHANGED);
+      if (im.empty()) break;  // a corrupt first image is a per-frame problem; check the camera later
+      if (im.cols != rig.cameras[c].Width() || im.rows != rig.cameras[c].Height())
+        Throw("image ", paths[c].string(), " is ", im.cols, "x", im.rows, " but the rig says camera '", rig.names[c],
+              "' is ", rig.cameras[c].Width(), "x", rig.cameras[c].Height());
+      break;
+    }
+  }
+  // Times.
+  std::map<size_t, double> times;
+  if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
+    const CsvTable t = ReadCsv(in.frames_csv);
+    const int cf = t.Column("frame"), ct = t.Column("time_s");
+    double last = -1e300;
+    for (size_t r = 0; r < t.rows.size(); ++r) {
+      const double f = t.Number(r, cf), time = t.Number(r, ct);
+      if (!(time > last))
+        Throw(in.frames_csv.string(), " line ", t.line_of_row[r], ": time_s must increase from row to row");
+      last = time;
+      times[static_cast<size_t>(f)] = time;
+    }
+  } else if (!(in.frame_rate_hz > 0)) {
+    Throw("frame rate must be positive, got ", in.frame_rate_hz);
+  }
+  for (size_t f : seq.frames) {
+    if (!times.empty()) {
+      const auto it = times.find(f);
+      if (it == times.end()) Throw(in.frames_csv.string(), ": no time for frame ", f);
+      seq.times_s.push_back(it->second);
+    } else {
+      seq.times_s.push_back(static_cast<double>(f) / in.frame_rate_hz);
+    }
+  }
+  return seq;
+}
+
+std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
+                                            const std::function<void(size_t, size_t)>& progress) {
+  std::vector<FrameResult> out;
+  const size_t ncam = tracker.rig().size();
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    std::vector<cv::Mat> images(ncam);
+    std::vector<std::string> problems(ncam);
+    for (size_t c = 0; c < ncam; ++c) {
+      const fs::path& p = seq.image_paths[i][c];
+      if (p.empty()) {
+        problems[c] = "image missing";
+        continue;
+      }
+      images[c] = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+      if (images[c].empty()) problems[c] = "cannot decode " + p.string();
+    }
+    out.push_back(tracker.ProcessFrame(seq.frames[i], seq.times_s[i], images, problems));
+    if (progress) progress(i + 1, seq.frames.size());
+  }
+  return out;
+}
+
+void WritePoseCsv(const fs::path& path, const std::vector<FrameResult>& results) {
+  static const char* kAxes[6] = {"rx", "ry", "rz", "px", "py", "pz"};
+  WriteFileAtomically(path, [&](std::ostream& o) {
+    o << "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,cameras,observations,id_margin_chi2,rms_px,"
+         "chi2_per_dof";
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 6; ++c) o << ",cov_" << kAxes[r] << "_" << kAxes[c];
+    o << "\n";
+    char buf[64];
+    auto num = [&](double v) {
+      std::snprintf(buf, sizeof(buf), "%.10g", v);
+      return std::string(buf);
+    };
+    for (const FrameResult& f : results) {
+      std::string reason = f.reason;
+      std::replace(reason.begin(), reason.end(), ',', ';');
+      std::replace(reason.begin(), reason.end(), '"', '\'');
+      o << f.frame << "," << num(f.time_s) << "," << ToString(f.status) << ",\"" << reason << "\"";
+      if (f.T_rig_target) {
+        const auto q = f.T_rig_target->Quaternion();
+        const Vec3& t = f.T_rig_target->t;
+        o << "," << num(t.x()) << "," << num(t.y()) << "," << num(t.z()) << "," << num(q.w()) << "," << num(q.x())
+          << "," << num(q.y()) << "," << num(q.z());
+      } else {
+        o << ",,,,,,,";
+      }
+      o << "," << f.balls_identified << "," << f.cameras_used << "," << f.observations << ","
+        << num(f.identification_margin) << "," << num(f.rms_px) << "," << num(f.chi2_per_dof);
+      for (int r = 0; r < 6; ++r)
+        for (int c = 0; c < 6; ++c) o << "," << (f.T_rig_target ? num(f.cov(r, c)) : std::string());
+      o << "\n";
+    }
+  });
+}
+
+}  // namespace mcms

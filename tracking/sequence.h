@@ -1,0 +1,45 @@
+// Tracking a recorded image sequence from disk, and the pose CSV it produces.
+//
+// Folder layout (what `mcms render` writes, and what a user's recording must follow):
+//   images/<camera name>/<frame>.png   one folder per rig camera, named as in the rig
+//                                      file; file stems are frame numbers (any digits)
+//   frames.csv (optional)              frame,time_s  -- otherwise time = frame / rate
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <vector>
+
+#include "tracking/tracker.h"
+
+namespace mcms {
+
+struct SequenceInput {
+  std::filesystem::path images_dir;  // holds one folder per camera
+  std::filesystem::path frames_csv;  // optional
+  double frame_rate_hz = 10.0;       // used when there is no frames.csv
+};
+
+struct ImageSequence {
+  std::vector<size_t> frames;                                    // sorted frame numbers
+  std::vector<double> times_s;                                   // one per frame
+  std::vector<std::vector<std::filesystem::path>> image_paths;  // [frame][camera], empty path = missing
+};
+
+// Lists the frames and checks the layout against the rig: InputError when the folder
+// is missing or empty, a rig camera has no folder, there are folders for cameras the
+// rig does not have, or the first image of a camera has another size than the rig says.
+ImageSequence ScanImageSequence(const SequenceInput& input, const CameraRig& rig);
+
+// Runs the tracker over every frame (missing or undecodable images become per-frame
+// problems). progress(done, total) is called after each frame.
+std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
+                                            const std::function<void(size_t, size_t)>& progress = {});
+
+// One row per frame: frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz, diagnostics,
+// then the 36 entries of the 6x6 covariance in the [dtheta; dp] layout, named
+// cov_<row>_<col> with rows/cols rx,ry,rz (rad) and px,py,pz (m): units rad^2, rad*m, m^2.
+// Pose cells are empty for lost frames. Written atomically.
+void WritePoseCsv(const std::filesystem::path& path, const std::vector<FrameResult>& results);
+
+}  // namespace mcms

@@ -1,0 +1,239 @@
+#include "tracking/tracker.h"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+
+#include "core/error.h"
+#include "vision/sphere_projection.h"
+
+namespace mcms {
+
+const char* ToString(FrameStatus s) {
+  switch (s) {
+    case FrameStatus::kOk: return "ok";
+    case FrameStatus::kDegraded: return "degraded";
+    case FrameStatus::kLost: return "lost";
+  }
+  return "?";
+}
+
+bool TrackerOptions::IsValid(std::string* why) const {
+  if (!detector.IsValid(why) || !matching.IsValid(why) || !identification.IsValid(why) || !refinement.IsValid(why))
+    return false;
+  if (!(association_gate_px > 0)) return (*why = "association_gate_px must be positive", false);
+  if (!(max_chi2_per_dof > 0)) return (*why = "max_chi2_per_dof must be positive", false);
+  if (!(min_margin >= 0)) return (*why = "min_margin must be >= 0", false);
+  return true;
+}
+
+Tracker::Tracker(CameraRig rig, Target target, TrackerOptions options)
+    : rig_(std::move(rig)), target_(std::move(target)), options_(std::move(options)) {
+  std::string why;
+  if (!options_.IsValid(&why)) Throw("tracker options: ", why);
+  target_.MinDistanceGap();
+  if (rig_.size() < 2) Throw("the rig needs at least 2 cameras to triangulate, it has ", rig_.size());
+  options_.matching.triangulation.sphere_radius_m = target_.ball_radius;
+}
+
+std::optional<Pose> Tracker::Predict(double t) const {
+  if (history_.empty()) return std::nullopt;
+  const auto& [t1, T1] = history_.back();
+  if (std::abs(t - t1) > options_.max_prediction_age_s) return std::nullopt;
+  if (history_.size() < 2) return T1;
+  const auto& [t0, T0] = history_[history_.size() - 2];
+  if (!(t1 > t0)) return T1;
+  Vec6 v = BoxMinus(T1, T0) / (t1 - t0);  // [omega; velocity], world side
+  return BoxPlus(T1, v * (t - t1));
+}
+
+FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
+                                  const std::vector<std::string>& problems) {
+  std::vector<std::optional<std::vector<ImagePoint>>> pts(rig_.size());
+  std::vector<std::string> why(problems);
+  why.resize(rig_.size());
+  for (size_t c = 0; c < rig_.size(); ++c) {
+    if (c >= images.size() || images[c].empty()) continue;
+    const cv::Mat& im = images[c];
+    if (im.cols != rig_.cameras[c].Width() || im.rows != rig_.cameras[c].Height()) {
+      std::ostringstream s;
+      s << "image is " << im.cols << "x" << im.rows << ", the rig says " << rig_.cameras[c].Width() << "x"
+        << rig_.cameras[c].Height();
+      why[c] = s.str();
+      continue;
+    }
+    std::vector<ImagePoint> v;
+    for (const Blob& b : DetectBlobs(im, options_.detector)) {
+      if (b.touches_border || b.crowded) continue;  // a cut or pulled centre would bias the pose
+      v.push_back({b.centre, b.cov});
+    }
+    pts[c] = std::move(v);
+  }
+  return ProcessPoints(frame, time_s, pts, why);
+}
+
+namespace {
+std::string Join(const std::vector<std::string>& v) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : "; ") + x;
+  return s;
+}
+}  // namespace
+
+FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
+                                   const std::vector<std::optional<std::vector<ImagePoint>>>& in,
+                                   const std::vector<std::string>& problems) {
+  FrameResult res;
+  res.frame = frame;
+  res.time_s = time_s;
+  const int ncam = static_cast<int>(rig_.size());
+  const int nb = static_cast<int>(target_.balls_target.size());
+  std::vector<std::string> notes;
+  std::vector<std::vector<ImagePoint>> pts(ncam);
+  for (int c = 0; c < ncam; ++c) {
+    if (c < static_cast<int>(in.size()) && in[c]) {
+      pts[c] = *in[c];
+      ++res.cameras_used;
+    } else {
+      const std::string p = c < static_cast<int>(problems.size()) && !problems[c].empty() ? problems[c] : "no image";
+      notes.push_back("camera " + rig_.names[c] + ": " + p);
+    }
+  }
+
+  res.points = MatchAndTriangulate(rig_, pts, options_.matching);
+  res.points_triangulated = static_cast<int>(res.points.size());
+  const std::optional<Pose> predicted = Predict(time_s);
+
+  std::optional<Pose> initial;
+  std::vector<int> point_of_ball(nb, -1);
+  bool from_prediction = false;
+  const auto id = IdentifyTarget(target_, res.points, options_.identification);
+  const bool fit_ok = id && id->fit_rms_m <= options_.max_fit_rms_m;
+  if (fit_ok) res.identification_margin = id->margin;
+  if (fit_ok && id->margin >= options_.min_margin) {
+    initial = id->T_rig_target;
+    point_of_ball = id->point_of_ball;
+  } else if (predicted) {
+    initial = predicted;
+    from_prediction = true;
+    std::ostringstream s;
+    if (fit_ok)
+      s << "identification ambiguous (margin " << id->margin << "); used the prediction from earlier frames";
+    else
+      s << "target not identified among " << res.points.size() << " triangulated points; used the prediction";
+    notes.push_back(s.str());
+  } else if (fit_ok) {
+    initial = id->T_rig_target;
+    point_of_ball = id->point_of_ball;
+    std::ostringstream s;
+    s << "identification ambiguous (margin " << id->margin << ") and no prediction";
+    notes.push_back(s.str());
+  } else {
+    std::ostringstream s;
+    s << "target not found: " << res.points.size() << " points triangulated from " << res.cameras_used
+      << " cameras, no assignment of at least 3 balls fits the target's distances";
+    notes.push_back(s.str());
+    res.reason = Join(notes);
+    return res;
+  }
+
+  // 2-D observations: the identified points' views first, then any ball image the
+  // pose predicts near an unused blob.
+  std::vector<std::vector<bool>> used(ncam);
+  for (int c = 0; c < ncam; ++c) used[c].assign(pts[c].size(), false);
+  std::vector<BallObservation> obs;
+  for (int b = 0; b < nb; ++b) {
+    if (point_of_ball[b] < 0) continue;
+    for (const auto& o : res.points[point_of_ball[b]].observations) {
+      obs.push_back({o.camera, b, pts[o.camera][o.index].q, pts[o.camera][o.index].cov});
+      used[o.camera][o.index] = true;
+    }
+  }
+  auto associate = [&](const Pose& T, double gate, std::vector<BallObservation>* out) {
+    std::set<std::pair<int, int>> have;
+    for (const auto& o : *out) have.insert({o.camera, o.ball});
+    for (int c = 0; c < ncam; ++c)
+      for (int b = 0; b < nb; ++b) {
+        if (have.count({c, b})) continue;
+        const CameraModel& cam = rig_.cameras[c];
+        const Vec3 p_cam = cam.T_cam_rig() * (T * target_.balls_target[b]);
+        if (!cam.Sees(p_cam)) continue;
+        const Vec2 q = SphereImageCentroid(cam, p_cam, target_.ball_radius, 32);
+        int best = -1;
+        double best_d = gate;
+        for (size_t k = 0; k < pts[c].size(); ++k) {
+          if (used[c][k]) continue;
+          const double d = (pts[c][k].q - q).norm();
+          if (d < best_d) {
+            best_d = d;
+            best = static_cast<int>(k);
+          }
+        }
+        if (best >= 0) {
+          out->push_back({c, b, pts[c][best].q, pts[c][best].cov});
+          used[c][best] = true;
+        }
+      }
+  };
+  associate(*initial, from_prediction ? 3 * options_.association_gate_px : options_.association_gate_px, &obs);
+
+  std::set<int> balls;
+  for (const auto& o : obs) balls.insert(o.ball);
+  if (balls.size() < 3) {
+    notes.push_back("fewer than 3 balls observed (" + std::to_string(balls.size()) + ")");
+    res.reason = Join(notes);
+    return res;
+  }
+  PoseRefinement ref = RefinePose(rig_, target_, *initial, obs, options_.refinement);
+  if (from_prediction) {
+    // Re-associate from the refined pose with the tight gate and refine again.
+    for (int c = 0; c < ncam; ++c) std::fill(used[c].begin(), used[c].end(), false);
+    std::vector<BallObservation> again;
+    associate(ref.T_rig_target, options_.association_gate_px, &again);
+    std::set<int> b2;
+    for (const auto& o : again) b2.insert(o.ball);
+    if (b2.size() >= 3) ref = RefinePose(rig_, target_, ref.T_rig_target, again, options_.refinement);
+  }
+
+  res.chi2_per_dof = ref.dof > 0 ? ref.chi2 / ref.dof : 0.0;
+  res.rms_px = ref.rms_px;
+  res.observations = static_cast<int>(ref.kept.size());
+  std::set<int> seen;
+  std::vector<int> views(nb, 0);
+  for (const auto& o : ref.kept) {
+    seen.insert(o.ball);
+    ++views[o.ball];
+  }
+  res.balls_identified = static_cast<int>(seen.size());
+  res.point_of_ball = point_of_ball;
+  if (!ref.converged) {
+    notes.push_back("pose refinement did not converge");
+    res.reason = Join(notes);
+    return res;
+  }
+  if (res.chi2_per_dof > options_.max_chi2_per_dof) {
+    std::ostringstream s;
+    s << "observations do not fit the target (chi2/dof " << res.chi2_per_dof << ")";
+    notes.push_back(s.str());
+    if (from_prediction) {
+      res.reason = Join(notes);
+      return res;
+    }
+  }
+  for (int b = 0; b < nb; ++b)
+    if (views[b] == 0) notes.push_back("ball " + std::to_string(b) + " not observed");
+  if (!ref.dropped.empty()) notes.push_back(std::to_string(ref.dropped.size()) + " outlier observation(s) dropped");
+
+  res.T_rig_target = ref.T_rig_target;
+  res.cov = ref.cov;
+  res.status = notes.empty() ? FrameStatus::kOk : FrameStatus::kDegraded;
+  res.reason = Join(notes);
+  if (res.chi2_per_dof <= options_.max_chi2_per_dof) {
+    history_.emplace_back(time_s, ref.T_rig_target);
+    if (history_.size() > 2) history_.erase(history_.begin());
+  }
+  return res;
+}
+
+}  // namespace mcms

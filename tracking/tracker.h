@@ -1,0 +1,86 @@
+// Sequence tracking of the five-ball target: per frame, detect balls in every camera,
+// match and triangulate them, identify the target, fit it in closed form, then bundle-
+// adjust its pose on the 2-D observations of all cameras. A constant-velocity
+// prediction from earlier frames gates the association when identification is
+// impossible or ambiguous (occluded balls, a camera missing). Every frame gets a status
+// and, unless ok, the reason.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/pose_math.h"
+#include "tracking/identify.h"
+#include "tracking/pose_refinement.h"
+#include "tracking/target.h"
+#include "vision/blob_detector.h"
+#include "vision/camera_model.h"
+#include "vision/triangulation.h"
+
+namespace mcms {
+
+enum class FrameStatus { kOk, kDegraded, kLost };
+const char* ToString(FrameStatus s);
+
+struct TrackerOptions {
+  BlobDetectorOptions detector;
+  MatchingOptions matching;
+  IdentificationOptions identification;
+  PoseRefinementOptions refinement;
+  double min_margin = 9.0;            // identification margin (chi-square) below this is ambiguous
+  double max_fit_rms_m = 0.005;       // closed-form fit worse than this: not the target
+  double association_gate_px = 6.0;   // 2-D association of predicted ball images to blobs
+  double max_chi2_per_dof = 6.0;      // a refined pose worse than this is rejected
+  double max_prediction_age_s = 0.5;  // predictions older than this are not used
+  bool IsValid(std::string* why) const;
+};
+
+struct FrameResult {
+  size_t frame = 0;
+  double time_s = 0;
+  FrameStatus status = FrameStatus::kLost;
+  std::string reason;                  // empty when ok
+  std::optional<Pose> T_rig_target;    // absent when lost
+  Mat6 cov = Mat6::Zero();             // [dtheta; dp], rig frame, SI units
+  int points_triangulated = 0;
+  int balls_identified = 0;
+  int cameras_used = 0;
+  int observations = 0;
+  double identification_margin = 0;
+  double rms_px = 0;
+  double chi2_per_dof = 0;
+  std::vector<TriangulatedPoint> points;            // all triangulated points of the frame
+  std::vector<int> point_of_ball;                   // identification (-1 = not found)
+};
+
+class Tracker {
+ public:
+  // InputError when the options are not valid or the target is degenerate.
+  Tracker(CameraRig rig, Target target, TrackerOptions options);
+
+  // images[c] is camera c's image, or an empty Mat when it is missing for this frame;
+  // problems[c] (may be empty) says why it is missing ("file missing", "cannot decode").
+  FrameResult ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
+                           const std::vector<std::string>& problems = {});
+
+  // Same, from already detected image points per camera (an empty optional = no image).
+  FrameResult ProcessPoints(size_t frame, double time_s,
+                            const std::vector<std::optional<std::vector<ImagePoint>>>& points,
+                            const std::vector<std::string>& problems = {});
+
+  const CameraRig& rig() const { return rig_; }
+  const Target& target() const { return target_; }
+
+ private:
+  std::optional<Pose> Predict(double time_s) const;
+
+  CameraRig rig_;
+  Target target_;
+  TrackerOptions options_;
+  // Last two good poses for the constant-velocity prediction.
+  std::vector<std::pair<double, Pose>> history_;
+};
+
+}  // namespace mcms
