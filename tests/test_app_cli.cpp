@@ -1,0 +1,144 @@
+// The mcms command line on rendered recordings: a clean run, and every kind of bad
+// input the tracker must survive per frame or refuse with a clear error, a non-zero
+// exit and no half-written output.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+
+#include "core/io.h"
+#include "tests/test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int code;
+  std::string err;
+};
+
+CliRun Mcms(const std::string& args, const fs::path& scratch) {
+  const fs::path err = scratch / "stderr.txt";
+  const std::string cmd = std::string(MCMS_CLI) + " " + args + " 2> " + err.string() + " > /dev/null";
+  const int status = std::system(cmd.c_str());
+  std::ifstream in(err);
+  std::stringstream s;
+  s << in.rdbuf();
+  return {WEXITSTATUS(status), s.str()};
+}
+
+// One small rendered recording shared by the tests (copied before each is spoiled).
+const fs::path& Recording() {
+  static const fs::path dir = [] {
+    const fs::path d = test::ScratchDir("cli_recording") / "rec";
+    const CliRun r = Mcms("render --frames 6 --quiet -o " + d.string(), d.parent_path());
+    EXPECT_EQ(r.code, 0) << r.err;
+    return d;
+  }();
+  return dir;
+}
+
+fs::path Copy(const std::string& name) {
+  const fs::path d = test::ScratchDir("cli_" + name) / "rec";
+  fs::copy(Recording(), d, fs::copy_options::recursive);
+  fs::remove(d / "poses.csv");
+  return d;
+}
+
+TEST(Cli, HelpOnEveryCommand) {
+  const fs::path s = test::ScratchDir("cli_help");
+  for (const char* c : {"--help", "render --help", "track --help", "demo --help"}) {
+    EXPECT_EQ(Mcms(c, s).code, 0) << c;
+  }
+  EXPECT_NE(Mcms("no-such-command", s).code, 0);
+}
+
+TEST(Cli, TracksARenderedRecording) {
+  const fs::path d = Copy("clean");
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  ASSERT_EQ(t.rows.size(), 6u);
+  EXPECT_TRUE(t.HasColumn("x_m"));
+  EXPECT_TRUE(t.HasColumn("qw"));
+  EXPECT_TRUE(t.HasColumn("cov_pz_pz"));
+  EXPECT_EQ(t.header.size(), 17u + 36u);
+  for (size_t i = 0; i < t.rows.size(); ++i) EXPECT_NE(t.rows[i][t.Column("status")], "lost");
+}
+
+TEST(Cli, MissingAndCorruptImagesDegradeTheirFrameOnly) {
+  const fs::path d = Copy("missing");
+  fs::remove(d / "images" / "cam1" / "000002.png");
+  std::ofstream(d / "images" / "cam2" / "000004.png", std::ios::trunc) << "this is not a PNG";
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  ASSERT_EQ(t.rows.size(), 6u);
+  const int st = t.Column("status"), re = t.Column("reason");
+  EXPECT_EQ(t.rows[2][st], "degraded");
+  EXPECT_NE(t.rows[2][re].find("cam1: image missing"), std::string::npos) << t.rows[2][re];
+  EXPECT_EQ(t.rows[4][st], "degraded");
+  EXPECT_NE(t.rows[4][re].find("cam2: cannot decode"), std::string::npos) << t.rows[4][re];
+  EXPECT_FALSE(t.rows[4][t.Column("x_m")].empty()) << "three cameras still give a pose";
+}
+
+void ExpectRefused(const fs::path& d, const std::string& args, const std::string& needle) {
+  const CliRun r = Mcms(args, d);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find(needle), std::string::npos) << "stderr: " << r.err;
+  EXPECT_FALSE(fs::exists(d / "poses.csv")) << "no output may be written";
+  for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << "left behind: " << e.path();
+}
+
+TEST(Cli, ImageSizeThatDisagreesWithTheRigIsRefused) {
+  const fs::path d = Copy("size");
+  cv::imwrite((d / "images" / "cam0" / "000000.png").string(), cv::Mat(480, 640, CV_8U, cv::Scalar(10)));
+  ExpectRefused(d, "track --quiet " + d.string(), "is 640x480 but the rig says camera 'cam0' is 1280x1024");
+}
+
+TEST(Cli, EmptyOrMissingImageFolderIsRefused) {
+  const fs::path d = Copy("empty");
+  fs::remove_all(d / "images");
+  fs::create_directories(d / "images");
+  ExpectRefused(d, "track --quiet " + d.string(), "is empty");
+  fs::remove_all(d / "images");
+  ExpectRefused(d, "track --quiet " + d.string(), "does not exist");
+}
+
+TEST(Cli, CameraCountMismatchIsRefused) {
+  const fs::path d = Copy("count");
+  fs::create_directories(d / "images" / "cam4");
+  ExpectRefused(d, "track --quiet " + d.string(), "camera count mismatch: the rig has 4 cameras");
+  fs::remove_all(d / "images" / "cam4");
+  fs::remove_all(d / "images" / "cam3");
+  ExpectRefused(d, "track --quiet " + d.string(), "no sub-folder 'cam3'");
+}
+
+TEST(Cli, TargetNeverVisibleIsRefused) {
+  const fs::path d = Copy("dark");
+  for (const auto& cam : fs::directory_iterator(d / "images"))
+    for (const auto& im : fs::directory_iterator(cam.path()))
+      cv::imwrite(im.path().string(), cv::Mat(1024, 1280, CV_8U, cv::Scalar(12)));
+  ExpectRefused(d, "track --quiet " + d.string(), "target never found in any of the 6 frames");
+}
+
+TEST(Cli, BadRigTargetAndTimesAreRefused) {
+  const fs::path d = Copy("files");
+  fs::remove(d / "rig.yaml");
+  ExpectRefused(d, "track --quiet " + d.string(), "rig.yaml does not exist");
+  const fs::path e = Copy("times");
+  std::ofstream(e / "frames.csv", std::ios::trunc) << "frame,time_s\n0,0\n1,0.1\n2,0.1\n3,0.3\n4,0.4\n5,0.5\n";
+  ExpectRefused(e, "track --quiet " + e.string(), "frames.csv line 4: time_s must increase");
+  const fs::path g = Copy("target");
+  std::ofstream(g / "target.yaml", std::ios::trunc) << "name: x\nballs_m: [[0,0,0]]\n";
+  ExpectRefused(g, "track --quiet " + g.string(), "ball_radius_m");
+}
+
+}  // namespace
+}  // namespace mcms
