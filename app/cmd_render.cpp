@@ -1,6 +1,8 @@
 // mcms render: synthetic camera images of the five-ball target with their ground
 // truth (synthetic/renderer.h, synthetic/scenario.h).
 #include <cstdio>
+#include <memory>
+#include <optional>
 #include <string>
 
 #include "app/commands.h"
@@ -56,12 +58,14 @@ const McmsCommand kRender([](CLI::App& app) {
       "dropouts}.csv. It is written to a temporary folder and moved into place when complete; an\n"
       "earlier render in DIR is replaced, any other non-empty DIR is refused. The same scenario and\n"
       "seed give byte-identical output. Progress goes to stderr.");
-  sub->add_option("scenario", args->scenario, "Scenario file (YAML or JSON); default: the built-in scenario")
-      ->check(CLI::ExistingFile);
-  sub->add_option("-o,--output", args->out, "Output folder DIR");
+  sub->add_option("SCENARIO", args->scenario, "Scenario file (YAML or JSON); default: the built-in scenario")
+      ->check(CLI::ExistingFile)
+      ->type_name("FILE");
+  sub->add_option("-o,--output", args->out, "Output folder (required unless --print-default)")->type_name("DIR");
   sub->add_option("--frames", args->frames, "Render only the first N frames of the scenario")
-      ->check(CLI::PositiveNumber);
-  sub->add_option("--seed", args->seed, "Random seed, overriding the scenario's");
+      ->check(CLI::PositiveNumber)
+      ->type_name("N");
+  sub->add_option("--seed", args->seed, "Random seed, overriding the scenario's")->type_name("S");
   sub->add_flag("--quiet", args->quiet, "No progress on stderr");
   sub->add_flag("--print-default", args->print_default, "Print the default scenario file and exit");
   return std::make_pair(sub, Runner([args] { return RunRender(*args); }));

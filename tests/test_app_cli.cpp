@@ -8,6 +8,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
+#include <unistd.h>
 
 #include "core/io.h"
 #include "tests/test_util.h"
@@ -32,10 +33,11 @@ CliRun Mcms(const std::string& args, const fs::path& scratch) {
   return {WEXITSTATUS(status), s.str()};
 }
 
-// One small rendered recording shared by the tests (copied before each is spoiled).
+// One small rendered recording shared by the tests of this process (copied before each
+// is spoiled); ctest runs every test in its own process, possibly in parallel.
 const fs::path& Recording() {
   static const fs::path dir = [] {
-    const fs::path d = test::ScratchDir("cli_recording") / "rec";
+    const fs::path d = test::ScratchDir("cli_recording_" + std::to_string(::getpid())) / "rec";
     const CliRun r = Mcms("render --frames 6 --quiet -o " + d.string(), d.parent_path());
     EXPECT_EQ(r.code, 0) << r.err;
     return d;
