@@ -117,7 +117,9 @@ PoseRefinement RefinePose(const CameraRig& rig, const Target& target, const Pose
       const Vec6 d = Eigen::Map<const Vec6>(delta);
       out.T_rig_target = BoxPlus(out.T_rig_target, d);
       out.converged = summary.IsSolutionUsable();
-      if (d.head<3>().norm() < 1e-9 && d.tail<3>().norm() < 1e-9) break;
+      // Converged when the re-linearized sphere bias moved the pose by less than a
+      // micro-radian / micrometre (far below its standard deviation).
+      if (d.head<3>().norm() < 1e-6 && d.tail<3>().norm() < 1e-6) break;
     }
   };
 
