@@ -1,0 +1,434 @@
+#include "calib/robot_model.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+
+#include <Eigen/Eigenvalues>
+
+#include "core/error.h"
+#include "core/io.h"
+
+namespace mcms {
+
+namespace internal {
+// Text of calib/robots/kuka_kr5_arc.yaml, generated into the build tree by
+// calib/CMakeLists.txt from calib/default_robot.cpp.in.
+extern const char* const kDefaultRobotYaml;
+extern const char* const kDefaultRobotSource;
+}  // namespace internal
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDeg = kPi / 180.0;
+
+const char* TypeName(JointType t) { return t == JointType::kRevolute ? "revolute" : "prismatic"; }
+
+// "joint A2 (2 of 6)"
+std::string JointLabel(const std::vector<Joint>& joints, int i) {
+  std::ostringstream s;
+  s << "joint " << (joints[i].name.empty() ? std::to_string(i + 1) : joints[i].name) << " (" << i + 1 << " of "
+    << joints.size() << ")";
+  return s.str();
+}
+
+// A joint value or limit for messages: degrees for revolute joints, metres otherwise.
+std::string JointValueText(const Joint& j, double v) {
+  std::ostringstream s;
+  s.precision(3);
+  if (j.type == JointType::kRevolute)
+    s << std::fixed << v / kDeg << " deg";
+  else
+    s << std::fixed << v << " m";
+  return s.str();
+}
+
+// ---- YAML reading: every error names the source, the line and the field. ----
+class YamlReader {
+ public:
+  explicit YamlReader(std::string source) : source_(std::move(source)) {}
+
+  template <typename... Parts>
+  [[noreturn]] void Fail(const YAML::Node& at, const Parts&... parts) const {
+    if (at.IsDefined() && at.Mark().line >= 0)
+      Throw(source_, " line ", at.Mark().line + 1, ": ", parts...);
+    Throw(source_, ": ", parts...);
+  }
+
+  void CheckKeys(const YAML::Node& map, const std::set<std::string>& allowed, const std::string& where) const {
+    if (!map.IsMap()) Fail(map, where, " must be a map of key: value");
+    for (const auto& kv : map) {
+      const std::string key = kv.first.as<std::string>();
+      if (!allowed.count(key)) {
+        std::string list;
+        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+        Fail(kv.first, where, ": unknown key '", key, "' (expected one of: ", list, ")");
+      }
+    }
+  }
+
+  // allow_infinite: YAML's .inf / -.inf are accepted (open joint limits).
+  double Number(const YAML::Node& n, const std::string& what, bool allow_infinite = false) const {
+    double v = 0.0;
+    try {
+      v = n.as<double>();
+    } catch (const YAML::Exception&) {
+      Fail(n, what, " must be a number");
+    }
+    if (std::isnan(v) || (!allow_infinite && !std::isfinite(v))) Fail(n, what, " must be finite");
+    return v;
+  }
+
+  std::vector<double> Numbers(const YAML::Node& n, size_t count, const std::string& what,
+                              bool allow_infinite = false) const {
+    if (!n.IsSequence() || n.size() != count) Fail(n, what, " must be a list of ", count, " numbers");
+    std::vector<double> v;
+    for (size_t i = 0; i < count; ++i) v.push_back(Number(n[i], what, allow_infinite));
+    return v;
+  }
+
+  // A quantity that may be given in one of several units: key_<suffix> for each suffix,
+  // at most one present; the value is multiplied by the suffix's scale to SI.
+  // Returns nullopt when none is present.
+  std::optional<YAML::Node> OneOf(const YAML::Node& map, const std::string& key,
+                                  const std::vector<std::pair<std::string, double>>& units, double* scale,
+                                  const std::string& where) const {
+    std::optional<YAML::Node> found;
+    std::string found_key;
+    for (const auto& [suffix, s] : units) {
+      const std::string k = key + "_" + suffix;
+      if (map[k]) {
+        if (found) Fail(map[k], where, ": give only one of '", found_key, "' and '", k, "'");
+        found = map[k];
+        found_key = k;
+        *scale = s;
+      }
+    }
+    return found;
+  }
+
+  const std::string& Source() const { return source_; }
+
+ private:
+  std::string source_;
+};
+
+const std::vector<std::pair<std::string, double>> kAngleUnits = {{"rad", 1.0}, {"deg", kDeg}};
+const std::vector<std::pair<std::string, double>> kLengthUnits = {{"m", 1.0}};
+
+RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
+  in.CheckKeys(root,
+               {"name", "convention", "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m", "tool", "joints"},
+               "robot description");
+  std::string name;
+  if (root["name"]) name = root["name"].as<std::string>();
+
+  if (!root["convention"]) in.Fail(root, "missing key 'convention' (standard_dh or modified_dh)");
+  const std::string conv = root["convention"].as<std::string>();
+  DhConvention convention;
+  if (conv == "standard_dh")
+    convention = DhConvention::kStandard;
+  else if (conv == "modified_dh")
+    convention = DhConvention::kModified;
+  else
+    in.Fail(root["convention"], "convention '", conv, "' is not standard_dh or modified_dh");
+
+  double scale = 1.0;
+  double sigma_revolute = 0.0, sigma_prismatic = 0.0;
+  if (auto n = in.OneOf(root, "encoder_sigma", kAngleUnits, &scale, "robot")) {
+    sigma_revolute = in.Number(*n, "encoder_sigma") * scale;
+    if (sigma_revolute < 0) in.Fail(*n, "encoder_sigma must be >= 0");
+  }
+  if (root["encoder_sigma_m"]) {
+    sigma_prismatic = in.Number(root["encoder_sigma_m"], "encoder_sigma_m");
+    if (sigma_prismatic < 0) in.Fail(root["encoder_sigma_m"], "encoder_sigma_m must be >= 0");
+  }
+
+  Pose tool;
+  if (const YAML::Node t = root["tool"]) {
+    in.CheckKeys(t, {"translation_m", "quaternion_wxyz"}, "tool");
+    if (t["translation_m"]) {
+      const auto v = in.Numbers(t["translation_m"], 3, "tool translation_m");
+      tool.t = Vec3(v[0], v[1], v[2]);
+    }
+    if (t["quaternion_wxyz"]) {
+      const auto v = in.Numbers(t["quaternion_wxyz"], 4, "tool quaternion_wxyz");
+      const Eigen::Quaterniond q(v[0], v[1], v[2], v[3]);
+      if (std::abs(q.norm() - 1.0) > 1e-6)
+        in.Fail(t["quaternion_wxyz"], "tool quaternion_wxyz must have unit norm, has ", q.norm());
+      tool.R = q.normalized().toRotationMatrix();
+    }
+  }
+
+  const YAML::Node list = root["joints"];
+  if (!list || !list.IsSequence() || list.size() == 0) in.Fail(root, "missing or empty list 'joints'");
+  std::vector<Joint> joints;
+  for (size_t i = 0; i < list.size(); ++i) {
+    const YAML::Node jn = list[i];
+    const std::string where = "joint " + std::to_string(i + 1);
+    in.CheckKeys(jn,
+                 {"name", "type", "a_m", "d_m", "alpha_rad", "alpha_deg", "theta_offset_rad", "theta_offset_deg",
+                  "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m"},
+                 where);
+    Joint j;
+    if (jn["name"]) j.name = jn["name"].as<std::string>();
+    const std::string label = j.name.empty() ? where : where + " (" + j.name + ")";
+    if (jn["type"]) {
+      const std::string type = jn["type"].as<std::string>();
+      if (type == "revolute")
+        j.type = JointType::kRevolute;
+      else if (type == "prismatic")
+        j.type = JointType::kPrismatic;
+      else
+        in.Fail(jn["type"], label, ": type '", type, "' is not revolute or prismatic");
+    }
+    const bool revolute = j.type == JointType::kRevolute;
+    for (const char* key : {"a_m", "d_m"})
+      if (!jn[key]) in.Fail(jn, label, ": missing key '", key, "'");
+    j.a = in.Number(jn["a_m"], label + " a_m");
+    j.d = in.Number(jn["d_m"], label + " d_m");
+    if (auto n = in.OneOf(jn, "alpha", kAngleUnits, &scale, label))
+      j.alpha = in.Number(*n, label + " alpha") * scale;
+    else
+      in.Fail(jn, label, ": missing key 'alpha_rad' (or 'alpha_deg')");
+    if (auto n = in.OneOf(jn, "theta_offset", kAngleUnits, &scale, label))
+      j.theta_offset = in.Number(*n, label + " theta_offset") * scale;
+    else
+      in.Fail(jn, label, ": missing key 'theta_offset_rad' (or 'theta_offset_deg')");
+
+    const auto& value_units = revolute ? kAngleUnits : kLengthUnits;
+    const char* wrong_unit = revolute ? "m" : "rad";
+    for (const std::string& k : {std::string("limits_"), std::string("encoder_sigma_")})
+      if (jn[k + wrong_unit] || (!revolute && jn[k + "deg"]))
+        in.Fail(jn, label, ": a ", TypeName(j.type), " joint takes ", k, revolute ? "rad/deg" : "m");
+    if (auto n = in.OneOf(jn, "limits", value_units, &scale, label)) {
+      const auto v = in.Numbers(*n, 2, label + " limits", /*allow_infinite=*/true);
+      j.lower = v[0] * scale;
+      j.upper = v[1] * scale;
+      if (!(j.lower < j.upper)) in.Fail(*n, label, ": limits must be [lower, upper] with lower < upper");
+    }
+    j.encoder_sigma = revolute ? sigma_revolute : sigma_prismatic;
+    if (auto n = in.OneOf(jn, "encoder_sigma", value_units, &scale, label)) {
+      j.encoder_sigma = in.Number(*n, label + " encoder_sigma") * scale;
+      if (j.encoder_sigma < 0) in.Fail(*n, label, ": encoder_sigma must be >= 0");
+    }
+    joints.push_back(j);
+  }
+  return RobotModel(name, convention, joints, tool);
+}
+
+}  // namespace
+
+RobotModel::RobotModel(std::string name, DhConvention convention, std::vector<Joint> joints,
+                       const Pose& T_flange_tool)
+    : name_(std::move(name)), convention_(convention), joints_(std::move(joints)), T_flange_tool_(T_flange_tool) {
+  const std::string who = "robot '" + name_ + "'";
+  if (joints_.empty()) Throw(who, ": needs at least one joint");
+  for (int i = 0; i < NumJoints(); ++i) {
+    const Joint& j = joints_[i];
+    for (double v : {j.a, j.alpha, j.d, j.theta_offset})
+      if (!std::isfinite(v)) Throw(who, ": ", JointLabel(joints_, i), " has a non-finite DH parameter");
+    if (std::isnan(j.lower) || std::isnan(j.upper) || !(j.lower < j.upper))
+      Throw(who, ": ", JointLabel(joints_, i), " needs limits lower < upper");
+    if (!(j.encoder_sigma >= 0) || !std::isfinite(j.encoder_sigma))
+      Throw(who, ": ", JointLabel(joints_, i), " needs a finite encoder sigma >= 0");
+  }
+  if (!T_flange_tool_.R.allFinite() || !T_flange_tool_.t.allFinite() ||
+      (T_flange_tool_.R.transpose() * T_flange_tool_.R - Mat3::Identity()).norm() > 1e-9 ||
+      T_flange_tool_.R.determinant() < 0)
+    Throw(who, ": T_flange_tool must be a finite rigid transform");
+}
+
+RobotModel RobotModel::Default() {
+  static const RobotModel model = Parse(internal::kDefaultRobotYaml, internal::kDefaultRobotSource);
+  return model;
+}
+
+RobotModel RobotModel::Read(const std::filesystem::path& path) {
+  return Parse(ReadTextFile(path), "robot file " + path.string());
+}
+
+RobotModel RobotModel::Parse(const std::string& yaml_text, const std::string& source) {
+  const YamlReader in(source);
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::Exception& e) {
+    Throw(source, ": not valid YAML: ", e.what());
+  }
+  try {
+    return ParseRoot(root, in);
+  } catch (const YAML::Exception& e) {
+    Throw(source, ": ", e.what());
+  } catch (const InputError& e) {
+    // Constructor errors do not know the source; name it once.
+    const std::string what = e.what();
+    if (what.rfind(source, 0) == 0) throw;
+    Throw(source, ": ", what);
+  }
+}
+
+std::string RobotModel::ToYaml() const {
+  YAML::Emitter out;
+  out.SetDoublePrecision(17);
+  out << YAML::BeginMap;
+  out << YAML::Key << "name" << YAML::Value << name_;
+  out << YAML::Key << "convention" << YAML::Value
+      << (convention_ == DhConvention::kStandard ? "standard_dh" : "modified_dh");
+  if (T_flange_tool_.R != Mat3::Identity() || T_flange_tool_.t != Vec3::Zero()) {
+    // The quaternion is written from the rotation matrix; reading it back reproduces
+    // the matrix to rounding (1e-16), not bit for bit.
+    const Eigen::Quaterniond q = T_flange_tool_.Quaternion();
+    out << YAML::Key << "tool" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "translation_m" << YAML::Value << YAML::Flow
+        << std::vector<double>{T_flange_tool_.t.x(), T_flange_tool_.t.y(), T_flange_tool_.t.z()};
+    out << YAML::Key << "quaternion_wxyz" << YAML::Value << YAML::Flow
+        << std::vector<double>{q.w(), q.x(), q.y(), q.z()};
+    out << YAML::EndMap;
+  }
+  out << YAML::Key << "joints" << YAML::Value << YAML::BeginSeq;
+  for (const Joint& j : joints_) {
+    const bool rev = j.type == JointType::kRevolute;
+    out << YAML::Flow << YAML::BeginMap;
+    out << YAML::Key << "name" << YAML::Value << j.name;
+    out << YAML::Key << "type" << YAML::Value << TypeName(j.type);
+    out << YAML::Key << "d_m" << YAML::Value << j.d;
+    out << YAML::Key << "a_m" << YAML::Value << j.a;
+    out << YAML::Key << "alpha_rad" << YAML::Value << j.alpha;
+    out << YAML::Key << "theta_offset_rad" << YAML::Value << j.theta_offset;
+    if (std::isfinite(j.lower) || std::isfinite(j.upper)) {
+      // An open side is written as YAML's .inf / -.inf.
+      out << YAML::Key << (rev ? "limits_rad" : "limits_m") << YAML::Value << YAML::Flow
+          << std::vector<double>{j.lower, j.upper};
+    }
+    out << YAML::Key << (rev ? "encoder_sigma_rad" : "encoder_sigma_m") << YAML::Value << j.encoder_sigma;
+    out << YAML::EndMap;
+  }
+  out << YAML::EndSeq << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
+void RobotModel::Write(const std::filesystem::path& path) const {
+  const std::string text = ToYaml();
+  WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
+}
+
+bool RobotModel::WithinLimits(const Eigen::VectorXd& q, std::string* why) const {
+  std::ostringstream s;
+  if (q.size() != NumJoints()) {
+    s << "robot '" << name_ << "' has " << NumJoints() << " joints, got " << q.size() << " joint values";
+  } else {
+    for (int i = 0; i < NumJoints(); ++i) {
+      const Joint& j = joints_[i];
+      if (!std::isfinite(q[i])) {
+        s << "robot '" << name_ << "': " << JointLabel(joints_, i) << " value is not finite";
+        break;
+      }
+      if (q[i] < j.lower) {
+        s << "robot '" << name_ << "': " << JointLabel(joints_, i) << " = " << JointValueText(j, q[i])
+          << " is below its lower limit " << JointValueText(j, j.lower);
+        break;
+      }
+      if (q[i] > j.upper) {
+        s << "robot '" << name_ << "': " << JointLabel(joints_, i) << " = " << JointValueText(j, q[i])
+          << " is above its upper limit " << JointValueText(j, j.upper);
+        break;
+      }
+    }
+  }
+  if (s.tellp() == 0) return true;
+  if (why) *why = s.str();
+  return false;
+}
+
+void RobotModel::CheckJoints(const Eigen::VectorXd& q) const {
+  std::string why;
+  if (!WithinLimits(q, &why)) Throw(why);
+}
+
+Pose RobotModel::LinkTransform(int i, double qi) const {
+  const Joint& j = joints_[i];
+  const double theta = j.theta_offset + (j.type == JointType::kRevolute ? qi : 0.0);
+  const double d = j.d + (j.type == JointType::kPrismatic ? qi : 0.0);
+  const double ct = std::cos(theta), st = std::sin(theta);
+  const double ca = std::cos(j.alpha), sa = std::sin(j.alpha);
+  Pose T;
+  if (convention_ == DhConvention::kStandard) {
+    // Rz(theta) Tz(d) Tx(a) Rx(alpha)
+    T.R << ct, -st * ca, st * sa, st, ct * ca, -ct * sa, 0.0, sa, ca;
+    T.t = Vec3(j.a * ct, j.a * st, d);
+  } else {
+    // Rx(alpha) Tx(a) Rz(theta) Tz(d)
+    T.R << ct, -st, 0.0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca;
+    T.t = Vec3(j.a, -sa * d, ca * d);
+  }
+  return T;
+}
+
+std::vector<Pose> RobotModel::LinkFrames(const Eigen::VectorXd& q) const {
+  CheckJoints(q);
+  std::vector<Pose> frames(NumJoints() + 1);
+  for (int i = 0; i < NumJoints(); ++i) frames[i + 1] = frames[i] * LinkTransform(i, q[i]);
+  return frames;
+}
+
+Pose RobotModel::T_base_flange(const Eigen::VectorXd& q) const {
+  CheckJoints(q);
+  Pose T;
+  for (int i = 0; i < NumJoints(); ++i) T = T * LinkTransform(i, q[i]);
+  return T;
+}
+
+Eigen::Matrix<double, 6, Eigen::Dynamic> RobotModel::Jacobian(const Eigen::VectorXd& q, EndFrame end) const {
+  const std::vector<Pose> F = LinkFrames(q);
+  const Vec3 p_end = end == EndFrame::kTool ? (F.back() * T_flange_tool_).t : F.back().t;
+  Eigen::Matrix<double, 6, Eigen::Dynamic> J(6, NumJoints());
+  for (int i = 0; i < NumJoints(); ++i) {
+    // Standard DH: joint i turns about z of frame i-1; modified DH: about z of frame i
+    // (its origin lies on that axis, since Rz(theta) Tz(d) keep to it).
+    const Pose& axis_frame = convention_ == DhConvention::kStandard ? F[i] : F[i + 1];
+    const Vec3 w = axis_frame.R.col(2);
+    if (joints_[i].type == JointType::kRevolute) {
+      J.block<3, 1>(0, i) = w;
+      J.block<3, 1>(3, i) = w.cross(p_end - axis_frame.t);
+    } else {
+      J.block<3, 1>(0, i).setZero();
+      J.block<3, 1>(3, i) = w;
+    }
+  }
+  return J;
+}
+
+Eigen::MatrixXd RobotModel::EncoderCovariance() const {
+  Eigen::VectorXd s(NumJoints());
+  for (int i = 0; i < NumJoints(); ++i) s[i] = joints_[i].encoder_sigma * joints_[i].encoder_sigma;
+  return s.asDiagonal();
+}
+
+Mat6 RobotModel::PoseCovariance(const Eigen::VectorXd& q, const Eigen::MatrixXd& Q, EndFrame end) const {
+  if (Q.rows() != NumJoints() || Q.cols() != NumJoints())
+    Throw("robot '", name_, "': joint covariance must be ", NumJoints(), "x", NumJoints(), ", got ", Q.rows(), "x",
+          Q.cols());
+  const double scale = Q.cwiseAbs().maxCoeff();
+  if (!Q.allFinite() || (Q - Q.transpose()).cwiseAbs().maxCoeff() > 1e-12 * scale)
+    Throw("robot '", name_, "': joint covariance must be finite and symmetric");
+  if (scale > 0) {
+    const double min_eig = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Q, Eigen::EigenvaluesOnly).eigenvalues()[0];
+    if (min_eig < -1e-12 * scale)
+      Throw("robot '", name_, "': joint covariance is not positive semi-definite (eigenvalue ", min_eig, ")");
+  }
+  const auto J = Jacobian(q, end);
+  const Mat6 C = J * Q * J.transpose();
+  return 0.5 * (C + C.transpose());
+}
+
+Mat6 RobotModel::PoseCovariance(const Eigen::VectorXd& q, EndFrame end) const {
+  return PoseCovariance(q, EncoderCovariance(), end);
+}
+
+}  // namespace mcms
