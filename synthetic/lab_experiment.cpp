@@ -152,8 +152,8 @@ LabResult RunLabExperiment(const LabScenario& lab, const std::vector<FrameResult
     PoseKalmanOptions ko;
     ko.angular_acceleration_psd = options.kf_angular_psd;
     ko.linear_acceleration_psd = options.kf_linear_psd;
-    ko.initial_angular_velocity_sigma = 1e-6;
-    ko.initial_linear_velocity_sigma = 1e-6;
+    ko.initial_angular_velocity_sigma = 1e-10;
+    ko.initial_linear_velocity_sigma = 1e-10;
     PoseKalmanFilter kf(ko);
     int robot_samples = 0;
     for (size_t k = e0; k < events.size() && events[k].t < t1; ++k) robot_samples += events[k].kind == 1;
@@ -221,6 +221,10 @@ std::string FormatLabTable(const LabResult& r) {
     out += buf;
   }
   out += "reduction = 1 - (method's 3-sigma position error) / (camera's), as the paper reports it\n";
+  out += "On static points the KF with a static model and MOIFA use the same information and agree; the paper's\n"
+         "larger KF reduction (78.2 % in its simulation) comes from averaging many samples over time, not from\n"
+         "fusing sensors (see `mcms paper fusion`). The robot's NEES is low because its kinematic error is one\n"
+         "draw, correlated over the points, of the distribution its covariance describes.\n";
   return out;
 }
 

@@ -42,9 +42,11 @@ struct LabResult {
 };
 
 struct LabExperimentOptions {
-  // The KF's process noise while the robot dwells (see fusion/kalman.h): a static robot
-  // still sways by micrometres (servo dither, thermal drift).
-  double kf_angular_psd = 1e-12, kf_linear_psd = 1e-12;
+  // The KF's process noise while the robot dwells (see fusion/kalman.h). Over a 7 s dwell
+  // a white acceleration of density q moves the pose by sqrt(q t^3 / 3): 1e-16 m^2/s^3 is
+  // 0.1 um, a robot standing still; 1e-12 would already be 10 um, as large as the camera's
+  // error, and the filter would discount its own past measurements accordingly.
+  double kf_angular_psd = 1e-16, kf_linear_psd = 1e-16;
   // The robot's kinematic error is the same at every controller sample of a dwell; fed to
   // the KF at controller rate it must not be counted as independent each time, so its
   // covariance is inflated by the number of samples it stays correlated over (a dwell).

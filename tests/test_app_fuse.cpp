@@ -1,0 +1,330 @@
+// mcms fuse through the command line: a clean run on small synthetic logs, and every kind
+// of bad input refused with one clear line naming the file and the line, a non-zero exit
+// and no output file (nor a temporary left behind).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "calib/inclinometer.h"
+#include "calib/robot_model.h"
+#include "core/io.h"
+#include "tests/test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+using Lines = std::vector<std::string>;
+
+struct CliRun {
+  int code;
+  std::string err;
+};
+
+std::string N(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+// Small clean logs: 20 camera frames at 10 Hz from 0.2 s, joints at 100 Hz and the
+// inclinometer at 50 Hz from 0 to 2.2 s, default robot, nearly noise-free readings.
+struct Logs {
+  std::map<std::string, Lines> files;  // poses.csv, joints.csv, incl.csv, setup.yaml
+};
+
+Logs CleanLogs() {
+  const RobotModel robot = RobotModel::Default();
+  Eigen::VectorXd q0(6);
+  q0 << 0.1, -0.4, 0.6, 0.2, 0.7, 0.1;
+  const auto q_at = [&](double t) {
+    Eigen::VectorXd q = q0;
+    for (int j = 0; j < 6; ++j) q[j] += 0.1 * std::sin((0.3 + 0.1 * j) * t + j);
+    return q;
+  };
+  Pose T_base_rig;
+  T_base_rig.R = ExpSO3(Vec3(0.0, 0.0, 0.4));
+  T_base_rig.t = Vec3(2.0, -1.0, 0.5);
+  Pose T_flange_target;
+  T_flange_target.t = Vec3(0.0, 0.0, 0.1);
+  Inclinometer incl;
+  incl.R_flange_incl = robot.T_base_flange(q0).R.transpose();
+  const Eigen::Quaterniond qi(incl.R_flange_incl);
+  const auto qr = T_base_rig.Quaternion();
+
+  Logs l;
+  l.files["setup.yaml"] = {
+      "T_base_rig:",
+      "  translation_m: [2.0, -1.0, 0.5]",
+      "  quaternion_wxyz: [" + N(qr.w()) + ", " + N(qr.x()) + ", " + N(qr.y()) + ", " + N(qr.z()) + "]",
+      "  sigma_rotation_rad: 1e-6",
+      "  sigma_translation_m: 1e-6",
+      "T_flange_target:",
+      "  translation_m: [0, 0, 0.1]",
+      "  quaternion_wxyz: [1, 0, 0, 0]",
+      "inclinometer:",
+      "  quaternion_wxyz: [" + N(qi.w()) + ", " + N(qi.x()) + ", " + N(qi.y()) + ", " + N(qi.z()) + "]",
+      "  sigma_deg: 0.01",
+      "robot_accuracy:",
+      "  position_sigma_m: [2e-5, 2e-5, 2e-5]",
+      "  orientation_sigma_deg: 0.001",
+  };
+  Lines& j = l.files["joints.csv"];
+  j.push_back("time_s,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg");
+  for (int k = 0; k <= 220; ++k) {
+    const Eigen::VectorXd q = q_at(k / 100.0);
+    std::string row = N(k / 100.0);
+    for (int i = 0; i < 6; ++i) (row += ",") += N(q[i] * 180.0 / 3.14159265358979323846);
+    j.push_back(row);
+  }
+  Lines& in = l.files["incl.csv"];
+  in.push_back("time_s,tilt_x_rad,tilt_y_rad");
+  for (int k = 0; k <= 110; ++k) {
+    const Vec2 r = incl.Predict(robot.T_base_flange(q_at(2 * k / 100.0)).R);
+    in.push_back(N(2 * k / 100.0) + "," + N(r.x()) + "," + N(r.y()));
+  }
+  Lines& p = l.files["poses.csv"];
+  std::string header = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz";
+  const char* ax[6] = {"rx", "ry", "rz", "px", "py", "pz"};
+  for (auto& a : ax)
+    for (auto& b : ax) header += std::string(",cov_") + a + "_" + b;
+  p.push_back(header);
+  for (int m = 0; m < 20; ++m) {
+    const double t = (20 + 10 * m) / 100.0;
+    const Pose T = T_base_rig.Inverse() * robot.T_base_flange(q_at(t)) * T_flange_target;
+    const auto q = T.Quaternion();
+    std::string row = std::to_string(m) + "," + N(t) + ",ok,\"\"," + N(T.t.x()) + "," + N(T.t.y()) + "," +
+                      N(T.t.z()) + "," + N(q.w()) + "," + N(q.x()) + "," + N(q.y()) + "," + N(q.z());
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 6; ++c) (row += ",") += N(r != c ? 0.0 : r < 3 ? 1e-8 : 1e-9);
+    p.push_back(row);
+  }
+  return l;
+}
+
+void Write(const fs::path& dir, const Logs& l) {
+  for (const auto& [name, lines] : l.files) {
+    std::ofstream o(dir / name);
+    for (const auto& s : lines) o << s << "\n";
+  }
+}
+
+// Replaces cell `col` (0-based) of line `line` (1-based) of a CSV.
+void SetCell(Lines& lines, int line, int col, const std::string& v) {
+  std::vector<std::string> cells;
+  std::stringstream s(lines[line - 1]);
+  std::string c;
+  while (std::getline(s, c, ',')) cells.push_back(c);
+  cells.at(col) = v;
+  std::string out;
+  for (size_t i = 0; i < cells.size(); ++i) out += (i ? "," : "") + cells[i];
+  lines[line - 1] = out;
+}
+
+const std::string kArgs = "fuse --quiet --tracker poses.csv --robot joints.csv --inclinometer incl.csv --setup "
+                          "setup.yaml -o fused.csv";
+
+// Runs mcms in `dir` (relative file names, so messages name them as given).
+CliRun Fuse(const fs::path& dir, const std::string& args = kArgs) {
+  const std::string cmd = "cd " + dir.string() + " && " + std::string(MCMS_CLI) + " " + args + " 2> stderr.txt > /dev/null";
+  const int status = std::system(cmd.c_str());
+  std::ifstream in(dir / "stderr.txt");
+  std::stringstream s;
+  s << in.rdbuf();
+  return {WEXITSTATUS(status), s.str()};
+}
+
+// Writes the logs into a fresh folder, runs the CLI and expects a refusal whose one line
+// contains every needle, and no output.
+void ExpectRefused(const std::string& name, const Logs& l, const std::vector<std::string>& needles,
+                   const std::string& args = kArgs) {
+  SCOPED_TRACE(name);
+  const fs::path d = test::ScratchDir("app_fuse_" + name);
+  Write(d, l);
+  const CliRun r = Fuse(d, args);
+  EXPECT_EQ(r.code, 2) << r.err;
+  for (const auto& n : needles) EXPECT_NE(r.err.find(n), std::string::npos) << "missing '" << n << "' in: " << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
+  EXPECT_FALSE(fs::exists(d / "fused.csv")) << "no output may be written";
+  for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << "left behind: " << e.path();
+}
+
+TEST(AppFuse, HelpDocumentsTheFormats) {
+  const fs::path d = test::ScratchDir("app_fuse_help");
+  const std::string cmd = std::string(MCMS_CLI) + " fuse --help > " + (d / "help.txt").string();
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::string help = ReadTextFile(d / "help.txt");
+  for (const char* s : {"time_s,q1_rad", "tilt_x_rad", "T_base_rig", "T_flange_target", "robot_accuracy",
+                        "cov_<a>_<b>", "moifa|kf", "flagged"})
+    EXPECT_NE(help.find(s), std::string::npos) << s;
+}
+
+TEST(AppFuse, FusesCleanLogs) {
+  const fs::path d = test::ScratchDir("app_fuse_clean");
+  Write(d, CleanLogs());
+  const CliRun r = Fuse(d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "fused.csv");
+  ASSERT_EQ(t.rows.size(), 40u);  // 20 frames, moifa and kf
+  EXPECT_EQ(t.header.size(), 14u + 36u);
+  EXPECT_EQ(t.rows[0][t.Column("method")], "moifa");
+  EXPECT_EQ(t.rows[1][t.Column("method")], "kf");
+  EXPECT_EQ(t.rows[0][t.Column("sensors")], "camera;robot;inclinometer");
+  EXPECT_TRUE(t.HasColumn("cov_pz_pz"));
+  // --method kf alone, and the robot alone as the second sensor.
+  ASSERT_EQ(Fuse(d, "fuse -q --tracker poses.csv --robot joints.csv --setup setup.yaml -o kf.csv --method kf").code, 0);
+  const CsvTable k = ReadCsv(d / "kf.csv");
+  ASSERT_EQ(k.rows.size(), 20u);
+  EXPECT_EQ(k.rows[5][k.Column("sensors")], "camera;robot");
+}
+
+TEST(AppFuse, BadTrackerLogsAreRefused) {
+  const Logs clean = CleanLogs();
+  {
+    Logs l = clean;
+    SetCell(l.files["poses.csv"], 6, 1, "0.3");  // line 6 is frame 4 at 0.6 s; line 5 has 0.5
+    ExpectRefused("tracker_time", l, {"poses.csv line 6", "does not increase"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["poses.csv"], 1, 7, "q_w");
+    ExpectRefused("tracker_column", l, {"poses.csv", "missing column 'qw'"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["poses.csv"], 4, 4, "nan");
+    ExpectRefused("tracker_nan", l, {"poses.csv line 4, column 'x_m'", "finite number"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["poses.csv"], 9, 13, "inf");
+    ExpectRefused("tracker_inf", l, {"poses.csv line 9, column 'cov_rx_rz'", "finite number"});
+  }
+  {
+    Logs l = clean;
+    l.files["poses.csv"].clear();
+    ExpectRefused("tracker_empty", l, {"poses.csv line 1: empty file"});
+  }
+  {
+    Logs l = clean;
+    l.files["poses.csv"].resize(1);
+    ExpectRefused("tracker_header_only", l, {"poses.csv line 1: header but no data rows"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["poses.csv"], 7, 11 + 3, "1e-9");  // cov_rx_px, its mirror stays 0
+    ExpectRefused("tracker_asymmetric", l, {"poses.csv line 7: covariance is not symmetric", "cov_rx_px"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["poses.csv"], 8, 11 + 35, "-1e-9");  // cov_pz_pz negative
+    ExpectRefused("tracker_indefinite", l, {"poses.csv line 8: covariance is not positive definite"});
+  }
+  {
+    Logs l = clean;
+    for (size_t i = 1; i < l.files["poses.csv"].size(); ++i) SetCell(l.files["poses.csv"], static_cast<int>(i) + 1, 2, "lost");
+    ExpectRefused("tracker_all_lost", l, {"poses.csv line 21", "every row has status lost"});
+  }
+}
+
+TEST(AppFuse, BadRobotLogsAreRefused) {
+  const Logs clean = CleanLogs();
+  {
+    Logs l = clean;
+    for (auto& s : l.files["joints.csv"]) s = s.substr(0, s.rfind(','));
+    ExpectRefused("robot_count", l, {"joints.csv line 1: found 5 joint columns",
+                                     "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad", "6 joints"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["joints.csv"], 30, 5, "140");  // A5 limit is +-130 deg
+    ExpectRefused("robot_limit", l, {"joints.csv line 30", "A5", "above its upper limit"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["joints.csv"], 12, 0, "0.05");
+    ExpectRefused("robot_time", l, {"joints.csv line 12", "does not increase"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["joints.csv"], 40, 3, "NaN");
+    ExpectRefused("robot_nan", l, {"joints.csv line 40, column 'q3_deg'", "finite number"});
+  }
+  {
+    Logs l = clean;
+    l.files["joints.csv"].resize(1);
+    ExpectRefused("robot_empty", l, {"joints.csv line 1: header but no data rows"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["joints.csv"], 1, 0, "t");
+    ExpectRefused("robot_column", l, {"joints.csv line 1: missing column 'time_s'"});
+  }
+  {
+    Logs l = clean;
+    for (size_t i = 1; i < l.files["joints.csv"].size(); ++i) {
+      std::string& s = l.files["joints.csv"][i];
+      s = N(std::stod(s.substr(0, s.find(','))) + 100.0) + s.substr(s.find(','));
+    }
+    ExpectRefused("robot_no_overlap", l, {"no time overlap", "poses.csv covers [0.2, 2.1] s", "joints.csv covers [100, 102.2] s"});
+  }
+}
+
+TEST(AppFuse, BadInclinometerLogsAndSetupsAreRefused) {
+  const Logs clean = CleanLogs();
+  {
+    Logs l = clean;
+    SetCell(l.files["incl.csv"], 1, 2, "tilt_z_rad");
+    ExpectRefused("incl_column", l, {"incl.csv line 1: missing column 'tilt_y_rad' or 'tilt_y_deg'"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["incl.csv"], 20, 1, "-inf");
+    ExpectRefused("incl_inf", l, {"incl.csv line 20, column 'tilt_x_rad'", "finite number"});
+  }
+  {
+    Logs l = clean;
+    SetCell(l.files["incl.csv"], 50, 0, "0.96");  // line 50 has 0.96 s, line 51 0.98 s
+    SetCell(l.files["incl.csv"], 51, 0, "0.96");
+    ExpectRefused("incl_time", l, {"incl.csv line 51", "does not increase"});
+  }
+  {
+    Logs l = clean;
+    l.files["incl.csv"].clear();
+    ExpectRefused("incl_empty", l, {"incl.csv line 1: empty file"});
+  }
+  {
+    Logs l = clean;
+    l.files["setup.yaml"].erase(l.files["setup.yaml"].begin(), l.files["setup.yaml"].begin() + 5);
+    ExpectRefused("setup_missing", l, {"setup file setup.yaml", "missing 'T_base_rig'"});
+  }
+  {
+    Logs l = clean;
+    l.files["setup.yaml"].push_back("  orientation_sigma_mrad: 3");
+    ExpectRefused("setup_unknown_key", l, {"setup file setup.yaml line 15", "unknown key 'orientation_sigma_mrad'"});
+  }
+  {
+    Logs l = clean;
+    l.files["setup.yaml"][6] = "  translation_m: [0, .nan, 0.1]";
+    ExpectRefused("setup_nan", l, {"setup file setup.yaml line 7", "T_flange_target.translation_m must be finite"});
+  }
+  {
+    Logs l = clean;
+    l.files["setup.yaml"].clear();
+    ExpectRefused("setup_empty", l, {"setup file setup.yaml line 1: empty file"});
+  }
+  {
+    Logs l = clean;
+    ExpectRefused("no_second_sensor", l, {"--robot and/or --inclinometer"},
+                  "fuse --tracker poses.csv --setup setup.yaml -o fused.csv");
+  }
+}
+
+}  // namespace
+}  // namespace mcms
