@@ -101,6 +101,7 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
     }
   }
 
+  res.image_points = pts;
   res.points = MatchAndTriangulate(rig_, pts, options_.matching);
   res.points_triangulated = static_cast<int>(res.points.size());
   const std::optional<Pose> predicted = Predict(time_s);
@@ -207,6 +208,7 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
   }
   res.balls_identified = static_cast<int>(seen.size());
   res.point_of_ball = point_of_ball;
+  res.ball_observations = ref.kept;
   if (!ref.converged) {
     notes.push_back("pose refinement did not converge");
     res.reason = Join(notes);

@@ -53,6 +53,8 @@ struct FrameResult {
   double chi2_per_dof = 0;
   std::vector<TriangulatedPoint> points;            // all triangulated points of the frame
   std::vector<int> point_of_ball;                   // identification (-1 = not found)
+  std::vector<BallObservation> ball_observations;   // the 2-D observations the pose was fitted to
+  std::vector<std::vector<ImagePoint>> image_points;  // every detected blob, per camera
 };
 
 class Tracker {
