@@ -1,0 +1,190 @@
+// Kinematic calibration of a serial robot (paper section 3.2, issue 4): identification of
+// DH parameter errors, the measurement-to-base transform and the tool (target) offset from
+// measured target positions (3-D) or full poses (6-D) and the joint values, by
+// Levenberg-Marquardt in Ceres; identifiability analysis (which parameters or combinations
+// the poses cannot separate, and which are therefore held fixed, with the reason); the
+// parameter covariance and strongly correlated pairs; held-out validation; pose selection.
+//
+// Frames: `meas` is the measuring system's frame (the camera rig, a laser tracker, a
+// static sensor). The model predicts
+//     T_meas_tool(q) = T_meas_base * T_base_flange(q; DH) * T_flange_tool,
+// and a measurement is the measured position p_meas of the tool (target) origin and,
+// for 6-D measurements, its orientation R_meas_tool.
+//
+// Parameter vector (SI: rad and m), in this order; `CalibrationParameterNames` gives the
+// names used in reports and in RobotCalibrationOptions::fixed:
+//   per joint i (name J):  J.theta_offset, J.d, J.a, J.alpha      (errors added to the DH table)
+//   base:  base.rx, base.ry, base.rz (rotation, left perturbation in the meas frame:
+//          R = Exp(r) R_hat), base.x, base.y, base.z (translation in the meas frame)
+//   tool:  tool.rx, tool.ry, tool.rz (R = Exp(r) R_hat in the flange frame), tool.x, tool.y, tool.z
+// This is the project's [dtheta; dp] layout for both transforms (docs/conventions.md).
+//
+// Identifiability: the Jacobian of the whitened residuals w.r.t. all parameters is
+// evaluated at the starting values, each column scaled to unit norm, and the columns are
+// taken greedily in a fixed priority order (base, tool, then the joints from the base out);
+// a column whose distance from the span of the columns already taken is below
+// `identifiability_tolerance` is held at its starting value, and the report names the
+// kept parameters it is (numerically) a combination of. With the base and the tool first,
+// this fixes e.g. the first joint's theta offset (= base yaw about axis 1) and d (= base
+// translation along axis 1), one of d_i/d_{i+1} for parallel consecutive axes in standard
+// DH, and the last joint's parameters that duplicate the tool transform.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "calib/robot_model.h"
+#include "core/pose_math.h"
+
+namespace mcms {
+
+// One measurement: joint values and the measured tool (target) position in the meas frame,
+// with the measured orientation for 6-D measurements.
+struct RobotMeasurement {
+  Eigen::VectorXd q;
+  Vec3 p_meas = Vec3::Zero();
+  std::optional<Mat3> R_meas_tool;
+};
+
+// Measurement files (YAML). Two layouts are read:
+//  (1) mcms:   measurements:
+//                - {q_rad: [..] | q_deg: [..], position_m: [x, y, z],
+//                   quaternion_wxyz: [w, x, y, z]   (optional: 6-D measurement)}
+//  (2) ROS-Industrial industrial_calibration's kinematic measurements: a map of
+//      id -> {camera_joints: [], target_joints: [..], pose: {x, y, z, qw, qx, qy, qz}}
+//      (the pose is T_camera_target; the target chain is the robot; camera_joints must be empty).
+// InputError naming the file, the entry and the field on bad input.
+std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path& path);
+// Writes layout (1), atomically, 17 significant digits.
+void WriteRobotMeasurements(const std::filesystem::path& path, const std::vector<RobotMeasurement>& m);
+
+struct RobotCalibrationOptions {
+  // One standard deviation of the measurement noise per axis: position (m) and
+  // orientation (rad, per rotation-vector component). Residuals are divided by them.
+  double position_sigma_m = 5e-5;
+  double rotation_sigma_rad = 1e-3;
+  bool estimate_dh = true;    // false: registration only (base and tool with nominal DH)
+  bool estimate_base = true;
+  bool estimate_tool = true;
+  // Parameter names (see the header comment) held at their starting value by request.
+  std::vector<std::string> fixed;
+  // Relative distance (0..1) of a scaled Jacobian column from the span of the columns
+  // kept before it below which the parameter counts as not identifiable.
+  double identifiability_tolerance = 1e-6;
+  // When true, a parameter that this pose set cannot identify although well-spread poses
+  // would (i.e. not a structural redundancy of the model) is an InputError naming it and
+  // the joint ranges covered; when false it is held and reported like the structural ones.
+  bool require_pose_identifiability = true;
+  double correlation_threshold = 0.95;  // report pairs with |rho| above this
+  int max_iterations = 200;
+  // When true the covariance is scaled by the a-posteriori variance factor
+  // (chi^2 / degrees of freedom), i.e. the sigmas above need only be right relatively.
+  bool scale_covariance = true;
+  // Called after each solver iteration with (iteration, cost); may be empty.
+  std::function<void(int, double)> progress;
+  bool IsValid(std::string* why) const;
+};
+
+struct CalibrationParameter {
+  std::string name;
+  double initial = 0.0;   // starting value of the error parameter (0 for the DH errors)
+  double estimate = 0.0;  // identified value (= initial when fixed)
+  double sigma = 0.0;     // standard deviation (0 when fixed)
+  bool fixed = false;
+  std::string reason;     // why it was fixed; empty when estimated
+};
+
+struct CorrelatedPair {
+  std::string a, b;
+  double rho = 0.0;
+};
+
+// Prediction error of one measurement: predicted minus measured, in the meas frame.
+struct PoseError {
+  Vec3 dp = Vec3::Zero();                 // m
+  std::optional<double> rotation_rad;     // angle of R_pred R_meas^T (6-D only)
+  double position() const { return dp.norm(); }
+};
+
+struct ErrorStats {
+  double mean_position_m = 0.0, rms_position_m = 0.0, max_position_m = 0.0;
+  std::optional<double> mean_rotation_rad, rms_rotation_rad, max_rotation_rad;
+};
+ErrorStats Summarize(const std::vector<PoseError>& errors);
+
+struct RobotCalibrationResult {
+  RobotModel robot;       // calibrated DH table and tool
+  Pose T_meas_base;       // calibrated registration
+  std::vector<CalibrationParameter> parameters;  // all 4n + 12, in the layout order
+  // Covariance of the free parameters (SI), in the order of `free_parameters`.
+  Eigen::MatrixXd covariance;
+  std::vector<int> free_parameters;  // indices into `parameters`
+  std::vector<CorrelatedPair> correlated;
+  std::vector<PoseError> errors_before, errors_after;  // fitting set, starting vs final model
+  double variance_factor = 1.0;   // chi^2 / dof of the final fit
+  // Smallest singular value of the whitened Jacobian over the free parameters with its
+  // columns scaled to unit norm, / sqrt(measurements): the observability index of
+  // ObservabilityIndex (larger = better conditioned).
+  double observability = 0.0;
+  int iterations = 0;
+  bool converged = false;
+  std::vector<const CalibrationParameter*> Fixed() const;
+};
+
+// Names of the 4n + 12 parameters in the layout order.
+std::vector<std::string> CalibrationParameterNames(const RobotModel& robot);
+// The model with DH errors added: delta has 4n values [theta_offset, d, a, alpha] per joint.
+RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta);
+
+// Predicted T_meas_tool for each measurement compared with the measurement.
+std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_meas_base,
+                                        const std::vector<RobotMeasurement>& measurements);
+
+// A starting registration when none is known: the rigid transform (Umeyama/Kabsch) that
+// best maps the nominal tool positions T_base_tool(q_i).t onto the measured positions.
+// InputError when fewer than 3 measurements or the positions are collinear.
+Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements);
+
+// Identifies the parameters (see the header comment). `robot` holds the nominal DH table
+// and the starting tool; `T_meas_base_guess` the starting registration.
+// InputError: joint counts differ from the robot's, joint values out of limits, mixed 3-D
+// and 6-D measurements, too few measurements for the free parameters, parameters that
+// these poses cannot separate but other poses would (require_pose_identifiability), or a
+// singular problem; each message says what is missing and what would fix it.
+RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_meas_base_guess,
+                                      const std::vector<RobotMeasurement>& measurements,
+                                      const RobotCalibrationOptions& options);
+
+// k-fold cross-validation: each measurement is predicted by a model fitted without its
+// fold (fold of measurement i = i mod k). `nominal` holds the errors of the nominal DH
+// table registered (base and tool fitted) on the same training folds, the fair baseline.
+struct CrossValidation {
+  std::vector<PoseError> calibrated, nominal;
+};
+CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_base_guess,
+                                   const std::vector<RobotMeasurement>& measurements,
+                                   const RobotCalibrationOptions& options, int folds);
+
+// Greedy pose selection: picks k of the candidate joint vectors, each step the one that
+// most improves the column-normalized information matrix of the identifiable parameters
+// (the identifiability analysis runs on all candidates first): log det (D-optimal) while
+// fewer residuals than parameters are chosen, then its smallest eigenvalue, i.e. the
+// observability index below (E-optimal). Returns the
+// indices in the order chosen. `six_dof` says whether orientation will be measured.
+std::vector<int> SelectPoses(const RobotModel& robot, const Pose& T_meas_base,
+                             const std::vector<Eigen::VectorXd>& candidates, int k, bool six_dof,
+                             const RobotCalibrationOptions& options);
+
+// Observability index of a pose set: smallest singular value of the whitened, column-
+// normalized Jacobian over the parameters that the identifiability analysis keeps,
+// divided by sqrt(number of measurements) so pose sets of different sizes compare.
+double ObservabilityIndex(const RobotModel& robot, const Pose& T_meas_base,
+                          const std::vector<Eigen::VectorXd>& poses, bool six_dof,
+                          const RobotCalibrationOptions& options);
+
+}  // namespace mcms
