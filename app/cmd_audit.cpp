@@ -1,0 +1,65 @@
+// mcms audit: track a recording and test every camera against the rest of the rig; name
+// an inconsistent camera and the cause, and optionally write the repaired rig.
+#include <cstdio>
+
+#include "app/commands.h"
+#include "core/error.h"
+#include "core/io.h"
+#include "tracking/audit.h"
+#include "tracking/sequence.h"
+
+namespace mcms::app {
+namespace {
+
+struct AuditArgs {
+  std::string dir, repaired;
+  double rate = 10.0;
+  double gain = 0;
+  bool quiet = false;
+};
+
+int RunAudit(const AuditArgs& a) {
+  namespace fs = std::filesystem;
+  const fs::path dir = a.dir;
+  const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
+  const Target target = Target::Read(dir / "target.yaml");
+  const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate}, rig);
+  TrackerOptions o;
+  o.detector.gain_e_per_dn = a.gain;
+  Tracker tracker(rig, target, o);
+  Progress progress("track", seq.frames.size(), a.quiet);
+  const auto results = TrackImageSequence(seq, tracker, [&](size_t d, size_t) { progress.Update(d); });
+  progress.Finish();
+  const SequenceAudit audit = AuditCameras(rig, target, results);
+  std::printf("%s", audit.Report().c_str());
+  if (audit.worst < 0) {
+    std::printf("every camera is consistent with the rest of the rig\n");
+  } else if (!a.repaired.empty()) {
+    if (audit.cameras[audit.worst].cause != "camera moved")
+      Throw("camera ", audit.cameras[audit.worst].name, " is inconsistent (", audit.cameras[audit.worst].cause,
+            "): re-calibrate its lens (mcms calib-rig); no repaired rig written");
+    RepairRig(rig, audit).Write(a.repaired);
+    std::printf("wrote the rig with %s's re-estimated pose to %s\n", audit.cameras[audit.worst].name.c_str(),
+                a.repaired.c_str());
+  }
+  return 0;
+}
+
+McmsCommand audit_command([](CLI::App& app) {
+  auto args = std::make_shared<AuditArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "audit",
+      "Track a recording (as `mcms track`) and test every camera against the rest of the rig: leave-one-camera-out "
+      "residuals against chi-square. An inconsistent camera is named with the cause that explains its residuals "
+      "(camera moved, or lens distortion), and a moved camera's pose is re-estimated.");
+  cmd->add_option("DIR", args->dir, "recording folder (images/, rig.yaml, target.yaml, optional frames.csv)")->required();
+  cmd->add_option("--repaired-rig", args->repaired, "write the rig with the re-estimated camera pose here");
+  cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames.csv")->check(CLI::PositiveNumber);
+  cmd->add_option("--gain", args->gain, "camera gain in electrons per DN (0 = no photon-noise term)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
+  return std::make_pair(cmd, Runner([args] { return RunAudit(*args); }));
+});
+
+}  // namespace
+}  // namespace mcms::app
