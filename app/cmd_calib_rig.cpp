@@ -1,0 +1,164 @@
+// mcms calib-rig: calibration-board images per camera -> every camera's intrinsics
+// and pose in the rig (camera 0 = rig frame), as mrcal .cameramodel, OpenCV YAML and
+// rig.yaml, with a residual summary and per-camera residual plots.
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <set>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "app/commands.h"
+#include "calib/calibration_board.h"
+#include "calib/camera_calibration.h"
+#include "core/error.h"
+#include "core/io.h"
+
+namespace mcms::app {
+namespace {
+
+struct CalibRigArgs {
+  std::string board;
+  std::vector<std::string> folders;
+  std::string lensmodel = "LENSMODEL_OPENCV8";
+  std::string output = "calib-rig";
+  double outlier_k = 4.0;
+  double range_m = 10.0;
+  bool board_warp = false;
+  bool quiet = false;
+};
+
+bool IsImage(const std::filesystem::path& p) {
+  std::string e = p.extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  static const std::set<std::string> kExt = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm"};
+  return kExt.count(e) > 0;
+}
+
+int RunCalibRig(const CalibRigArgs& a) {
+  namespace fs = std::filesystem;
+  const CalibrationBoard board = CalibrationBoard::Read(a.board);
+  CameraCalibrationOptions options;
+  options.lensmodel = a.lensmodel;
+  options.outlier_k = a.outlier_k;
+  options.solve_board_warp = a.board_warp;
+  if (!a.quiet) options.log = [](const std::string& s) { std::fprintf(stderr, "calib-rig: %s\n", s.c_str()); };
+  std::string why;
+  if (!options.IsValid(&why)) Throw("calib-rig options: ", why);
+
+  // Images per camera; a frame is one file name (stem) shared across the folders.
+  std::vector<std::vector<fs::path>> images(a.folders.size());
+  std::set<std::string> stems;
+  CameraCalibrationInput input;
+  for (size_t c = 0; c < a.folders.size(); ++c) {
+    const fs::path dir = a.folders[c];
+    if (!fs::is_directory(dir)) Throw("image folder ", dir.string(), " does not exist or is not a folder");
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.is_regular_file() && IsImage(e.path())) images[c].push_back(e.path());
+    std::sort(images[c].begin(), images[c].end());
+    if (images[c].empty())
+      Throw("image folder ", dir.string(), " holds no images (.png, .jpg, .bmp, .tif, .pgm)");
+    for (const auto& p : images[c]) stems.insert(p.stem().string());
+    std::string name = fs::path(dir).lexically_normal().filename().string();
+    if (name.empty() || name == ".") name = "cam" + std::to_string(c);
+    input.camera_names.push_back(name);
+  }
+  const std::vector<std::string> frame_names(stems.begin(), stems.end());
+  size_t total = 0;
+  for (const auto& v : images) total += v.size();
+  Progress progress("detect", total, a.quiet);
+  size_t done = 0;
+  for (size_t c = 0; c < a.folders.size(); ++c) {
+    int width = 0, height = 0, found = 0;
+    for (const fs::path& p : images[c]) {
+      const cv::Mat img = cv::imread(p.string(), cv::IMREAD_GRAYSCALE);
+      if (img.empty()) Throw("image ", p.string(), ": cannot be read as an image");
+      if (width == 0) width = img.cols, height = img.rows;
+      else if (img.cols != width || img.rows != height)
+        Throw("image ", p.string(), " is ", img.cols, "x", img.rows, " but the other images of camera ",
+              input.camera_names[c], " are ", width, "x", height);
+      const BoardDetection det = DetectBoard(board, img);
+      progress.Update(++done);
+      if (det.size() == 0) continue;
+      ++found;
+      BoardObservation o;
+      o.camera = static_cast<int>(c);
+      o.frame = static_cast<int>(std::lower_bound(frame_names.begin(), frame_names.end(), p.stem().string()) -
+                                 frame_names.begin());
+      o.pixels = det.pixels;
+      for (int id : det.ids) o.points_board.push_back(board.Point(id));
+      input.observations.push_back(std::move(o));
+    }
+    if (found == 0)
+      Throw("the board (", board.Describe(), ", from ", a.board, ") was not found in any of the ", images[c].size(),
+            " images of camera ", input.camera_names[c], " (", a.folders[c],
+            "); check the board file (chessboards count inner corners) and that the images show the whole board; "
+            "no output written");
+    input.widths.push_back(width);
+    input.heights.push_back(height);
+    if (!a.quiet)
+      std::fprintf(stderr, "calib-rig: %s: board found in %d of %zu images\n", input.camera_names[c].c_str(), found,
+                   images[c].size());
+  }
+  progress.Finish();
+
+  const CameraCalibrationResult r = CalibrateCameras(input, options);
+
+  // Everything is computed; only now write the outputs (each atomically).
+  const fs::path out = a.output;
+  fs::create_directories(out);
+  for (size_t c = 0; c < r.rig.size(); ++c) {
+    const std::string& name = r.rig.names[c];
+    r.rig.cameras[c].WriteCameramodel(out / (name + ".cameramodel"));
+    r.rig.cameras[c].WriteOpenCvYaml(out / (name + ".yml"));
+    WriteResidualPlot(r, static_cast<int>(c), out / ("residuals-" + name + ".svg"));
+  }
+  r.rig.Write(out / "rig.yaml");
+
+  std::printf("%s", SummarizeCalibration(r).c_str());
+  if (a.board_warp)
+    std::printf("board warp: %.3f +- %.3f mm (x), %.3f +- %.3f mm (y)\n", r.board_warp_m[0] * 1e3,
+                r.board_warp_std_m[0] * 1e3, r.board_warp_m[1] * 1e3, r.board_warp_std_m[1] * 1e3);
+  for (size_t c = 0; c < r.rig.size(); ++c) {
+    const UncertaintyGrid g = ProjectionUncertaintyGrid(r.rig.cameras[c], r.intrinsics_covariance[c], a.range_m);
+    std::printf("%s: projection uncertainty (1 sigma, px) at %.2f m, %dx%d grid over the image:\n",
+                r.rig.names[c].c_str(), a.range_m, g.nx, g.ny);
+    for (int j = 0; j < g.ny; ++j) {
+      std::printf("  ");
+      for (int i = 0; i < g.nx; ++i) std::printf(" %7.3f", g.sigma_px[j * g.nx + i]);
+      std::printf("\n");
+    }
+  }
+  std::printf("wrote %zu camera models (.cameramodel, .yml), residual plots and rig.yaml to %s\n", r.rig.size(),
+              out.string().c_str());
+  return 0;
+}
+
+McmsCommand calib_rig_command([](CLI::App& app) {
+  auto args = std::make_shared<CalibRigArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "calib-rig",
+      "Calibrate a camera rig from calibration-board images: every camera's intrinsics (mrcal lens model) and pose "
+      "in the rig (the first camera defines the rig frame), by bundle adjustment with outlier rejection. Give one "
+      "image folder per camera (images of the same moment share a file name) or a single folder for one camera. "
+      "Writes <camera>.cameramodel (mrcal), <camera>.yml (OpenCV), rig.yaml and residuals-<camera>.svg to the "
+      "output folder, and prints residuals, parameter standard deviations and the projection uncertainty.");
+  cmd->add_option("BOARD", args->board,
+                  "board description (Kalibr YAML: target_type aprilgrid with tagCols, tagRows, tagSize, tagSpacing; "
+                  "or checkerboard with targetCols, targetRows (inner corners), rowSpacingMeters, colSpacingMeters)")
+      ->required();
+  cmd->add_option("FOLDERS", args->folders, "image folder per camera (its name names the camera)")->required();
+  cmd->add_option("-m,--lensmodel", args->lensmodel,
+                  "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, _OPENCV5, _OPENCV12 or LENSMODEL_PINHOLE");
+  cmd->add_option("-o,--output", args->output, "output folder (created; default ./calib-rig)");
+  cmd->add_option("--outlier-k", args->outlier_k, "reject points beyond k sigma and re-solve (0 = keep all)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--range", args->range_m, "range in metres for the projection-uncertainty report")
+      ->check(CLI::PositiveNumber);
+  cmd->add_flag("--board-warp", args->board_warp, "also solve the board's out-of-plane warp (mrcal's calobject_warp)");
+  cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
+  return std::make_pair(cmd, Runner([args] { return RunCalibRig(*args); }));
+});
+
+}  // namespace
+}  // namespace mcms::app
