@@ -64,6 +64,14 @@ Vec6 BoxMinus(const Pose& T, const Pose& T_hat) {
   return d;
 }
 
+Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, const Pose& B) {
+  Mat6 J = Mat6::Zero();
+  J.topLeftCorner<3, 3>() = A.R;
+  J.bottomLeftCorner<3, 3>() = -A.R * Skew(T.R * B.t);
+  J.bottomRightCorner<3, 3>() = A.R;
+  return J * cov * J.transpose();
+}
+
 double RotationAngle(const Mat3& R_a, const Mat3& R_b) {
   // Through the quaternion: acos of the trace loses half the digits near zero.
   const Eigen::Quaterniond q(R_a.transpose() * R_b);

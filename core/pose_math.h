@@ -41,6 +41,11 @@ Mat3 LeftJacobianSO3(const Vec3& r);
 Pose BoxPlus(const Pose& T, const Vec6& delta);
 Vec6 BoxMinus(const Pose& T, const Pose& T_hat);  // T = BoxPlus(T_hat, result)
 
+// Maps a covariance of T in the [dtheta; dp] layout to that of T' = A * T * B, with A and
+// B exact (e.g. a registration and a mounting offset): dtheta' = R_A dtheta,
+// dp' = R_A (dp - [R p_B]x dtheta).
+Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, const Pose& B);
+
 // Angle of the relative rotation R_a^T R_b, radians.
 double RotationAngle(const Mat3& R_a, const Mat3& R_b);
 

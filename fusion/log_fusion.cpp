@@ -67,13 +67,7 @@ PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covari
   const Pose T_target_flange = setup.T_flange_target.Inverse();
   PoseWithCovariance out;
   out.T = setup.T_base_rig * T_rig_target * T_target_flange;
-  const Mat3& Rbr = setup.T_base_rig.R;
-  const Vec3 a = Rbr * T_rig_target.R * T_target_flange.t;
-  Mat6 J = Mat6::Zero();
-  J.topLeftCorner<3, 3>() = Rbr;
-  J.bottomLeftCorner<3, 3>() = -Skew(a) * Rbr;
-  J.bottomRightCorner<3, 3>() = Rbr;
-  out.covariance = J * covariance_rig * J.transpose();
+  out.covariance = TransformPoseCovariance(covariance_rig, setup.T_base_rig, T_rig_target, T_target_flange);
   Mat6 K = Mat6::Identity();
   K.bottomLeftCorner<3, 3>() = -Skew(out.T.t - setup.T_base_rig.t);
   out.covariance += K * setup.T_base_rig_covariance * K.transpose();

@@ -17,16 +17,6 @@ bool LabOptions::IsValid(std::string* why) const {
   return inclinometer.IsValid(why);
 }
 
-Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, const Pose& B) {
-  // R' = R_A R R_B -> dtheta' = R_A dtheta;  p' = R_A (R p_B + p) + p_A
-  // -> dp' = R_A (dp - [R p_B]x dtheta).
-  Mat6 J = Mat6::Zero();
-  J.topLeftCorner<3, 3>() = A.R;
-  J.bottomLeftCorner<3, 3>() = -A.R * Skew(T.R * B.t);
-  J.bottomRightCorner<3, 3>() = A.R;
-  return J * cov * J.transpose();
-}
-
 std::optional<Eigen::VectorXd> SolveIk(const RobotModel& robot, const Pose& T_goal, const Eigen::VectorXd& seed) {
   Eigen::VectorXd q = seed;
   for (int it = 0; it < 200; ++it) {

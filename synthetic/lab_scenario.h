@@ -68,7 +68,4 @@ LabScenario MakeLabScenario(const LabOptions& options = {});
 // converge within the joint limits.
 std::optional<Eigen::VectorXd> SolveIk(const RobotModel& robot, const Pose& T_base_flange, const Eigen::VectorXd& seed);
 
-// Maps a pose covariance in [dtheta; dp] through T' = A * T * B (A, B exact).
-Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, const Pose& B);
-
 }  // namespace mcms
