@@ -13,7 +13,8 @@
 // and a robot description (calib/robots/*.yaml format; default: the built-in KUKA KR 5
 // arc) whose `tool` is the starting target offset T_flange_tool.
 // Outputs (each written only after the whole calibration succeeded, atomically):
-//   -o ROBOT.yaml    the calibrated robot (DH table and tool)
+//   -o ROBOT.yaml    the calibrated robot (DH table, tool and, with --error-motion, the
+//                    joints' error-motion harmonics)
 //   --report FILE    the report (also printed): starting and final residuals, the
 //                    registration T_meas_base, every parameter with its sigma, the fixed
 //                    parameters with the reason, correlated pairs, k-fold held-out errors
@@ -43,6 +44,7 @@ struct CalibRobotArgs {
   std::string measurements, robot, output, report, plot;
   std::vector<double> base_guess, tool_guess;
   std::vector<std::string> fixed;
+  std::vector<int> error_motion;
   double position_sigma_mm = 0.05, rotation_sigma_deg = 0.05;
   int folds = 5;
   int max_iterations = 200;
@@ -99,6 +101,7 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   opt.fixed = a.fixed;
   opt.max_iterations = a.max_iterations;
   opt.estimate_dh = !a.registration_only;
+  opt.error_motion_harmonics = a.error_motion;
   // Progress: the iteration count is not known in advance, so a line at most every half
   // second (long solves only) instead of a percentage.
   using Clock = std::chrono::steady_clock;
@@ -118,6 +121,7 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   // The fair baseline: the nominal DH table with base and tool fitted.
   RobotCalibrationOptions reg = opt;
   reg.estimate_dh = false;
+  reg.error_motion_harmonics.clear();
   reg.progress = nullptr;
   const RobotCalibrationResult nominal = CalibrateRobot(robot, guess, ms, reg);
 
@@ -224,6 +228,11 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
   sub->add_option("--folds", args->folds, "k-fold held-out validation (default 5; 0 = none)")->check(CLI::NonNegativeNumber);
   sub->add_option("--max-iterations", args->max_iterations, "Solver iterations (default 200)")
       ->check(CLI::PositiveNumber);
+  sub->add_option("--error-motion", args->error_motion,
+                  "Error-motion harmonics to estimate per joint, one count each (e.g. 0 3: joint 2's angle-dependent\n"
+                  "tilt, radial, axial and angular errors to the 3rd harmonic; calib/robot_model.h)")
+      ->delimiter(',')
+      ->type_name("H1 H2 ..");
   sub->add_flag("--registration-only", args->registration_only, "Fit only base and tool, DH held nominal");
   sub->add_flag("--quiet", args->quiet, "No progress on stderr");
   return std::make_pair(sub, Runner([args] { return RunCalibRobot(*args); }));

@@ -14,6 +14,7 @@
 // poses have; AT, RT for the path. Lengths in mm, angles in degrees.
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -24,6 +25,7 @@
 #include "calib/iso9283.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "synthetic/iso9283_experiment.h"
 
 namespace mcms::app {
 namespace {
@@ -32,7 +34,36 @@ constexpr double kDeg = 3.14159265358979323846 / 180.0;
 
 struct IsoArgs {
   std::string poses, path, output;
+  // --simulate: the experiment on the forward model (synthetic/iso9283_experiment.h)
+  // instead of measured input.
+  bool simulate = false;
+  int cycles = 30;
+  uint64_t seed = Iso9283ExperimentOptions{}.seed;
+  std::string simulate_dir;
 };
+
+// The four conditions of the forward-model experiment: tables on stdout, -o the
+// characteristics CSV, --write-measurements the attained poses and paths per condition
+// (this command's own input layout, so each can be re-evaluated from its file).
+int RunIso9283Simulation(const IsoArgs& a) {
+  if (!a.poses.empty() || !a.path.empty())
+    Throw("iso9283 --simulate: makes its own measurements; give no POSES file and no --path");
+  Iso9283ExperimentOptions o;
+  o.cycles = a.cycles;
+  o.seed = a.seed;
+  const Iso9283Experiment e = RunIso9283Experiment(o);
+  if (!a.output.empty()) WriteIso9283ExperimentCsv(a.output, e);
+  if (!a.simulate_dir.empty()) {
+    std::filesystem::create_directories(a.simulate_dir);
+    for (int k = 0; k < static_cast<int>(e.conditions.size()); ++k) {
+      const std::filesystem::path dir = a.simulate_dir;
+      WriteIso9283AttainedCsv(dir / ("attained_" + std::to_string(k + 1) + ".csv"), e, k);
+      WriteIso9283PathCsv(dir / ("path_" + std::to_string(k + 1) + ".csv"), e, k);
+    }
+  }
+  std::fputs(FormatIso9283Experiment(e).c_str(), stdout);
+  return 0;
+}
 
 struct PoseRows {
   Pose commanded;
@@ -53,6 +84,8 @@ Pose RowPose(const CsvTable& t, size_t row, const std::string& prefix) {
 }
 
 int RunIso9283(const IsoArgs& a) {
+  if (a.simulate) return RunIso9283Simulation(a);
+  if (a.poses.empty()) Throw("iso9283: POSES (a pose CSV) is required, or --simulate");
   const CsvTable t = ReadCsv(a.poses);
   const int c_pose = t.Column("pose"), c_cycle = t.Column("cycle");
   std::map<std::string, PoseRows> poses;
@@ -167,8 +200,17 @@ const McmsCommand kIso9283([](CLI::App& app) {
       "Reports per pose AP, RP (with AP_a/b/c, RP_a/b/c: rotation deviations about x, y, z), per\n"
       "consecutive pose pair AD, RD (cycles matched by name), and with --path AT, RT from a CSV\n"
       "run,x_m,y_m,z_m where run = commanded marks the commanded path (calculation points).\n"
-      "Table on stdout (mm, deg); -o writes it as CSV.");
-  sub->add_option("POSES", args->poses, "Pose CSV")->required()->check(CLI::ExistingFile);
+      "Table on stdout (mm, deg); -o writes it as CSV.\n"
+      "--simulate: no input; runs the experiment on the forward model (KR 5 arc with DH, base, tool and gear\n"
+      "errors, the 4-camera rig, the inclinometer) before and after calibration and before and after a\n"
+      "camera-only and a MOIFA correction, and prints the four conditions' tables.");
+  sub->add_option("POSES", args->poses, "Pose CSV (required unless --simulate)")->check(CLI::ExistingFile);
+  sub->add_flag("--simulate", args->simulate, "Run the forward-model experiment instead of reading POSES");
+  sub->add_option("--cycles", args->cycles, "--simulate: cycles P1..P5 (ISO 9283: 30; at least 2)");
+  sub->add_option("--seed", args->seed, "--simulate: random seed");
+  sub->add_option("--write-measurements", args->simulate_dir,
+                  "--simulate: folder for attained_<k>.csv and path_<k>.csv per condition k = 1..4")
+      ->type_name("DIR");
   sub->add_option("--path", args->path, "Path CSV (run,x_m,y_m,z_m)")->check(CLI::ExistingFile);
   sub->add_option("-o,--output", args->output, "Also write the table as CSV")->type_name("FILE");
   return std::make_pair(sub, Runner([args] { return RunIso9283(*args); }));

@@ -1,8 +1,13 @@
 #include "calib/calibration_board.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <sstream>
+
+#include <Eigen/Eigenvalues>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -126,7 +131,133 @@ cv::Mat ToGray8(const cv::Mat& image) {
 
 }  // namespace
 
+bool AprilTagOptions::IsValid(std::string* why) const {
+  std::ostringstream s;
+  if (!(quad_decimate >= 1.0f) || !std::isfinite(quad_decimate))
+    s << "quad_decimate must be >= 1 (got " << quad_decimate << ")";
+  else if (!(quad_sigma >= 0.0f) || !std::isfinite(quad_sigma))
+    s << "quad_sigma must be >= 0 px (got " << quad_sigma << ")";
+  else if (threads < 1)
+    s << "threads must be >= 1 (got " << threads << ")";
+  else if (max_hamming < 0 || max_hamming > 2)
+    s << "max_hamming must be 0, 1 or 2 (got " << max_hamming << ")";
+  if (why) *why = s.str();
+  return s.str().empty();
+}
+
+namespace {
+
+// Grey level at (x, y) in this project's convention (pixel centres at integers),
+// bilinear between the four nearest pixel centres; nullopt within one pixel of the
+// border, where the four neighbours do not exist.
+std::optional<double> Bilinear(const cv::Mat& gray, double x, double y) {
+  const double fx = std::floor(x), fy = std::floor(y);
+  const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+  if (!(x0 >= 0 && y0 >= 0 && x0 + 1 < gray.cols && y0 + 1 < gray.rows)) return std::nullopt;
+  const double a = x - fx, b = y - fy;
+  const uchar* r0 = gray.ptr<uchar>(y0) + x0;
+  const uchar* r1 = gray.ptr<uchar>(y0 + 1) + x0;
+  return (1 - a) * (1 - b) * r0[0] + a * (1 - b) * r0[1] + (1 - a) * b * r1[0] + a * b * r1[1];
+}
+
+// A line {p : n . (p - point) = 0}, n a unit normal.
+struct Line2 {
+  Vec2 point, normal;
+};
+
+std::optional<Vec2> Intersect(const Line2& a, const Line2& b) {
+  Eigen::Matrix2d A;
+  A << a.normal.transpose(), b.normal.transpose();
+  // Adjacent tag edges meet at a clear angle in any usable view; below ~0.06 deg the
+  // crossing is ill-defined.
+  if (std::abs(A.determinant()) < 1e-3) return std::nullopt;
+  return A.inverse() * Vec2(a.normal.dot(a.point), b.normal.dot(b.point));
+}
+
+// Re-fits the four edges of a tag quad to the image gradient and returns the corners
+// where adjacent fitted edges cross; nullopt (keep the corners given) when an edge
+// finds too little gradient or a corner would move further than the search range.
+// `corners` in this project's convention, in cyclic order around the quad.
+//
+// Per edge, at max(16, length/8) points spread along it (avoiding the corners,
+// whose neighbourhood mixes two edges), the grey-level step across the edge is
+// sampled every 1/4 px along the outward normal within +-range px; each sample's
+// weight is the squared difference of the grey levels 1 px outside and 1 px inside
+// it, kept only where the outside is the brighter (tag36h11's black border on its
+// white surround), and the weighted mean offset is that point's edge crossing.
+// The line through the crossings is the total-least-squares fit. This is the
+// refinement of later libapriltag versions (bilinear reads at the right half-pixel,
+// which 3.3's truncated integer reads get wrong); range = quad_decimate + 1 as
+// there, the uncertainty of the quad fit in the (decimated) threshold image.
+std::optional<std::array<Vec2, 4>> RefineTagEdges(const cv::Mat& gray, const std::array<Vec2, 4>& corners,
+                                                  double range) {
+  constexpr double kStepPx = 0.25, kHalfBaselinePx = 1.0;
+  constexpr int kMinCrossings = 4;
+  const Vec2 centre = 0.25 * (corners[0] + corners[1] + corners[2] + corners[3]);
+  std::array<Line2, 4> lines;
+  for (int e = 0; e < 4; ++e) {
+    const Vec2& a = corners[e];
+    const Vec2& b = corners[(e + 1) % 4];
+    const double length = (b - a).norm();
+    if (!(length > 0)) return std::nullopt;
+    Vec2 n(b.y() - a.y(), a.x() - b.x());
+    n /= length;
+    if (n.dot(0.5 * (a + b) - centre) < 0) n = -n;  // outward
+    const int nsamples = std::max(16, static_cast<int>(length / 8));
+    std::vector<Vec2> crossings;
+    for (int s = 0; s < nsamples; ++s) {
+      const double alpha = (1.0 + s) / (nsamples + 1);
+      const Vec2 p0 = alpha * a + (1 - alpha) * b;
+      double sum_wn = 0, sum_w = 0;
+      const int steps = static_cast<int>(std::floor(2 * range / kStepPx)) + 1;
+      for (int k = 0; k < steps; ++k) {
+        const double t = -range + kStepPx * k;
+        const auto outside = Bilinear(gray, p0.x() + (t + kHalfBaselinePx) * n.x(), p0.y() + (t + kHalfBaselinePx) * n.y());
+        const auto inside = Bilinear(gray, p0.x() + (t - kHalfBaselinePx) * n.x(), p0.y() + (t - kHalfBaselinePx) * n.y());
+        if (!outside || !inside || *outside < *inside) continue;
+        const double w = (*outside - *inside) * (*outside - *inside);
+        sum_wn += w * t;
+        sum_w += w;
+      }
+      if (sum_w > 0) crossings.push_back(p0 + (sum_wn / sum_w) * n);
+    }
+    if (static_cast<int>(crossings.size()) < kMinCrossings) return std::nullopt;
+    Vec2 mean = Vec2::Zero();
+    for (const Vec2& c : crossings) mean += c;
+    mean /= static_cast<double>(crossings.size());
+    Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+    for (const Vec2& c : crossings) cov += (c - mean) * (c - mean).transpose();
+    // The normal of the best-fit line: the eigenvector of the smaller eigenvalue.
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(cov);
+    lines[e] = {mean, eig.eigenvectors().col(0)};
+  }
+  std::array<Vec2, 4> out;
+  for (int e = 0; e < 4; ++e) {
+    // Corner e + 1 is where edge e (corners e -> e+1) meets edge e + 1.
+    const int k = (e + 1) % 4;
+    const auto x = Intersect(lines[e], lines[k]);
+    if (!x || (*x - corners[k]).norm() > range + kHalfBaselinePx) return std::nullopt;
+    out[k] = *x;
+  }
+  return out;
+}
+
+// Where the diagonals of the quad cross: the image of the tag centre under the
+// homography through the four corners (what libapriltag reports as c).
+Vec2 DiagonalCrossing(const Vec2 p[4], const Vec2& fallback) {
+  const Vec2 d0 = p[2] - p[0], d1 = p[3] - p[1];
+  Eigen::Matrix2d A;
+  A << d0.x(), -d1.x(), d0.y(), -d1.y();
+  if (std::abs(A.determinant()) < 1e-9) return fallback;
+  const Vec2 st = A.inverse() * (p[1] - p[0]);
+  return p[0] + st[0] * d0;
+}
+
+}  // namespace
+
 std::vector<AprilTagDetection> DetectAprilTags(const cv::Mat& image, const AprilTagOptions& options) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("DetectAprilTags: options: ", why);
   cv::Mat gray = ToGray8(image);
   if (!gray.isContinuous()) gray = gray.clone();
   std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> family(tag36h11_create(), tag36h11_destroy);
@@ -136,7 +267,11 @@ std::vector<AprilTagDetection> DetectAprilTags(const cv::Mat& image, const April
   detector->quad_decimate = options.quad_decimate;
   detector->quad_sigma = options.quad_sigma;
   detector->nthreads = options.threads;
-  detector->refine_edges = options.refine_edges;
+  // libapriltag 3.3 refines before decoding, so kLibApriltag33 also decodes the
+  // refined quad; the other modes decode the unrefined quad (as AprilTag's own
+  // regression data did; there all 47 of its tags decode from the unrefined quad at
+  // max_hamming 2, 45 from 3.3's refined one; 46 and 44 at max_hamming 1).
+  detector->refine_edges = options.corner_refinement == AprilTagCornerRefinement::kLibApriltag33;
   image_u8_t im{gray.cols, gray.rows, static_cast<int32_t>(gray.step[0]), gray.data};
   zarray_t* found = apriltag_detector_detect(detector.get(), &im);
   std::vector<AprilTagDetection> out;
@@ -150,8 +285,13 @@ std::vector<AprilTagDetection> DetectAprilTags(const cv::Mat& image, const April
     // libapriltag puts the top-left corner of the top-left pixel at (0,0) (its
     // decimation maps x -> (x - 0.5) d + 0.5); this project puts that pixel's centre
     // there, hence the half-pixel shift.
-    for (int k = 0; k < 4; ++k) t.corners[k] = Vec2(d->p[k][0] - 0.5, d->p[k][1] - 0.5);
-    t.center = Vec2(d->c[0] - 0.5, d->c[1] - 0.5);
+    std::array<Vec2, 4> corners;
+    for (int k = 0; k < 4; ++k) corners[k] = Vec2(d->p[k][0] - 0.5, d->p[k][1] - 0.5);
+    if (options.corner_refinement == AprilTagCornerRefinement::kEdgeFit) {
+      if (const auto refined = RefineTagEdges(gray, corners, options.quad_decimate + 1.0)) corners = *refined;
+    }
+    for (int k = 0; k < 4; ++k) t.corners[k] = corners[k];
+    t.center = DiagonalCrossing(t.corners, Vec2(d->c[0] - 0.5, d->c[1] - 0.5));
     out.push_back(t);
   }
   apriltag_detections_destroy(found);

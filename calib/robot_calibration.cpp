@@ -27,16 +27,27 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kParamsPerJoint = 4;
 constexpr int kBaseAndTool = 12;
+constexpr int kPerHarmonic = 12;  // sin [rx ry rz x y z], cos [rx ry rz x y z]
 
-int NumParameters(const RobotModel& r) { return kParamsPerJoint * r.NumJoints() + kBaseAndTool; }
 int BaseOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints(); }
 int ToolOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints() + 6; }
+int ErrorMotionOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints() + kBaseAndTool; }
+// Harmonics of error motion estimated for joint i (options.error_motion_harmonics).
+int HarmonicsOf(const RobotCalibrationOptions& o, int i) {
+  return o.error_motion_harmonics.empty() ? 0 : o.error_motion_harmonics[i];
+}
+int NumParameters(const RobotModel& r, const RobotCalibrationOptions& o) {
+  int n = ErrorMotionOffset(r);
+  for (int i = 0; i < r.NumJoints(); ++i) n += kPerHarmonic * HarmonicsOf(o, i);
+  return n;
+}
 
 // ---- The one cost functor: whitened prediction error of one measurement. ----
 // Parameter block: the full vector of the header's layout. Residuals: 3 (position) or 6
 // (position, then the rotation vector of R_pred R_meas^T), each divided by its sigma.
 struct MeasurementCost {
   const RobotModel* robot;
+  std::vector<int> harmonics;  // estimated error-motion harmonics per joint
   Eigen::VectorXd q;
   Pose base0, tool0;
   Vec3 p_meas;
@@ -52,6 +63,7 @@ struct MeasurementCost {
     const bool standard = robot->Convention() == DhConvention::kStandard;
     M3 R = M3::Identity();
     V3 t = V3::Zero();
+    const T* em = x + ErrorMotionOffset(*robot);
     for (size_t i = 0; i < joints.size(); ++i) {
       const Joint& j = joints[i];
       const T* e = x + kParamsPerJoint * i;
@@ -70,6 +82,37 @@ struct MeasurementCost {
         Rl << ct, -st, T(0), ca * st, ca * ct, -sa, sa * st, sa * ct, ca;
         tl << a, -sa * d, ca * d;
       }
+      // Error motion (robot_model.h): the model's harmonics plus the estimated corrections.
+      const int h_est = i < harmonics.size() ? harmonics[i] : 0;
+      const int h_all = std::max(j.Harmonics(), h_est);
+      if (h_all > 0) {
+        T xi[6] = {T(0), T(0), T(0), T(0), T(0), T(0)};
+        for (int h = 0; h < h_all; ++h) {
+          const double sh = std::sin((h + 1) * q[i]), chh = std::cos((h + 1) * q[i]);
+          for (int k = 0; k < 6; ++k) {
+            if (h < j.Harmonics()) xi[k] += T(sh * j.error_motion_sin[h][k] + chh * j.error_motion_cos[h][k]);
+            if (h < h_est) xi[k] += sh * em[kPerHarmonic * h + k] + chh * em[kPerHarmonic * h + 6 + k];
+          }
+        }
+        M3 Re;
+        ceres::AngleAxisToRotationMatrix(xi, Re.data());
+        const V3 te(xi[3], xi[4], xi[5]);
+        if (standard) {
+          // E * [Rl, tl]
+          tl = Re * tl + te;
+          Rl = Re * Rl;
+        } else {
+          // A E A^-1 [Rl, tl] with A = [Rx(alpha), (a, 0, 0)]
+          M3 Ra;
+          Ra << T(1), T(0), T(0), T(0), ca, -sa, T(0), sa, ca;
+          const V3 ta(a, T(0), T(0));
+          const M3 Rc = Ra * Re * Ra.transpose();
+          const V3 tc = Ra * te + ta - Rc * ta;
+          tl = Rc * tl + tc;
+          Rl = Rc * Rl;
+        }
+      }
+      em += kPerHarmonic * h_est;
       t = t + R * tl;
       R = R * Rl;
     }
@@ -100,10 +143,10 @@ using CostFunction = ceres::DynamicAutoDiffCostFunction<MeasurementCost, 4>;
 
 std::unique_ptr<CostFunction> MakeCost(const RobotModel& robot, const Pose& base0, const RobotMeasurement& m,
                                        const RobotCalibrationOptions& o) {
-  auto* f = new MeasurementCost{&robot,         m.q, base0, robot.T_flange_tool(), m.p_meas, m.R_meas_tool,
-                                1.0 / o.position_sigma_m, 1.0 / o.rotation_sigma_rad};
+  auto* f = new MeasurementCost{&robot,   o.error_motion_harmonics, m.q, base0, robot.T_flange_tool(), m.p_meas,
+                                m.R_meas_tool, 1.0 / o.position_sigma_m, 1.0 / o.rotation_sigma_rad};
   auto c = std::make_unique<CostFunction>(f);
-  c->AddParameterBlock(NumParameters(robot));
+  c->AddParameterBlock(NumParameters(robot, o));
   c->SetNumResiduals(m.R_meas_tool ? 6 : 3);
   return c;
 }
@@ -170,18 +213,20 @@ void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::str
   }
 }
 
-// Priority order of the identifiability analysis: base, tool, then the joints.
-std::vector<int> PriorityOrder(const RobotModel& robot) {
+// Priority order of the identifiability analysis: base, tool, the joints' DH errors, then
+// the error-motion harmonics (so a harmonic term that duplicates the geometry is the one held).
+std::vector<int> PriorityOrder(const RobotModel& robot, int num_parameters) {
   std::vector<int> order;
   for (int k = 0; k < kBaseAndTool; ++k) order.push_back(BaseOffset(robot) + k);
   for (int k = 0; k < BaseOffset(robot); ++k) order.push_back(k);
+  for (int k = ErrorMotionOffset(robot); k < num_parameters; ++k) order.push_back(k);
   return order;
 }
 
 // Runs the analysis in priority order on a parameter list whose requested fixes are set.
 void AnalyzeInPriorityOrder(const RobotModel& robot, const Eigen::MatrixXd& J, double tol,
                             std::vector<CalibrationParameter>* params) {
-  const std::vector<int> order = PriorityOrder(robot);
+  const std::vector<int> order = PriorityOrder(robot, static_cast<int>(J.cols()));
   Eigen::MatrixXd Jp(J.rows(), J.cols());
   std::vector<std::string> names;
   std::vector<CalibrationParameter> permuted;
@@ -255,7 +300,7 @@ std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& rob
   }
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
-  Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot)), &r, &J);
+  Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot, options)), &r, &J);
   std::vector<CalibrationParameter> params = requested.parameters;
   for (auto& p : params)
     if (p.reason != "fixed by request" && p.reason.rfind("DH parameters not estimated", 0) != 0) {
@@ -275,6 +320,9 @@ bool RobotCalibrationOptions::IsValid(std::string* why) const {
   else if (!(identifiability_tolerance > 0 && identifiability_tolerance < 1)) w = "identifiability_tolerance must be in (0, 1)";
   else if (!(correlation_threshold > 0 && correlation_threshold <= 1)) w = "correlation_threshold must be in (0, 1]";
   else if (max_iterations < 1) w = "max_iterations must be >= 1";
+  for (size_t i = 0; i < error_motion_harmonics.size() && w.empty(); ++i)
+    if (error_motion_harmonics[i] < 0 || error_motion_harmonics[i] > 8)
+      w = "error_motion_harmonics[" + std::to_string(i) + "] must be in 0..8";
   if (w.empty()) return true;
   if (why) *why = w;
   return false;
@@ -287,15 +335,53 @@ std::vector<const CalibrationParameter*> RobotCalibrationResult::Fixed() const {
   return f;
 }
 
-std::vector<std::string> CalibrationParameterNames(const RobotModel& robot) {
+std::vector<std::string> CalibrationParameterNames(const RobotModel& robot, const RobotCalibrationOptions& options) {
   std::vector<std::string> names;
+  std::vector<std::string> joint;
   for (int i = 0; i < robot.NumJoints(); ++i) {
-    const std::string j = robot.Joints()[i].name.empty() ? "J" + std::to_string(i + 1) : robot.Joints()[i].name;
-    for (const char* p : {".theta_offset", ".d", ".a", ".alpha"}) names.push_back(j + p);
+    std::ostringstream s;
+    if (robot.Joints()[i].name.empty()) s << 'J' << i + 1;
+    else s << robot.Joints()[i].name;
+    joint.push_back(s.str());
   }
+  auto joint_name = [&](int i) { return joint[i]; };
+  for (int i = 0; i < robot.NumJoints(); ++i)
+    for (const char* p : {".theta_offset", ".d", ".a", ".alpha"}) names.push_back(joint_name(i) + p);
   for (const char* f : {"base", "tool"})
     for (const char* c : {".rx", ".ry", ".rz", ".x", ".y", ".z"}) names.push_back(std::string(f) + c);
+  for (int i = 0; i < robot.NumJoints(); ++i)
+    for (int h = 1; h <= HarmonicsOf(options, i); ++h)
+      for (const char* sc : {".sin.", ".cos."})
+        for (const char* c : {"rx", "ry", "rz", "x", "y", "z"})
+          names.push_back(joint_name(i) + ".em" + std::to_string(h) + sc + c);
   return names;
+}
+
+RobotModel WithErrorMotionErrors(const RobotModel& robot, const std::vector<int>& harmonics,
+                                 const Eigen::VectorXd& delta) {
+  const int n = robot.NumJoints();
+  if (!harmonics.empty() && static_cast<int>(harmonics.size()) != n)
+    Throw("WithErrorMotionErrors: ", harmonics.size(), " harmonic counts for robot '", robot.Name(), "' with ", n,
+          " joints");
+  int needed = 0;
+  for (int h : harmonics) needed += kPerHarmonic * h;
+  if (delta.size() != needed)
+    Throw("WithErrorMotionErrors: ", delta.size(), " error-motion values given, the harmonic counts need ", needed);
+  std::vector<Joint> joints = robot.Joints();
+  int at = 0;
+  for (int i = 0; i < n && !harmonics.empty(); ++i) {
+    Joint& j = joints[i];
+    const int H = harmonics[i];
+    if (j.Harmonics() < H) {
+      j.error_motion_sin.resize(H, Vec6::Zero());
+      j.error_motion_cos.resize(H, Vec6::Zero());
+    }
+    for (int h = 0; h < H; ++h, at += kPerHarmonic) {
+      j.error_motion_sin[h] += delta.segment<6>(at);
+      j.error_motion_cos[h] += delta.segment<6>(at + 6);
+    }
+  }
+  return RobotModel(robot.Name(), robot.Convention(), joints, robot.T_flange_tool());
 }
 
 RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta) {
@@ -383,8 +469,17 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
   std::string why;
   if (!options.IsValid(&why)) Throw("robot calibration options: ", why);
   CheckMeasurements(robot, measurements, "robot calibration");
-  const int np = NumParameters(robot);
-  const std::vector<std::string> names = CalibrationParameterNames(robot);
+  if (!options.error_motion_harmonics.empty()) {
+    if (static_cast<int>(options.error_motion_harmonics.size()) != robot.NumJoints())
+      Throw("robot calibration: error_motion_harmonics has ", options.error_motion_harmonics.size(),
+            " counts but robot '", robot.Name(), "' has ", robot.NumJoints(), " joints; give one count per joint");
+    for (int i = 0; i < robot.NumJoints(); ++i)
+      if (options.error_motion_harmonics[i] > 0 && robot.Joints()[i].type != JointType::kRevolute)
+        Throw("robot calibration: error_motion_harmonics asks for harmonics of joint ", i + 1,
+              ", which is prismatic; error motion is for revolute joints (give 0 for it)");
+  }
+  const int np = NumParameters(robot, options);
+  const std::vector<std::string> names = CalibrationParameterNames(robot, options);
 
   RobotCalibrationResult result;
   result.parameters.resize(np);
@@ -400,7 +495,8 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
   }
   for (int k = 0; k < np; ++k) {
     auto& p = result.parameters[k];
-    const bool dh = k < BaseOffset(robot), base = !dh && k < ToolOffset(robot), tool = k >= ToolOffset(robot);
+    const bool dh = k < BaseOffset(robot) || k >= ErrorMotionOffset(robot), base = k >= BaseOffset(robot) && k < ToolOffset(robot),
+               tool = k >= ToolOffset(robot) && k < ErrorMotionOffset(robot);
     if (p.fixed) continue;
     if ((dh && !options.estimate_dh) || (base && !options.estimate_base) || (tool && !options.estimate_tool)) {
       p.fixed = true;
@@ -513,7 +609,9 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
     }
 
   // Calibrated model and registration.
-  RobotModel calibrated = WithDhErrors(robot, x.head(BaseOffset(robot)));
+  RobotModel calibrated = WithErrorMotionErrors(WithDhErrors(robot, x.head(BaseOffset(robot))),
+                                                options.error_motion_harmonics,
+                                                x.tail(np - ErrorMotionOffset(robot)));
   const Vec3 ub = x.segment<3>(BaseOffset(robot)), tb = x.segment<3>(BaseOffset(robot) + 3);
   const Vec3 uu = x.segment<3>(ToolOffset(robot)), tu = x.segment<3>(ToolOffset(robot) + 3);
   result.T_meas_base = Pose{ExpSO3(ub) * T_meas_base_guess.R, T_meas_base_guess.t + tb};
@@ -535,6 +633,7 @@ CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_b
   cv.nominal.resize(n);
   RobotCalibrationOptions reg = options;
   reg.estimate_dh = false;
+  reg.error_motion_harmonics.clear();
   reg.progress = nullptr;
   RobotCalibrationOptions cal = options;
   cal.progress = nullptr;
@@ -581,19 +680,19 @@ Eigen::MatrixXd PoseJacobian(const RobotModel& robot, const Pose& T_meas_base,
   }
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
-  Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot)), &r, &J);
+  Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot, options)), &r, &J);
   return J;
 }
 
 std::vector<int> KeptColumns(const RobotModel& robot, const Eigen::MatrixXd& J, const RobotCalibrationOptions& o) {
   std::vector<CalibrationParameter> params(J.cols());
-  const auto names = CalibrationParameterNames(robot);
+  const auto names = CalibrationParameterNames(robot, o);
   for (size_t k = 0; k < params.size(); ++k) params[k].name = names[k];
   for (const auto& f : o.fixed)
     for (auto& p : params)
       if (p.name == f) p.fixed = true;
-  for (int k = 0; k < BaseOffset(robot); ++k)
-    if (!o.estimate_dh) params[k].fixed = true;
+  for (int k = 0; k < static_cast<int>(params.size()); ++k)
+    if (!o.estimate_dh && (k < BaseOffset(robot) || k >= ErrorMotionOffset(robot))) params[k].fixed = true;
   AnalyzeInPriorityOrder(robot, J, o.identifiability_tolerance, &params);
   std::vector<int> kept;
   for (size_t k = 0; k < params.size(); ++k)

@@ -17,6 +17,10 @@
 //   base:  base.rx, base.ry, base.rz (rotation, left perturbation in the meas frame:
 //          R = Exp(r) R_hat), base.x, base.y, base.z (translation in the meas frame)
 //   tool:  tool.rx, tool.ry, tool.rz (R = Exp(r) R_hat in the flange frame), tool.x, tool.y, tool.z
+//   then, for each joint i with RobotCalibrationOptions::error_motion_harmonics[i] = H > 0,
+//   for h = 1..H: J.em<h>.sin.{rx,ry,rz,x,y,z}, J.em<h>.cos.{rx,ry,rz,x,y,z}
+//          (errors added to the joint's error motion, calib/robot_model.h: a model
+//          extension beyond DH for rotary axes whose motion is not a perfect rotation)
 // This is the project's [dtheta; dp] layout for both transforms (docs/conventions.md).
 //
 // Identifiability: the Jacobian of the whitened residuals w.r.t. all parameters is
@@ -68,7 +72,12 @@ struct RobotCalibrationOptions {
   // orientation (rad, per rotation-vector component). Residuals are divided by them.
   double position_sigma_m = 5e-5;
   double rotation_sigma_rad = 1e-3;
-  bool estimate_dh = true;    // false: registration only (base and tool with nominal DH)
+  bool estimate_dh = true;    // false: registration only (base and tool with nominal DH and error motion)
+  // Error-motion harmonics to estimate per joint (empty = none; else one count per joint,
+  // 0..8, > 0 only for revolute joints). Analyzed after the DH parameters, so the
+  // terms that duplicate the DH table or the tool (e.g. the sine/cosine pair of a first
+  // harmonic that is a constant offset in the rotating frame) are held with that reason.
+  std::vector<int> error_motion_harmonics;
   bool estimate_base = true;
   bool estimate_tool = true;
   // Parameter names (see the header comment) held at their starting value by request.
@@ -120,7 +129,7 @@ ErrorStats Summarize(const std::vector<PoseError>& errors);
 struct RobotCalibrationResult {
   RobotModel robot;       // calibrated DH table and tool
   Pose T_meas_base;       // calibrated registration
-  std::vector<CalibrationParameter> parameters;  // all 4n + 12, in the layout order
+  std::vector<CalibrationParameter> parameters;  // all of the layout, in its order
   // Covariance of the free parameters (SI), in the order of `free_parameters`.
   Eigen::MatrixXd covariance;
   std::vector<int> free_parameters;  // indices into `parameters`
@@ -136,8 +145,14 @@ struct RobotCalibrationResult {
   std::vector<const CalibrationParameter*> Fixed() const;
 };
 
-// Names of the 4n + 12 parameters in the layout order.
-std::vector<std::string> CalibrationParameterNames(const RobotModel& robot);
+// Names of the parameters in the layout order (4n + 12, plus the error-motion terms that
+// `options` asks for).
+std::vector<std::string> CalibrationParameterNames(const RobotModel& robot,
+                                                   const RobotCalibrationOptions& options = {});
+// The model with error-motion errors added: `harmonics` as in the options, delta with
+// 12 values per harmonic (sin then cos, [rx ry rz x y z]) in joint order.
+RobotModel WithErrorMotionErrors(const RobotModel& robot, const std::vector<int>& harmonics,
+                                 const Eigen::VectorXd& delta);
 // The model with DH errors added: delta has 4n values [theta_offset, d, a, alpha] per joint.
 RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta);
 

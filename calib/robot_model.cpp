@@ -173,7 +173,8 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
     const std::string where = "joint " + std::to_string(i + 1);
     in.CheckKeys(jn,
                  {"name", "type", "a_m", "d_m", "alpha_rad", "alpha_deg", "theta_offset_rad", "theta_offset_deg",
-                  "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m"},
+                  "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m",
+                  "error_motion"},
                  where);
     Joint j;
     if (jn["name"]) j.name = jn["name"].as<std::string>();
@@ -217,6 +218,21 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
       j.encoder_sigma = in.Number(*n, label + " encoder_sigma") * scale;
       if (j.encoder_sigma < 0) in.Fail(*n, label, ": encoder_sigma must be >= 0");
     }
+    if (const YAML::Node em = jn["error_motion"]) {
+      // error_motion: a list, harmonic 1, 2, ... in order, each
+      //   {sin: [rx_rad, ry_rad, rz_rad, x_m, y_m, z_m], cos: [...]}
+      if (!revolute) in.Fail(em, label, ": error_motion is for revolute joints only");
+      if (!em.IsSequence()) in.Fail(em, label, ": error_motion must be a list of {sin: [6], cos: [6]}, one per harmonic");
+      for (size_t h = 0; h < em.size(); ++h) {
+        const std::string w = label + " error_motion harmonic " + std::to_string(h + 1);
+        in.CheckKeys(em[h], {"sin", "cos"}, w);
+        for (const char* k : {"sin", "cos"})
+          if (!em[h][k]) in.Fail(em[h], w, ": missing key '", k, "' ([rx_rad, ry_rad, rz_rad, x_m, y_m, z_m])");
+        const auto vs = in.Numbers(em[h]["sin"], 6, w + " sin"), vc = in.Numbers(em[h]["cos"], 6, w + " cos");
+        j.error_motion_sin.push_back(Eigen::Map<const Vec6>(vs.data()));
+        j.error_motion_cos.push_back(Eigen::Map<const Vec6>(vc.data()));
+      }
+    }
     joints.push_back(j);
   }
   return RobotModel(name, convention, joints, tool);
@@ -237,6 +253,14 @@ RobotModel::RobotModel(std::string name, DhConvention convention, std::vector<Jo
       Throw(who, ": ", JointLabel(joints_, i), " needs limits lower < upper");
     if (!(j.encoder_sigma >= 0) || !std::isfinite(j.encoder_sigma))
       Throw(who, ": ", JointLabel(joints_, i), " needs a finite encoder sigma >= 0");
+    if (j.error_motion_sin.size() != j.error_motion_cos.size())
+      Throw(who, ": ", JointLabel(joints_, i), " has ", j.error_motion_sin.size(), " sine and ",
+            j.error_motion_cos.size(), " cosine error-motion harmonics; give both for each harmonic");
+    if (j.Harmonics() > 0 && j.type != JointType::kRevolute)
+      Throw(who, ": ", JointLabel(joints_, i), " is prismatic; error motion is for revolute joints only");
+    for (int h = 0; h < j.Harmonics(); ++h)
+      if (!j.error_motion_sin[h].allFinite() || !j.error_motion_cos[h].allFinite())
+        Throw(who, ": ", JointLabel(joints_, i), " error motion harmonic ", h + 1, " is not finite");
   }
   if (!T_flange_tool_.R.allFinite() || !T_flange_tool_.t.allFinite() ||
       (T_flange_tool_.R.transpose() * T_flange_tool_.R - Mat3::Identity()).norm() > 1e-9 ||
@@ -307,6 +331,17 @@ std::string RobotModel::ToYaml() const {
           << std::vector<double>{j.lower, j.upper};
     }
     out << YAML::Key << (rev ? "encoder_sigma_rad" : "encoder_sigma_m") << YAML::Value << j.encoder_sigma;
+    if (j.Harmonics() > 0) {
+      out << YAML::Key << "error_motion" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+      for (int h = 0; h < j.Harmonics(); ++h) {
+        const Vec6 &vs = j.error_motion_sin[h], &vc = j.error_motion_cos[h];
+        out << YAML::Flow << YAML::BeginMap;
+        out << YAML::Key << "sin" << YAML::Value << YAML::Flow << std::vector<double>(vs.data(), vs.data() + 6);
+        out << YAML::Key << "cos" << YAML::Value << YAML::Flow << std::vector<double>(vc.data(), vc.data() + 6);
+        out << YAML::EndMap;
+      }
+      out << YAML::EndSeq;
+    }
     out << YAML::EndMap;
   }
   out << YAML::EndSeq << YAML::EndMap;
@@ -367,7 +402,15 @@ Pose RobotModel::LinkTransform(int i, double qi) const {
     T.R << ct, -st, 0.0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca;
     T.t = Vec3(j.a, -sa * d, ca * d);
   }
-  return T;
+  if (j.Harmonics() == 0) return T;
+  Vec6 xi = Vec6::Zero();
+  for (int h = 0; h < j.Harmonics(); ++h)
+    xi += std::sin((h + 1) * qi) * j.error_motion_sin[h] + std::cos((h + 1) * qi) * j.error_motion_cos[h];
+  const Pose E{ExpSO3(xi.head<3>()), xi.tail<3>()};
+  if (convention_ == DhConvention::kStandard) return E * T;
+  // Rx(alpha) Tx(a) E Rz(theta) Tz(d): split T at the joint's axis frame.
+  const Pose A{Eigen::AngleAxisd(j.alpha, Vec3::UnitX()).toRotationMatrix(), Vec3(j.a, 0.0, 0.0)};
+  return A * E * A.Inverse() * T;
 }
 
 std::vector<Pose> RobotModel::LinkFrames(const Eigen::VectorXd& q) const {

@@ -49,6 +49,19 @@ struct Joint {
   double upper = std::numeric_limits<double>::infinity();
   // Standard deviation of the encoder reading of q (rad or m); 0 = noise-free.
   double encoder_sigma = 0.0;
+  // Error motion of a revolute joint (ISO 230-7's "error motion of a rotary axis": how
+  // the moving link departs from a perfect rotation as a function of the angle): the
+  // small transform E(q) = [Exp(xi_rot(q)), xi_pos(q)] with
+  //     xi(q) = sum_h  sin(h q) error_motion_sin[h-1] + cos(h q) error_motion_cos[h-1],
+  // xi = [rx, ry, rz, x, y, z] (rad, m) in the joint's fixed axis frame (z = the joint
+  // axis, attached to the preceding link): rx, ry are tilt error motion, rz angular
+  // positioning error, x, y radial and z axial error motion. It is applied just before the
+  // joint's rotation: standard DH  E(q) Rz(theta) Tz(d) Tx(a) Rx(alpha),
+  //                  modified DH  Rx(alpha) Tx(a) E(q) Rz(theta) Tz(d).
+  // The constant (h = 0) part is not here: the DH table holds it. Both lists have the same
+  // length (the number of harmonics); empty = a perfect rotation. Not for prismatic joints.
+  std::vector<Vec6> error_motion_sin, error_motion_cos;
+  int Harmonics() const { return static_cast<int>(error_motion_sin.size()); }
 };
 
 class RobotModel {
@@ -96,7 +109,9 @@ class RobotModel {
   // Geometric Jacobian (6 x n) of the end frame's pose in the [dtheta; dp] layout, base
   // frame: a joint change dq moves the pose to R = Exp(J_rot dq) R, p = p + J_pos dq to
   // first order. Column i of a revolute joint is [w_i; w_i x (p_end - o_i)] with w_i the
-  // joint axis and o_i a point on it; of a prismatic joint [0; w_i].
+  // joint axis and o_i a point on it; of a prismatic joint [0; w_i]. A joint's error
+  // motion enters through the link frames (the axis as displaced at q), not through its
+  // rate dE/dq, which is of the error motion's own size (1e-4 and below) relative to the column.
   Eigen::Matrix<double, 6, Eigen::Dynamic> Jacobian(const Eigen::VectorXd& q,
                                                     EndFrame end = EndFrame::kTool) const;
 

@@ -7,14 +7,23 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <sstream>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+extern "C" {
+#include <apriltag/apriltag.h>
+#include <apriltag/tag36h11.h>
+}
 
 #include "calib/calibration_board.h"
 #include "calib/camera_calibration.h"
+#include "core/error.h"
 #include "core/io.h"
+#include "core/random.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -99,26 +108,30 @@ TEST(CalibCameraReal, OpenCvStereoBaseline) {
   EXPECT_NEAR(r.rig.cameras[0].Intrinsics()[0], 534.80, 0.02 * 534.80);
 }
 
-// AprilTag's regression files: "id, (x y), (x y), (x y), (x y)" per tag, raw
-// libapriltag coordinates (pixel centres at +0.5), written by a newer libapriltag
-// (commit 1c21707a) than Debian's 3.3, whose edge refinement differs slightly: a few
-// corners move by up to ~1 px between the versions, and 3.3 misses 2 of the 47 tags
-// at max_hamming 1 (measured: 44/47 found, 80.7 % of corners within 0.5 px, median
-// 0.32 px; shifting by 0 or 1 px instead of the half pixel gives medians of 0.68 and
-// 0.84 px, which confirms the half-pixel convention). The thresholds below hold
-// those figures with a margin.
-TEST(CalibCameraReal, AprilTagUpstreamCornersMatch) {
-  MCMS_REQUIRE_DATA(dir, "apriltag-upstream-test");
-  constexpr double kTolPx = 0.5, kFoundPx = 2.0;
-  constexpr double kMinFound = 0.9, kMinFractionWithin = 0.75, kMaxMedianPx = 0.4;
-  int files = 0, expected_total = 0, found = 0;
-  std::vector<double> errors;
+// AprilTag's regression data, "id, (x y), (x y), (x y), (x y)" per tag in raw
+// libapriltag coordinates (pixel centres at +0.5), matched to our detections by id
+// and the smallest worst-corner distance.
+struct UpstreamMatch {
+  int files = 0, expected = 0, found = 0;
+  std::vector<double> errors;  // px, sorted; 4 per found tag
+  Vec2 mean_d[4] = {Vec2::Zero(), Vec2::Zero(), Vec2::Zero(), Vec2::Zero()};  // ours - expected, per corner
+  double Within(double tol) const {
+    return std::count_if(errors.begin(), errors.end(), [&](double e) { return e <= tol; }) /
+           std::max<double>(1.0, errors.size());
+  }
+  double Median() const { return errors.empty() ? 1e9 : errors[errors.size() / 2]; }
+  double Max() const { return errors.empty() ? 1e9 : errors.back(); }
+};
+
+UpstreamMatch MatchUpstream(const std::filesystem::path& dir, const AprilTagOptions& options) {
+  constexpr double kFoundPx = 2.0;  // a tag farther than this is counted as missed
+  UpstreamMatch m;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     if (entry.path().extension() != ".jpg") continue;
-    ++files;
+    ++m.files;
     const cv::Mat img = cv::imread(entry.path().string(), cv::IMREAD_GRAYSCALE);
-    ASSERT_FALSE(img.empty());
-    const auto dets = DetectAprilTags(img);
+    EXPECT_FALSE(img.empty()) << entry.path();
+    const auto dets = DetectAprilTags(img, options);
     std::ifstream f(std::filesystem::path(entry.path()).replace_extension(".txt"));
     std::string line;
     while (std::getline(f, line)) {
@@ -127,33 +140,109 @@ TEST(CalibCameraReal, AprilTagUpstreamCornersMatch) {
       if (std::sscanf(line.c_str(), "%d, (%lf %lf), (%lf %lf), (%lf %lf), (%lf %lf)", &id, &c[0], &c[1], &c[2], &c[3],
                       &c[4], &c[5], &c[6], &c[7]) != 9)
         continue;
-      ++expected_total;
+      ++m.expected;
       double best = 1e9;
-      std::vector<double> best_e;
+      std::vector<Vec2> best_d;
       for (const auto& d : dets) {
         if (d.id != id) continue;
-        std::vector<double> e;
-        for (int k = 0; k < 4; ++k) e.push_back((d.corners[k] + Vec2(0.5, 0.5) - Vec2(c[2 * k], c[2 * k + 1])).norm());
-        const double m = *std::max_element(e.begin(), e.end());
-        if (m < best) best = m, best_e = e;
+        std::vector<Vec2> dk;
+        double worst = 0;
+        for (int k = 0; k < 4; ++k) {
+          dk.push_back(d.corners[k] + Vec2(0.5, 0.5) - Vec2(c[2 * k], c[2 * k + 1]));
+          worst = std::max(worst, dk.back().norm());
+        }
+        if (worst < best) best = worst, best_d = dk;
       }
       if (best > kFoundPx) continue;
-      ++found;
-      errors.insert(errors.end(), best_e.begin(), best_e.end());
+      ++m.found;
+      for (int k = 0; k < 4; ++k) {
+        m.errors.push_back(best_d[k].norm());
+        m.mean_d[k] += best_d[k];
+      }
     }
   }
-  std::sort(errors.begin(), errors.end());
-  const double within = std::count_if(errors.begin(), errors.end(), [&](double e) { return e <= kTolPx; }) /
-                        std::max<double>(1.0, errors.size());
-  const double median = errors.empty() ? 1e9 : errors[errors.size() / 2];
-  std::printf("apriltag upstream: %d images, %d/%d expected tags found; corners: %.1f %% within %.1f px, median %.3f px, "
-              "max %.3f px\n",
-              files, found, expected_total, 100 * within, kTolPx, median, errors.empty() ? 0.0 : errors.back());
-  EXPECT_EQ(files, 3);
-  EXPECT_GT(expected_total, 0);
-  EXPECT_GE(found, kMinFound * expected_total);
-  EXPECT_GE(within, kMinFractionWithin);
-  EXPECT_LE(median, kMaxMedianPx);
+  for (auto& d : m.mean_d) d /= std::max(1, m.found);
+  std::sort(m.errors.begin(), m.errors.end());
+  return m;
+}
+
+void PrintUpstream(const char* what, const UpstreamMatch& m) {
+  std::printf("apriltag upstream, %s: %d images, %d/%d tags found; corners %.1f %% within 0.5 px, %.1f %% within "
+              "0.01 px, median %.4f px, max %.4f px; mean (dx, dy) per corner index:",
+              what, m.files, m.found, m.expected, 100 * m.Within(0.5), 100 * m.Within(0.01), m.Median(), m.Max());
+  for (const auto& d : m.mean_d) std::printf(" (%+.3f, %+.3f)", d.x(), d.y());
+  std::printf("\n");
+}
+
+// Why Debian's libapriltag 3.3 missed AprilTag's regression data (80.7 % of corners
+// within 0.5 px, median 0.32 px, 44/47 tags with our former defaults): the data
+// hold the UNREFINED quad-fit corners at quad_decimate 1. 3.3 runs refine_edges at
+// every decimation (the `quad_decimate > 1` condition is commented out in its
+// quad_decode_task, although its header says the option is ignored at 1), and that
+// refinement moved the corners by up to 0.8 px, with no common offset (mean dx, dy
+// per image and corner index within +-0.16 px, of either sign) and no scale: it is
+// the refinement's own noise, not a convention. With the refinement off as in the
+// data (AprilTagCornerRefinement::kNone) 3.3 reproduces them: all 47 tags, median
+// 0.0002 px (libapriltag keeps quad corners as float), 93.6 % of corners within
+// 0.01 px, every corner within 0.15 px. The few corners off by 0.01-0.14 px are not
+// the JPEG decoder (decoding with libapriltag's own pjpeg, as the upstream test
+// does, leaves the worst at 0.141 px): a small change in the quad fit since 3.3.
+TEST(CalibCameraReal, AprilTagUpstreamCornersMatch) {
+  MCMS_REQUIRE_DATA(dir, "apriltag-upstream-test");
+  constexpr double kTolPx = 0.5;       // issue 4
+  constexpr double kMaxPx = 0.2;       // measured 0.140 (one corner; 93.6 % are within 0.01 px)
+  constexpr double kMaxMedianPx = 0.005;  // measured 0.0002: libapriltag stores quad corners as float
+  // AprilTag's regression settings: full resolution, no edge refinement, and the
+  // 2 corrected bits of apriltag_detector_add_family (the 47th tag needs them).
+  AprilTagOptions upstream;
+  upstream.quad_decimate = 1.0f;
+  upstream.corner_refinement = AprilTagCornerRefinement::kNone;
+  upstream.max_hamming = 2;
+  const UpstreamMatch m = MatchUpstream(dir, upstream);
+  PrintUpstream("upstream settings", m);
+  EXPECT_EQ(m.files, 3);
+  EXPECT_EQ(m.expected, 47);
+  EXPECT_EQ(m.found, m.expected);
+  EXPECT_EQ(m.Within(kTolPx), 1.0);
+  EXPECT_LE(m.Max(), kMaxPx);
+  EXPECT_LE(m.Median(), kMaxMedianPx);
+
+  // Our default refinement (kEdgeFit, the most accurate on rendered tags) departs
+  // from the unrefined data by the refinement itself (measured: median 0.32 px, max
+  // 1.36 px, on small blurred tags); it must still keep every tag.
+  constexpr double kEdgeFitMaxPx = 1.5;
+  AprilTagOptions ours_options;
+  ours_options.max_hamming = 2;
+  const UpstreamMatch ours = MatchUpstream(dir, ours_options);
+  PrintUpstream("edge fit", ours);
+  EXPECT_EQ(ours.found, ours.expected);
+  EXPECT_LE(ours.Max(), kEdgeFitMaxPx);
+}
+
+TEST(CalibCameraReal, AprilTagBadOptionsNameTheField) {
+  const cv::Mat img(32, 32, CV_8U, cv::Scalar(128));
+  auto message = [&](const AprilTagOptions& o) {
+    try {
+      DetectAprilTags(img, o);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  AprilTagOptions o;
+  o.quad_decimate = 0.5f;
+  EXPECT_NE(message(o).find("quad_decimate"), std::string::npos) << message(o);
+  o = {};
+  o.quad_sigma = -1.0f;
+  EXPECT_NE(message(o).find("quad_sigma"), std::string::npos) << message(o);
+  o = {};
+  o.threads = 0;
+  EXPECT_NE(message(o).find("threads"), std::string::npos) << message(o);
+  o = {};
+  o.max_hamming = 3;
+  EXPECT_NE(message(o).find("max_hamming"), std::string::npos) << message(o);
+  EXPECT_EQ(message(AprilTagOptions{}), "no error");  // valid options, a blank image: no tags, no error
+  EXPECT_THROW(DetectAprilTags(cv::Mat()), InputError);
 }
 
 // ViSP: ground_truth_detection.txt holds per tag "36h11_id:_N" then 4 corner lines;
@@ -183,7 +272,13 @@ TEST(CalibCameraReal, VispAprilTagCornersAndPoses) {
   constexpr double kPosTolM = 0.0005, kAngTolDeg = 0.5;
   const cv::Mat img = cv::imread((dir / "AprilTag.pgm").string(), cv::IMREAD_GRAYSCALE);
   ASSERT_FALSE(img.empty());
-  const auto dets = DetectAprilTags(img);
+  // ViSP's corners are its own detector's output (libapriltag with 3.3's edge
+  // refinement at quad_decimate 1), not measured truth: compare like with like.
+  // AprilTagRenderedCornerAccuracy and VispAprilTagCornerRefinementAccuracy judge
+  // accuracy.
+  AprilTagOptions visp_options;
+  visp_options.corner_refinement = AprilTagCornerRefinement::kLibApriltag33;
+  const auto dets = DetectAprilTags(img, visp_options);
   const auto truth = ReadVispFile(dir / "ground_truth_detection.txt");
   const auto poses = ReadVispFile(dir / "ground_truth_pose.txt");
   ASSERT_EQ(truth.size(), 12u);
@@ -234,6 +329,196 @@ TEST(CalibCameraReal, VispAprilTagCornersAndPoses) {
   EXPECT_EQ(matched, 12);
   EXPECT_LT(worst_pos, kPosTolM);
   EXPECT_LT(worst_ang, kAngTolDeg);
+}
+
+// A check of corner accuracy that does not lean on any detector's output: a printed
+// tag is a square of known size, so with the camera's calibration the four corners
+// of a tag must be the image of such a square. The residual of that fit (OpenCV's
+// IPPE + LM; 8 coordinates, 6 pose parameters, so 2 degrees of freedom per tag)
+// measures how far the corners are from being consistent, whatever their source.
+// RMS per coordinate over the 12 tags, px, scaled by sqrt(8 / 2) so that it
+// estimates the corner noise itself.
+double VispSquareFitRms(const std::vector<AprilTagDetection>& dets) {
+  constexpr double kTagSize = 0.053;
+  const cv::Mat K = (cv::Mat_<double>(3, 3) << 615.167, 0, 312.189, 0, 615.168, 243.437, 0, 0, 1);
+  const double h = kTagSize / 2;
+  const std::vector<cv::Point3d> obj = {{-h, -h, 0}, {h, -h, 0}, {h, h, 0}, {-h, h, 0}};
+  double sum2 = 0;
+  int n = 0;
+  for (const auto& d : dets) {
+    std::vector<cv::Point2d> im;
+    for (int k = 0; k < 4; ++k) im.emplace_back(d.corners[k].x(), d.corners[k].y());
+    cv::Mat rvec, tvec;
+    cv::solvePnP(obj, im, K, cv::Mat(), rvec, tvec, false, cv::SOLVEPNP_IPPE);
+    cv::solvePnPRefineLM(obj, im, K, cv::Mat(), rvec, tvec);
+    std::vector<cv::Point2d> proj;
+    cv::projectPoints(obj, rvec, tvec, K, cv::Mat(), proj);
+    for (int k = 0; k < 4; ++k) {
+      sum2 += (proj[k].x - im[k].x) * (proj[k].x - im[k].x) + (proj[k].y - im[k].y) * (proj[k].y - im[k].y);
+      n += 2;
+    }
+  }
+  return n == 0 ? 1e9 : std::sqrt(sum2 / n * 8.0 / 2.0);
+}
+
+TEST(CalibCameraReal, VispAprilTagCornerRefinementAccuracy) {
+  MCMS_REQUIRE_DATA(dir, "visp-apriltag");
+  const cv::Mat img = cv::imread((dir / "AprilTag.pgm").string(), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(img.empty());
+  const auto truth = ReadVispFile(dir / "ground_truth_detection.txt");
+  // ViSP's own corners, in this project's convention.
+  std::vector<AprilTagDetection> visp;
+  for (const auto& [id, rows] : truth) {
+    AprilTagDetection d;
+    d.id = id;
+    for (int k = 0; k < 4; ++k) d.corners[k] = Vec2(rows[k][1] - 0.5, rows[k][0] - 0.5);
+    visp.push_back(d);
+  }
+  const double visp_rms = VispSquareFitRms(visp);
+  std::printf("visp square fit: ViSP's ground_truth_detection %.4f px\n", visp_rms);
+  const std::pair<const char*, AprilTagCornerRefinement> modes[] = {
+      {"none", AprilTagCornerRefinement::kNone},
+      {"libapriltag 3.3", AprilTagCornerRefinement::kLibApriltag33},
+      {"edge fit", AprilTagCornerRefinement::kEdgeFit}};
+  std::map<AprilTagCornerRefinement, double> rms;
+  for (const auto& [name, mode] : modes) {
+    AprilTagOptions o;
+    o.corner_refinement = mode;
+    const auto dets = DetectAprilTags(img, o);
+    EXPECT_EQ(dets.size(), 12u) << name;
+    double worst = 0;
+    for (const auto& d : dets) {
+      const auto it = truth.find(d.id);
+      if (it == truth.end()) continue;
+      for (int k = 0; k < 4; ++k)
+        worst = std::max(worst, (d.corners[k] + Vec2(0.5, 0.5) - Vec2(it->second[k][1], it->second[k][0])).norm());
+    }
+    rms[mode] = VispSquareFitRms(dets);
+    std::printf("visp square fit: %-16s %.4f px (%zu tags; worst corner %.3f px from ViSP's)\n", name, rms[mode],
+                dets.size(), worst);
+  }
+  // Measured: edge fit 0.2904, ViSP's corners 0.2961, 3.3 0.3002, none 0.3162 px. The
+  // common floor (~0.29 px) is what no corner placement removes (print, lens, the
+  // given calibration), so the margins are small, but the order is that of the
+  // rendered tags, and the image is fixed, so the figures are exact regressions.
+  EXPECT_LT(rms[AprilTagCornerRefinement::kEdgeFit], rms[AprilTagCornerRefinement::kLibApriltag33]);
+  EXPECT_LT(rms[AprilTagCornerRefinement::kEdgeFit], rms[AprilTagCornerRefinement::kNone]);
+  EXPECT_LE(rms[AprilTagCornerRefinement::kEdgeFit], visp_rms);
+}
+
+// The real images above have no true corners (both references are some detector's
+// output), so the choice of refinement is settled on rendered tags whose corners
+// are known exactly: tag36h11 tags under random rotation, scale (8..14 px per bit
+// cell) and perspective, each pixel the area average of the scene (8 x 8
+// sub-samples where a cell edge crosses it), then a Gaussian optical blur and read
+// noise, as a camera forms them.
+cv::Mat RenderTag36h11(int id, const cv::Mat& H_px_cell, int size_px, double blur_px, double noise_dn, Rng* rng) {
+  constexpr double kDark = 30, kLight = 220, kBackground = 200;
+  constexpr int kSub = 8;
+  std::unique_ptr<apriltag_family_t, void (*)(apriltag_family_t*)> fam(tag36h11_create(), tag36h11_destroy);
+  const uint64_t code = fam->codes[id];
+  // Cells: [-1, 9)^2 in bit-cell units; -1 and 8 the white surround, 0 and 7 the
+  // black border, the data bits inside (bit b = code bit nbits-1-b, 1 = light).
+  cv::Mat cell(10, 10, CV_64F, cv::Scalar(kDark));
+  for (int v = -1; v <= 8; ++v)
+    for (int u = -1; u <= 8; ++u)
+      if (u == -1 || v == -1 || u == 8 || v == 8) cell.at<double>(v + 1, u + 1) = kLight;
+  for (uint32_t b = 0; b < fam->nbits; ++b)
+    if ((code >> (fam->nbits - 1 - b)) & 1) cell.at<double>(fam->bit_y[b] + 1, fam->bit_x[b] + 1) = kLight;
+  const cv::Mat Hi = H_px_cell.inv();
+  auto to_cell = [&](double x, double y) {
+    const double w = Hi.at<double>(2, 0) * x + Hi.at<double>(2, 1) * y + Hi.at<double>(2, 2);
+    return cv::Point2d((Hi.at<double>(0, 0) * x + Hi.at<double>(0, 1) * y + Hi.at<double>(0, 2)) / w,
+                       (Hi.at<double>(1, 0) * x + Hi.at<double>(1, 1) * y + Hi.at<double>(1, 2)) / w);
+  };
+  auto shade = [&](const cv::Point2d& c) {
+    const int u = static_cast<int>(std::floor(c.x)), v = static_cast<int>(std::floor(c.y));
+    return (u < -1 || v < -1 || u > 8 || v > 8) ? kBackground : cell.at<double>(v + 1, u + 1);
+  };
+  auto cell_id = [](const cv::Point2d& c) {
+    return std::make_pair(static_cast<int>(std::floor(std::clamp(c.x, -2.0, 9.0))),
+                          static_cast<int>(std::floor(std::clamp(c.y, -2.0, 9.0))));
+  };
+  cv::Mat radiance(size_px, size_px, CV_64F);
+  for (int y = 0; y < size_px; ++y)
+    for (int x = 0; x < size_px; ++x) {
+      // Pixel (x, y) covers [x - 0.5, x + 0.5] x [y - 0.5, y + 0.5] (pixel centres at integers).
+      const auto c0 = cell_id(to_cell(x - 0.5, y - 0.5));
+      if (c0 == cell_id(to_cell(x + 0.5, y - 0.5)) && c0 == cell_id(to_cell(x - 0.5, y + 0.5)) &&
+          c0 == cell_id(to_cell(x + 0.5, y + 0.5))) {
+        radiance.at<double>(y, x) = shade(to_cell(x, y));
+        continue;
+      }
+      double sum = 0;
+      for (int j = 0; j < kSub; ++j)
+        for (int i = 0; i < kSub; ++i) sum += shade(to_cell(x - 0.5 + (i + 0.5) / kSub, y - 0.5 + (j + 0.5) / kSub));
+      radiance.at<double>(y, x) = sum / (kSub * kSub);
+    }
+  cv::GaussianBlur(radiance, radiance, cv::Size(0, 0), blur_px);
+  cv::Mat img(size_px, size_px, CV_8U);
+  for (int y = 0; y < size_px; ++y)
+    for (int x = 0; x < size_px; ++x)
+      img.at<uchar>(y, x) = cv::saturate_cast<uchar>(radiance.at<double>(y, x) + rng->Normal(0.0, noise_dn));
+  return img;
+}
+
+TEST(CalibCameraReal, AprilTagRenderedCornerAccuracy) {
+  constexpr int kTags = 24, kSizePx = 240;
+  constexpr double kBlurPx = 0.8, kNoiseDn = 2.0;
+  constexpr double kEdgeFitRmsPx = 0.03;   // measured 0.018 px
+  constexpr double kEdgeFitBiasPx = 0.01;  // |mean error| per axis; measured < 0.003 px
+  Rng rng(20261122);
+  struct Stats {
+    double sum2 = 0, sx = 0, sy = 0;
+    int n = 0, tags = 0;
+  };
+  const AprilTagCornerRefinement modes[] = {AprilTagCornerRefinement::kNone, AprilTagCornerRefinement::kLibApriltag33,
+                                            AprilTagCornerRefinement::kEdgeFit};
+  const char* names[] = {"none", "libapriltag 3.3", "edge fit"};
+  Stats stats[3];
+  for (int t = 0; t < kTags; ++t) {
+    const int id = 3 * t;
+    const double s = rng.Uniform(8.0, 14.0), angle = rng.Uniform(-M_PI, M_PI);
+    const double cx = kSizePx / 2.0 + rng.Uniform(-10.0, 10.0), cy = kSizePx / 2.0 + rng.Uniform(-10.0, 10.0);
+    const std::vector<cv::Point2f> cells = {{0, 0}, {8, 0}, {8, 8}, {0, 8}};
+    std::vector<cv::Point2f> px;
+    for (const auto& c : cells) {
+      const double x = (c.x - 4) * s, y = (c.y - 4) * s, k = 1 + rng.Uniform(-0.15, 0.15);  // perspective
+      px.emplace_back(cx + k * (std::cos(angle) * x - std::sin(angle) * y),
+                      cy + k * (std::sin(angle) * x + std::cos(angle) * y));
+    }
+    const cv::Mat img = RenderTag36h11(id, cv::getPerspectiveTransform(cells, px), kSizePx, kBlurPx, kNoiseDn, &rng);
+    for (int m = 0; m < 3; ++m) {
+      AprilTagOptions o;
+      o.corner_refinement = modes[m];
+      for (const auto& d : DetectAprilTags(img, o)) {
+        if (d.id != id) continue;
+        ++stats[m].tags;
+        for (const Vec2& c : d.corners) {
+          Vec2 best(1e9, 1e9);
+          for (const auto& q : px)
+            if ((c - Vec2(q.x, q.y)).norm() < best.norm()) best = c - Vec2(q.x, q.y);
+          stats[m].sum2 += best.squaredNorm() / 2;  // per coordinate
+          stats[m].sx += best.x();
+          stats[m].sy += best.y();
+          ++stats[m].n;
+        }
+      }
+    }
+  }
+  double rms[3];
+  for (int m = 0; m < 3; ++m) {
+    const Stats& st = stats[m];
+    rms[m] = std::sqrt(st.sum2 / std::max(1, st.n));
+    std::printf("rendered tags, %-16s: %d/%d found, corner error RMS %.4f px per coordinate, mean (%+.4f, %+.4f) px\n",
+                names[m], st.tags, kTags, rms[m], st.sx / std::max(1, st.n), st.sy / std::max(1, st.n));
+    EXPECT_EQ(st.tags, kTags) << names[m];
+  }
+  EXPECT_LT(rms[2], kEdgeFitRmsPx);
+  EXPECT_LT(rms[2], rms[1]);
+  EXPECT_LT(rms[2], rms[0]);
+  EXPECT_LT(std::abs(stats[2].sx / stats[2].n), kEdgeFitBiasPx);
+  EXPECT_LT(std::abs(stats[2].sy / stats[2].n), kEdgeFitBiasPx);
 }
 
 }  // namespace

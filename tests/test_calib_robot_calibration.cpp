@@ -261,6 +261,54 @@ TEST(RobotCalibration, PoseSelectionBeatsRandomPoses) {
   EXPECT_GT(o_sel, best_random);
 }
 
+TEST(RobotCalibration, ErrorMotionSameInSolverAndModelForBothConventions) {
+  // The solver's cost functor and RobotModel's forward kinematics implement the joint
+  // error motion separately; with noise-free 6-D measurements of a robot that has it, the
+  // fit must reproduce the measurements to rounding through RobotModel, in both DH
+  // conventions, and the error-motion terms it estimates must be the injected ones.
+  for (const DhConvention conv : {DhConvention::kStandard, DhConvention::kModified}) {
+    std::vector<Joint> j(3);
+    j[0].d = 0.3;
+    j[1].alpha = -M_PI / 2;
+    j[1].a = 0.05;
+    j[2].a = 0.4;
+    j[2].alpha = 0.3;
+    for (auto& x : j) x.lower = -3.0, x.upper = 3.0;
+    Truth t;
+    t.nominal = RobotModel("em3", conv, j, Pose{Mat3::Identity(), Vec3(0.1, 0.05, 0.05)});
+    Eigen::VectorXd em = Eigen::VectorXd::Zero(24);
+    for (int k = 0; k < 24; ++k) em[k] = 1e-4 * std::sin(1.7 * k + 0.3);
+    t.dh_errors = Eigen::VectorXd::Zero(12);
+    t.actual = WithErrorMotionErrors(t.nominal, {0, 2, 0}, em);
+    t.T_meas_base = Pose{ExpSO3(Vec3(0.1, 0.2, -0.3)), Vec3(1.0, 0.5, 0.2)};
+    Rng rng(41);
+    const auto fit = Measure(t, RandomPoses(t.nominal, 80, rng), true, 0.0, 0.0, rng);
+    RobotCalibrationOptions opt;
+    opt.position_sigma_m = 1e-5;
+    opt.rotation_sigma_rad = 1e-5;
+    opt.error_motion_harmonics = {0, 2, 0};
+    const auto r = CalibrateRobot(t.nominal, t.T_meas_base, fit, opt);
+    // Tolerance: the 4 held terms equal DH/tool changes to first order only, so their
+    // injected 1e-4 leaves ~1e-8 (second order); a mismatch between the two
+    // implementations would leave the error motion's own size, ~1e-4 rad and 5e-5 m.
+    const ErrorStats s = Summarize(r.errors_after);
+    EXPECT_LT(s.max_position_m, 1e-7) << (conv == DhConvention::kStandard ? "standard" : "modified");
+    EXPECT_LT(*s.max_rotation_rad, 1e-7);
+    const ErrorStats s0 = Summarize(r.errors_before);
+    EXPECT_GT(s0.max_position_m, 2e-5);
+    // 24 terms for joint 2's two harmonics; the first harmonic's tilt and radial pairs
+    // hold 4 (a rotating-frame constant, i.e. DH/tool), the rest are estimated.
+    const auto names = CalibrationParameterNames(t.nominal, opt);
+    ASSERT_EQ(names.size(), 48u);
+    int estimated = 0;
+    for (int k = 24; k < 48; ++k) estimated += r.parameters[k].fixed ? 0 : 1;
+    EXPECT_EQ(estimated, 20);
+    const Eigen::Vector3d q(0.3, -1.1, 0.7);
+    const RobotModel back = RobotModel::Parse(r.robot.ToYaml(), "em3");
+    EXPECT_LT((back.T_base_tool(q).t - r.robot.T_base_tool(q).t).norm(), 1e-12);
+  }
+}
+
 TEST(RobotCalibration, BadInputNamesWhatIsMissing) {
   const Truth truth = MakeTruth(71);
   Rng rng(72);
@@ -294,6 +342,11 @@ TEST(RobotCalibration, BadInputNamesWhatIsMissing) {
   opt = RobotCalibrationOptions();
   opt.estimate_dh = opt.estimate_base = opt.estimate_tool = false;
   expect_error(ms, "every parameter is fixed");
+  opt = RobotCalibrationOptions();
+  opt.error_motion_harmonics = {1, 1};
+  expect_error(ms, "error_motion_harmonics has 2 counts");
+  opt.error_motion_harmonics = {0, 0, 0, 0, 0, 12};
+  expect_error(ms, "error_motion_harmonics[5] must be in 0..8");
 }
 
 TEST(RobotCalibration, PoorPoseSetIsRefusedOrReported) {
