@@ -45,6 +45,8 @@ int RunCalibRig(const CalibRigArgs& a) {
   if (!a.quiet) options.log = [](const std::string& s) { std::fprintf(stderr, "calib-rig: %s\n", s.c_str()); };
   std::string why;
   if (!options.IsValid(&why)) Throw("calib-rig options: ", why);
+  // Refuse an unusable output folder before detection, not after the solve.
+  RequireWritableFolder(a.output, "calib-rig -o");
 
   // Images per camera; a frame is one file name (stem) shared across the folders.
   std::vector<std::vector<fs::path>> images(a.folders.size());
@@ -104,14 +106,18 @@ int RunCalibRig(const CalibRigArgs& a) {
 
   const CameraCalibrationResult r = CalibrateCameras(input, options);
 
-  // Everything is computed; only now write the outputs (each atomically).
+  // Everything is computed; only now write the outputs (each atomically): plots first,
+  // then the models, rig.yaml last, so a failure part-way leaves no rig.yaml.
   const fs::path out = a.output;
-  fs::create_directories(out);
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) Throw("calib-rig -o ", out.string(), ": cannot create the output folder: ", ec.message());
+  for (size_t c = 0; c < r.rig.size(); ++c)
+    WriteResidualPlot(r, static_cast<int>(c), out / ("residuals-" + r.rig.names[c] + ".svg"));
   for (size_t c = 0; c < r.rig.size(); ++c) {
     const std::string& name = r.rig.names[c];
     r.rig.cameras[c].WriteCameramodel(out / (name + ".cameramodel"));
     r.rig.cameras[c].WriteOpenCvYaml(out / (name + ".yml"));
-    WriteResidualPlot(r, static_cast<int>(c), out / ("residuals-" + name + ".svg"));
   }
   r.rig.Write(out / "rig.yaml");
 
@@ -120,8 +126,9 @@ int RunCalibRig(const CalibRigArgs& a) {
     std::printf("board warp: %.3f +- %.3f mm (x), %.3f +- %.3f mm (y)\n", r.board_warp_m[0] * 1e3,
                 r.board_warp_std_m[0] * 1e3, r.board_warp_m[1] * 1e3, r.board_warp_std_m[1] * 1e3);
   for (size_t c = 0; c < r.rig.size(); ++c) {
-    const UncertaintyGrid g = ProjectionUncertaintyGrid(r.rig.cameras[c], r.intrinsics_covariance[c], a.range_m);
-    std::printf("%s: projection uncertainty (1 sigma, px) at %.2f m, %dx%d grid over the image:\n",
+    const UncertaintyGrid g = ProjectionUncertaintyGrid(r, static_cast<int>(c), a.range_m);
+    std::printf("%s: projection uncertainty (worst direction, 1 sigma, px; mrcal's mean-frames method) at %.2f m, "
+                "%dx%d grid over the image:\n",
                 r.rig.names[c].c_str(), a.range_m, g.nx, g.ny);
     for (int j = 0; j < g.ny; ++j) {
       std::printf("  ");

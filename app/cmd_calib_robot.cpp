@@ -93,6 +93,10 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   if (a.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml");
   RobotModel robot = a.robot.empty() ? RobotModel::Default() : RobotModel::Read(a.robot);
   if (!a.tool_guess.empty()) robot.SetT_flange_tool(PoseFromArgs(a.tool_guess, "--tool-guess"));
+  // Refuse unwritable outputs before the solve, not after it.
+  RequireWritableFile(a.output, "-o");
+  if (!a.report.empty()) RequireWritableFile(a.report, "--report");
+  if (!a.plot.empty()) RequireWritableFile(a.plot, "--plot");
   const std::vector<RobotMeasurement> ms = ReadRobotMeasurements(a.measurements);
 
   RobotCalibrationOptions opt;
@@ -164,8 +168,8 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   for (const auto& c : r.correlated) rep << "  " << c.a << " ~ " << c.b << ": rho " << c.rho << "\n";
   const std::string report = rep.str();
 
-  // Everything computed: write the outputs.
-  r.robot.Write(a.output);
+  // Everything computed: write the outputs, the robot model last, so that a failed
+  // report or plot leaves no model behind (each file is written atomically).
   if (!a.report.empty()) WriteFileAtomically(a.report, [&](std::ostream& o) { o << report; });
   if (!a.plot.empty()) {
     Plot plot;
@@ -188,6 +192,7 @@ int RunCalibRobot(const CalibRobotArgs& a) {
     if (cv) series("calibrated, held out", cv->calibrated, "#2ca02c");
     plot.WriteSvg(a.plot);
   }
+  r.robot.Write(a.output);
   std::fputs(report.c_str(), stdout);
   return 0;
 }

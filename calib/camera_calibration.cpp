@@ -503,9 +503,11 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
       na += 2;
     }
     int nb = 0;
+    std::vector<int> frames_in_solve;  // frame index of each 6-column board block, in order
     for (int f = 0; f < nframes; ++f)
       if (st.rt_rig_board[f] && problem.HasParameterBlock(st.rt_rig_board[f]->data())) {
         blocks.push_back(st.rt_rig_board[f]->data());
+        frames_in_solve.push_back(f);
         nb += 6;
       }
     ceres::Problem::EvaluateOptions eo;
@@ -521,14 +523,33 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
     const Eigen::MatrixXd A = Eigen::MatrixXd(N.topLeftCorner(na, na));
     const Eigen::MatrixXd B = Eigen::MatrixXd(N.block(0, na, na, nb));
     Eigen::MatrixXd S = A;
+    std::vector<Mat6> D_inv(frames_in_solve.size());
+    std::vector<Eigen::MatrixXd> gain(frames_in_solve.size());  // K_f = D_f^-1 B_f^T
     for (int b = 0; b < nb; b += 6) {
-      const Eigen::Matrix<double, 6, 6> D = Eigen::MatrixXd(N.block(na + b, na + b, 6, 6));
+      const Mat6 D = Eigen::MatrixXd(N.block(na + b, na + b, 6, 6));
       const Eigen::MatrixXd Bb = B.middleCols(b, 6);
-      S -= Bb * D.ldlt().solve(Bb.transpose());
+      D_inv[b / 6] = D.ldlt().solve(Mat6::Identity());
+      gain[b / 6] = D_inv[b / 6] * Bb.transpose();
+      S -= Bb * gain[b / 6];
     }
     const int dof = 2 * res.num_inliers - na - nb;
     res.residual_variance_px2 = dof > 0 ? ss_all / dof : std::numeric_limits<double>::quiet_NaN();
     const Eigen::MatrixXd cov = S.ldlt().solve(Eigen::MatrixXd::Identity(na, na)) * res.residual_variance_px2;
+    CalibrationCovariance& full = res.covariance;
+    full.a_cov = cov;
+    full.intrinsics_offset.assign(ncam, -1);
+    if (!options.fix_intrinsics) full.intrinsics_offset = cam_offset;
+    full.extrinsics_offset = ext_offset;
+    full.warp_offset = options.solve_board_warp ? warp_offset : -1;
+    full.frame_in_solve.assign(nframes, false);
+    full.frame_conditional_cov.assign(nframes, Mat6::Zero());
+    full.frame_gain.assign(nframes, Eigen::MatrixXd());
+    for (size_t k = 0; k < frames_in_solve.size(); ++k) {
+      const int f = frames_in_solve[k];
+      full.frame_in_solve[f] = true;
+      full.frame_conditional_cov[f] = D_inv[k] * res.residual_variance_px2;
+      full.frame_gain[f] = std::move(gain[k]);
+    }
     for (int c = 0; c < ncam; ++c) {
       const int n = static_cast<int>(st.intrinsics[c].size());
       res.intrinsics_covariance.push_back(options.fix_intrinsics ? Eigen::MatrixXd::Zero(n, n)
@@ -560,21 +581,116 @@ std::optional<Mat2> ProjectionCovariance(const CameraModel& camera, const Eigen:
   return Mat2(J * cov_intrinsics * J.transpose());
 }
 
-UncertaintyGrid ProjectionUncertaintyGrid(const CameraModel& camera, const Eigen::MatrixXd& cov_intrinsics,
-                                          double range_m, int nx, int ny) {
+double WorstDirectionStdev(const Mat2& cov) {
+  // Largest eigenvalue of the symmetric part, closed form (as mrcal.worst_direction_stdev).
+  const double a = cov(0, 0), c = cov(1, 1), b = 0.5 * (cov(0, 1) + cov(1, 0));
+  return std::sqrt(std::max(0.0, 0.5 * (a + c) + std::sqrt(0.25 * (a - c) * (a - c) + b * b)));
+}
+
+std::optional<Mat2> ProjectionCovarianceMeanFrames(const CameraCalibrationResult& result, int camera, const Vec2& q,
+                                                   double range_m, std::optional<double> pixel_sigma_px) {
+  const int ncam = static_cast<int>(result.rig.size());
+  if (camera < 0 || camera >= ncam)
+    Throw("ProjectionCovarianceMeanFrames: camera ", camera, " does not exist (the calibration has ", ncam, ")");
+  if (!(range_m > 0.0)) Throw("ProjectionCovarianceMeanFrames: range_m must be > 0 or +infinity (got ", range_m, ")");
+  if (pixel_sigma_px && !(*pixel_sigma_px > 0.0 && std::isfinite(*pixel_sigma_px)))
+    Throw("ProjectionCovarianceMeanFrames: pixel_sigma_px must be a finite value > 0 (got ", *pixel_sigma_px, ")");
+  const CalibrationCovariance& C = result.covariance;
+  const int na = static_cast<int>(C.a_cov.rows());
+  if (static_cast<int>(C.intrinsics_offset.size()) != ncam || static_cast<int>(C.extrinsics_offset.size()) != ncam ||
+      C.frame_in_solve.size() != C.frame_gain.size() || C.frame_in_solve.size() != C.frame_conditional_cov.size())
+    Throw("ProjectionCovarianceMeanFrames: the calibration result carries no parameter covariance (it must come "
+          "from CalibrateCameras)");
+  const CameraModel& cam = result.rig.cameras[camera];
+  const auto v = cam.Unproject(q);
+  if (!v) return std::nullopt;
+  // At infinity only rotations act; any positive scale of the direction gives the
+  // same q, and dq/dp scales as 1/|p| while the rotation derivatives scale as |p|.
+  const bool at_infinity = std::isinf(range_m);
+  const Vec3 p_cam = at_infinity ? *v : Vec3(*v * range_m);
+  Eigen::Matrix<double, 2, 3> dq_dp;
+  std::vector<double> dq_di;
+  if (!cam.Project(p_cam, &dq_dp, &dq_di).allFinite()) return std::nullopt;
+
+  // dq/da for the dense block; the board blocks are folded in on the fly.
+  Eigen::MatrixXd dq_da = Eigen::MatrixXd::Zero(2, na);
+  if (const int o = C.intrinsics_offset[camera]; o >= 0)
+    dq_da.middleCols(o, cam.NumIntrinsics()) =
+        Eigen::Map<const Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor>>(dq_di.data(), 2, cam.NumIntrinsics());
+  const Pose& T_cam_rig = cam.T_cam_rig();
+  const Vec3 p_rig = at_infinity ? Vec3(T_cam_rig.R.transpose() * p_cam) : T_cam_rig.Inverse() * p_cam;
+  if (const int o = C.extrinsics_offset[camera]; o >= 0) {
+    double rt[6];
+    T_cam_rig.ToRt(rt);
+    dq_da.middleCols(o, 3) = dq_dp * (-Skew(T_cam_rig.R * p_rig) * LeftJacobianSO3(Vec3(rt[0], rt[1], rt[2])));
+    if (!at_infinity) dq_da.middleCols(o + 3, 3) = dq_dp;
+  }
+  const Eigen::Matrix<double, 2, 3> dq_dprig = dq_dp * T_cam_rig.R;
+
+  // Mean-frames: p_rig' = (1/F) sum_f T_rig_board_f(b_f) * (T_rig_board_f_hat^-1 * p_rig).
+  const size_t nframes = C.frame_in_solve.size();
+  if (result.T_rig_board.size() != nframes)
+    Throw("ProjectionCovarianceMeanFrames: the result has ", result.T_rig_board.size(), " board poses but covariance "
+          "for ", nframes, " frames");
+  const int F = static_cast<int>(std::count(C.frame_in_solve.begin(), C.frame_in_solve.end(), true));
+  // Var(q) = (Ga - sum_f Gf K_f) a_cov (Ga - sum_f Gf K_f)^T + sum_f Gf Cov(b_f | a) Gf^T:
+  // the full G Cov(b) G^T written with the block identities of CalibrationCovariance.
+  Eigen::MatrixXd H = dq_da;
+  Mat2 V = Mat2::Zero();
+  for (size_t f = 0; f < nframes; ++f) {
+    if (!C.frame_in_solve[f]) continue;
+    if (!result.T_rig_board[f])
+      Throw("ProjectionCovarianceMeanFrames: frame ", f, " has a covariance but no board pose in the result");
+    const Pose& T = *result.T_rig_board[f];
+    double rt[6];
+    T.ToRt(rt);
+    const Vec3 Rp = at_infinity ? p_rig : Vec3(p_rig - T.t);  // R_f * p_board
+    Eigen::Matrix<double, 2, 6> G = Eigen::Matrix<double, 2, 6>::Zero();
+    G.leftCols<3>() = dq_dprig * (-Skew(Rp) * LeftJacobianSO3(Vec3(rt[0], rt[1], rt[2]))) / F;
+    if (!at_infinity) G.rightCols<3>() = dq_dprig / F;
+    H.noalias() -= G * C.frame_gain[f];
+    V.noalias() += G * C.frame_conditional_cov[f] * G.transpose();
+  }
+  V.noalias() += H * C.a_cov * H.transpose();
+  if (pixel_sigma_px) {
+    if (!(result.residual_variance_px2 > 0.0))
+      Throw("ProjectionCovarianceMeanFrames: cannot rescale to pixel_sigma_px = ", *pixel_sigma_px,
+            ": the solution's residual variance is ", result.residual_variance_px2, " px^2");
+    V *= *pixel_sigma_px * *pixel_sigma_px / result.residual_variance_px2;
+  }
+  return V;
+}
+
+namespace {
+// Cell centres of an nx x ny tiling of the image, each with sigma(q) (NaN when absent).
+UncertaintyGrid Grid(const CameraModel& camera, int nx, int ny,
+                     const std::function<std::optional<Mat2>(const Vec2&)>& cov) {
+  if (nx < 1 || ny < 1) Throw("ProjectionUncertaintyGrid: grid ", nx, "x", ny, " must be at least 1x1");
   UncertaintyGrid g;
   g.nx = nx;
   g.ny = ny;
   for (int j = 0; j < ny; ++j)
     for (int i = 0; i < nx; ++i) {
-      // Cell centres of an nx x ny tiling of the image.
       const Vec2 q((i + 0.5) * camera.Width() / nx - 0.5, (j + 0.5) * camera.Height() / ny - 0.5);
       g.pixels.push_back(q);
-      const auto C = ProjectionCovariance(camera, cov_intrinsics, q, range_m);
-      g.sigma_px.push_back(C ? std::sqrt(Eigen::SelfAdjointEigenSolver<Mat2>(*C).eigenvalues().maxCoeff())
-                             : std::numeric_limits<double>::quiet_NaN());
+      const auto C = cov(q);
+      g.sigma_px.push_back(C ? WorstDirectionStdev(*C) : std::numeric_limits<double>::quiet_NaN());
     }
   return g;
+}
+}  // namespace
+
+UncertaintyGrid ProjectionUncertaintyGrid(const CameraModel& camera, const Eigen::MatrixXd& cov_intrinsics,
+                                          double range_m, int nx, int ny) {
+  return Grid(camera, nx, ny, [&](const Vec2& q) { return ProjectionCovariance(camera, cov_intrinsics, q, range_m); });
+}
+
+UncertaintyGrid ProjectionUncertaintyGrid(const CameraCalibrationResult& result, int camera, double range_m, int nx,
+                                          int ny) {
+  if (camera < 0 || camera >= static_cast<int>(result.rig.size()))
+    Throw("ProjectionUncertaintyGrid: camera ", camera, " does not exist (the calibration has ", result.rig.size(), ")");
+  return Grid(result.rig.cameras[camera], nx, ny,
+              [&](const Vec2& q) { return ProjectionCovarianceMeanFrames(result, camera, q, range_m); });
 }
 
 std::string SummarizeCalibration(const CameraCalibrationResult& r) {

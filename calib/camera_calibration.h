@@ -16,6 +16,7 @@
 //                                           returns and calls the reprojection error.
 #pragma once
 
+#include <filesystem>
 #include <functional>
 #include <optional>
 #include <string>
@@ -87,6 +88,30 @@ struct CameraResidualStats {
   std::vector<bool> inlier;
 };
 
+// The solution's full parameter covariance, sigma^2 (J^T J)^-1 with sigma^2 =
+// residual_variance_px2, kept in block form. The parameters are the solver's own:
+// "a" = each camera's intrinsics, rt_cam_rig of cameras 1.. (mrcal's rt: rotation
+// vector then translation, differentiated as raw parameters, not as perturbations),
+// the board warp; then rt_rig_board of every frame in the solve. With the normal
+// matrix N = [A B; B^T D] (D block-diagonal, one 6x6 D_f per frame) and
+// K_f = D_f^-1 B_f^T, the full covariance is
+//   Cov(a)        = a_cov                      = sigma^2 (A - B D^-1 B^T)^-1
+//   Cov(a, b_f)   = -a_cov K_f^T
+//   Cov(b_f, b_g) = [f == g] frame_conditional_cov[f] + K_f a_cov K_g^T,
+// with frame_conditional_cov[f] = sigma^2 D_f^-1. This needs frames * na memory
+// instead of frames^2 for a dense inverse.
+struct CalibrationCovariance {
+  Eigen::MatrixXd a_cov;               // na x na
+  std::vector<int> intrinsics_offset;  // per camera, into a; -1 when intrinsics were held fixed
+  std::vector<int> extrinsics_offset;  // per camera, into a; -1 for camera 0 (the rig frame)
+  int warp_offset = -1;                // -1 when the warp was not solved
+  // Per frame index (size = number of frames); in_solve false (and the matrices
+  // empty) for frames with no pose or no inlier point.
+  std::vector<bool> frame_in_solve;
+  std::vector<Mat6> frame_conditional_cov;
+  std::vector<Eigen::MatrixXd> frame_gain;  // K_f, 6 x na
+};
+
 struct CameraCalibrationResult {
   CameraRig rig;                                // intrinsics and T_cam_rig per camera
   std::vector<std::optional<Pose>> T_rig_board;  // per frame index; nullopt when unobserved
@@ -105,6 +130,8 @@ struct CameraCalibrationResult {
   std::vector<Vec6> extrinsics_std;
   // Board warp (w_x, w_y) in metres and its std, when solved (else zero).
   Eigen::Vector2d board_warp_m = Eigen::Vector2d::Zero(), board_warp_std_m = Eigen::Vector2d::Zero();
+  // Every solved parameter's covariance (what ProjectionCovarianceMeanFrames needs).
+  CalibrationCovariance covariance;
 };
 
 // Solves. InputError when a camera has no usable observation or is not connected to
@@ -117,11 +144,34 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
 // intrinsics covariance alone: the point is unprojected with the solved intrinsics,
 // held fixed in the camera frame and re-projected through intrinsics perturbed with
 // `cov_intrinsics` (first order: J cov J^T with J = dq/dintrinsics). This leaves out
-// the camera-pose uncertainty relative to the boards (mrcal folds that in), so in
-// the corners of the image it is an upper bound on what mrcal reports. nullopt
-// where the pixel does not unproject.
+// the camera-pose uncertainty relative to the boards, which mrcal folds in; use
+// ProjectionCovarianceMeanFrames for mrcal's definition. nullopt where the pixel
+// does not unproject.
 std::optional<Mat2> ProjectionCovariance(const CameraModel& camera, const Eigen::MatrixXd& cov_intrinsics,
                                          const Vec2& q, double range_m);
+
+// Projection covariance (px^2) of the point seen by `camera` at pixel q at `range_m`
+// along its ray, as mrcal 2.2 defines it (mrcal.projection_uncertainty,
+// mrcal-show-projection-uncertainty): the point p_cam is mapped to the rig frame and
+// from there into the coordinates of every frame's board; a perturbation of the
+// solution (intrinsics, extrinsics, all board poses, warp) moves those board-fixed
+// points, which are mapped back to the rig frame, AVERAGED over the frames (the
+// "mean-frames" fixed point: the camera is pinned to the boards it saw, not to an
+// arbitrary rig frame), and projected by the perturbed camera. First order:
+// Var(q) = dq/db Cov(b) dq/db^T over all parameters b (the warp moves no fixed point,
+// so it enters only through its correlations). range_m = +infinity gives the
+// uncertainty of a point at infinity (translations drop out, as mrcal's atinfinity).
+// Noise: Cov(b) is scaled by result.residual_variance_px2 (sum |e|^2 / degrees of
+// freedom) unless pixel_sigma_px is given, which replaces sigma (mrcal's default is
+// the population std of the board residuals, i.e. about rms_px). nullopt where the
+// pixel does not unproject. InputError for a bad camera index, a range that is not
+// > 0, a non-positive sigma or a result without the covariance.
+std::optional<Mat2> ProjectionCovarianceMeanFrames(const CameraCalibrationResult& result, int camera, const Vec2& q,
+                                                   double range_m,
+                                                   std::optional<double> pixel_sigma_px = std::nullopt);
+
+// sqrt of the largest eigenvalue of a 2x2 covariance (mrcal's "worstdirection-stdev").
+double WorstDirectionStdev(const Mat2& cov);
 
 struct UncertaintyGrid {
   int nx = 0, ny = 0;
@@ -130,6 +180,10 @@ struct UncertaintyGrid {
 };
 UncertaintyGrid ProjectionUncertaintyGrid(const CameraModel& camera, const Eigen::MatrixXd& cov_intrinsics,
                                           double range_m, int nx = 8, int ny = 6);
+// The same grid of worst-direction stdevs from ProjectionCovarianceMeanFrames (the
+// camera-pose term included; range_m may be +infinity).
+UncertaintyGrid ProjectionUncertaintyGrid(const CameraCalibrationResult& result, int camera, double range_m,
+                                          int nx = 8, int ny = 6);
 
 // Text summary (one line per camera plus the parameters with their std).
 std::string SummarizeCalibration(const CameraCalibrationResult& result);

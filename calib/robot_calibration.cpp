@@ -244,13 +244,15 @@ void CheckMeasurements(const RobotModel& robot, const std::vector<RobotMeasureme
   const bool six = ms[0].R_meas_tool.has_value();
   for (size_t i = 0; i < ms.size(); ++i) {
     const RobotMeasurement& m = ms[i];
+    // "<who>: measurement 5" plus where it was read from, when known.
+    const std::string at = m.source.empty() ? std::string() : " (" + m.source + ")";
     if (m.q.size() != robot.NumJoints())
-      Throw(who, ": measurement ", i + 1, " has ", m.q.size(), " joint values but robot '", robot.Name(), "' has ",
+      Throw(who, ": measurement ", i + 1, at, " has ", m.q.size(), " joint values but robot '", robot.Name(), "' has ",
             robot.NumJoints(), " joints; give one value per joint");
     std::string why;
     if (!robot.WithinLimits(m.q, &why))
-      Throw(who, ": measurement ", i + 1, ": ", why, "; remove the measurement or correct the joint limits");
-    if (!m.p_meas.allFinite()) Throw(who, ": measurement ", i + 1, " has a non-finite position");
+      Throw(who, ": measurement ", i + 1, at, ": ", why, "; remove the measurement or correct the joint limits");
+    if (!m.p_meas.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite position");
     if (m.R_meas_tool.has_value() != six)
       Throw(who, ": measurement ", i + 1, " is ", m.R_meas_tool ? "6-D" : "3-D", " but measurement 1 is ",
             six ? "6-D" : "3-D", "; give orientations for all measurements or for none");
@@ -471,8 +473,8 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
   CheckMeasurements(robot, measurements, "robot calibration");
   if (!options.error_motion_harmonics.empty()) {
     if (static_cast<int>(options.error_motion_harmonics.size()) != robot.NumJoints())
-      Throw("robot calibration: error_motion_harmonics has ", options.error_motion_harmonics.size(),
-            " counts but robot '", robot.Name(), "' has ", robot.NumJoints(), " joints; give one count per joint");
+      Throw("robot calibration: error_motion_harmonics (--error-motion) has ", options.error_motion_harmonics.size(),
+            options.error_motion_harmonics.size() == 1 ? " count" : " counts", " but robot '", robot.Name(), "' has ", robot.NumJoints(), " joints; give one count per joint");
     for (int i = 0; i < robot.NumJoints(); ++i)
       if (options.error_motion_harmonics[i] > 0 && robot.Joints()[i].type != JointType::kRevolute)
         Throw("robot calibration: error_motion_harmonics asks for harmonics of joint ", i + 1,
@@ -802,6 +804,7 @@ std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path&
           if (std::abs(qq.norm() - 1.0) > 1e-3) Throw(where, ": quaternion_wxyz has norm ", qq.norm(), ", expected 1");
           m.R_meas_tool = qq.normalized().toRotationMatrix();
         }
+        m.source = where;
         out.push_back(m);
       }
     } else if (root.IsMap() && root.size() > 0) {
@@ -820,6 +823,7 @@ std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path&
         const Pose T = ParsePoseNode(e["pose"], where);
         m.p_meas = T.t;
         m.R_meas_tool = T.R;
+        m.source = where;
         out.push_back(m);
       }
     } else {

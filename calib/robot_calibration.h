@@ -53,6 +53,9 @@ struct RobotMeasurement {
   Eigen::VectorXd q;
   Vec3 p_meas = Vec3::Zero();
   std::optional<Mat3> R_meas_tool;
+  // Where it came from, for error messages ("file.yaml measurement 5 (line 23)"); empty
+  // for measurements made in code.
+  std::string source;
 };
 
 // Measurement files (YAML). Two layouts are read:

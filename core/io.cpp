@@ -36,9 +36,51 @@ void WriteFileAtomically(const fs::path& path, const std::function<void(std::ost
   std::error_code ec;
   fs::rename(tmp, path, ec);
   if (ec) {
-    fs::remove(tmp, ec);
-    Throw("cannot move the finished output into place at ", path.string());
+    std::error_code ec2;
+    fs::remove(tmp, ec2);
+    Throw("cannot move the finished output into place at ", path.string(), ": ", ec.message());
   }
+}
+
+namespace {
+// The nearest existing ancestor of p (p itself when it exists); "." for a relative path
+// whose ancestors do not exist yet.
+fs::path NearestExisting(const fs::path& p) {
+  fs::path q = p.empty() ? fs::path(".") : p;
+  std::error_code ec;
+  while (!fs::exists(q, ec)) {
+    if (!q.has_parent_path() || q.parent_path() == q) return fs::path(".");
+    q = q.parent_path();
+  }
+  return q;
+}
+
+void RequireWritableAncestor(const fs::path& target, const fs::path& start, const std::string& what) {
+  const fs::path anc = NearestExisting(start);
+  std::error_code ec;
+  if (!fs::is_directory(anc, ec))
+    Throw(what, " ", target.string(), ": ", anc.string(), " exists and is not a folder; choose another path");
+  if (::access(anc.c_str(), W_OK) != 0)
+    Throw(what, " ", target.string(), ": folder ", anc.string(), " is not writable; choose another path");
+}
+}  // namespace
+
+void RequireWritableFile(const fs::path& path, const std::string& what) {
+  if (path.empty()) Throw(what, ": the output file name is empty");
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    Throw(what, " ", path.string(), " is a folder; give a file name (nothing was written)");
+  if (fs::exists(path, ec) && ::access(path.c_str(), W_OK) != 0)
+    Throw(what, " ", path.string(), " exists and is not writable; choose another path (nothing was written)");
+  RequireWritableAncestor(path, path.has_parent_path() ? path.parent_path() : fs::path("."), what);
+}
+
+void RequireWritableFolder(const fs::path& path, const std::string& what) {
+  if (path.empty()) Throw(what, ": the output folder name is empty");
+  std::error_code ec;
+  if (fs::exists(path, ec) && !fs::is_directory(path, ec))
+    Throw(what, " ", path.string(), " exists and is not a folder; give a folder for the outputs (nothing was written)");
+  RequireWritableAncestor(path, path, what);
 }
 
 std::string ReadTextFile(const fs::path& path) {

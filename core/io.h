@@ -15,6 +15,14 @@ namespace mcms {
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write);
 
+// Checks, before any long work, that `path` can be written as a file: not an existing
+// folder, its folder either creatable or writable. InputError naming `what` (e.g. "-o")
+// and the path otherwise, so a run refuses bad outputs before it computes anything.
+void RequireWritableFile(const std::filesystem::path& path, const std::string& what);
+// The same for an output folder: an existing non-folder, or a folder that cannot be
+// written, is refused.
+void RequireWritableFolder(const std::filesystem::path& path, const std::string& what);
+
 // Reads the whole file; InputError naming the file when it cannot be read.
 std::string ReadTextFile(const std::filesystem::path& path);
 

@@ -344,7 +344,7 @@ TEST(RobotCalibration, BadInputNamesWhatIsMissing) {
   expect_error(ms, "every parameter is fixed");
   opt = RobotCalibrationOptions();
   opt.error_motion_harmonics = {1, 1};
-  expect_error(ms, "error_motion_harmonics has 2 counts");
+  expect_error(ms, "has 2 counts but robot");
   opt.error_motion_harmonics = {0, 0, 0, 0, 0, 12};
   expect_error(ms, "error_motion_harmonics[5] must be in 0..8");
 }
