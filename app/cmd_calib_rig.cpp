@@ -158,7 +158,9 @@ McmsCommand calib_rig_command([](CLI::App& app) {
   cmd->add_option("-m,--lensmodel", args->lensmodel,
                   "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, _OPENCV5, _OPENCV12 or LENSMODEL_PINHOLE");
   cmd->add_option("-o,--output", args->output, "output folder (created; default ./calib-rig)");
-  cmd->add_option("--outlier-k", args->outlier_k, "reject points beyond k sigma and re-solve (0 = keep all)")
+  cmd->add_option("--outlier-k", args->outlier_k,
+                  "reject points with a coordinate beyond k sigma and re-solve, in rounds where one exceeds "
+                  "k + 1 sigma (0 = keep all)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--range", args->range_m, "range in metres for the projection-uncertainty report")
       ->check(CLI::PositiveNumber);

@@ -24,6 +24,7 @@ namespace mcms {
 bool CameraCalibrationOptions::IsValid(std::string* why) const {
   std::ostringstream s;
   if (!(outlier_k == 0.0 || outlier_k >= 2.0)) s << "outlier_k must be 0 (off) or >= 2 (got " << outlier_k << ")";
+  else if (!(outlier_trigger >= 0.0)) s << "outlier_trigger must be >= 0 (got " << outlier_trigger << ")";
   else if (max_outlier_rounds < 0) s << "max_outlier_rounds must be >= 0";
   else if (max_iterations < 1) s << "max_iterations must be >= 1";
   else if (min_points_per_observation < 4) s << "min_points_per_observation must be >= 4 (a pose needs 4 points)";
@@ -430,9 +431,14 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
     }
     const double sigma = std::sqrt(ss / std::max(1, 2 * n));
     int added = 0;
-    if (options.outlier_k > 0.0 && round < options.max_outlier_rounds)
-      for (size_t i = 0; i < points.size(); ++i)
-        if (inlier[i] && !(e[i].norm() <= options.outlier_k * sigma)) inlier[i] = false, ++added;
+    if (options.outlier_k > 0.0 && round < options.max_outlier_rounds) {
+      bool triggered = false;
+      for (size_t i = 0; i < points.size() && !triggered; ++i)
+        triggered = inlier[i] && !(e[i].cwiseAbs().maxCoeff() <= (options.outlier_k + options.outlier_trigger) * sigma);
+      if (triggered)
+        for (size_t i = 0; i < points.size(); ++i)
+          if (inlier[i] && !(e[i].cwiseAbs().maxCoeff() <= options.outlier_k * sigma)) inlier[i] = false, ++added;
+    }
     std::ostringstream s;
     s << "solve " << round << ": " << summary.iterations.size() << " iterations, RMS " << sigma
       << " px per coordinate over " << n << " points; " << added << " new outliers";
