@@ -39,6 +39,7 @@ int RunDemo(const DemoArgs& a) {
   const LabScenario lab = MakeLabScenario(lo);
   const Scenario& sc = lab.vision;
   const fs::path out = a.out;
+  RequireWritableFolder(out, "demo -o");  // before minutes of simulation, not after
   std::printf("mcms demo: the paper's lab experiment: %d points on a %.0f mm sphere, %.0f s dwell, %zu cameras at "
               "%.1f Hz (%zu frames), robot at %.0f Hz, inclinometer every %.0f ms -> %s\n",
               lo.points, 1e3 * lo.sphere_radius_m, lo.dwell_s, sc.rig.size(), lo.camera_rate_hz, sc.NumFrames(),

@@ -7,6 +7,7 @@
 
 #include "app/commands.h"
 #include "core/error.h"
+#include "core/io.h"
 #include "fusion/log_fusion.h"
 
 namespace mcms::app {
@@ -19,6 +20,7 @@ struct FuseArgs {
 
 int RunFuse(const FuseArgs& a) {
   // Every input is read and checked before anything is written.
+  RequireWritableFile(a.output, "fuse -o");
   const FusionSetup setup = ReadFusionSetup(a.setup);
   SensorLogs logs;
   logs.tracker = ReadTrackerLog(a.tracker);

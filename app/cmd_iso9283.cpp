@@ -48,6 +48,8 @@ struct IsoArgs {
 int RunIso9283Simulation(const IsoArgs& a) {
   if (!a.poses.empty() || !a.path.empty())
     Throw("iso9283 --simulate: makes its own measurements; give no POSES file and no --path");
+  if (!a.output.empty()) RequireWritableFile(a.output, "iso9283 -o");
+  if (!a.simulate_dir.empty()) RequireWritableFolder(a.simulate_dir, "iso9283 --write-measurements");
   Iso9283ExperimentOptions o;
   o.cycles = a.cycles;
   o.seed = a.seed;

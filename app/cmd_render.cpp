@@ -7,6 +7,7 @@
 
 #include "app/commands.h"
 #include "core/error.h"
+#include "core/io.h"
 #include "synthetic/renderer.h"
 #include "synthetic/scenario.h"
 
@@ -28,6 +29,7 @@ int RunRender(const RenderArgs& a) {
     return 0;
   }
   if (a.out.empty()) Throw("render: the output folder is missing; give -o DIR");
+  RequireWritableFolder(a.out, "render -o");
   Scenario s = a.scenario.empty() ? Scenario::Default() : Scenario::Read(a.scenario);
   const std::string source = a.scenario.empty() ? std::string("the default scenario") : a.scenario;
   if (a.frames >= 0) {

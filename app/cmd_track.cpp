@@ -56,6 +56,7 @@ int RunTrack(const TrackArgs& a) {
   const fs::path target_file = !a.target.empty() ? fs::path(a.target) : pick("", "target.yaml");
   const fs::path frames = !a.frames_csv.empty() ? fs::path(a.frames_csv) : (a.dir.empty() ? fs::path() : dir / "frames.csv");
   const fs::path out = !a.output.empty() ? fs::path(a.output) : (a.dir.empty() ? fs::path("poses.csv") : dir / "poses.csv");
+  RequireWritableFile(out, "track -o");  // before the sequence, not after it
 
   CameraRig rig = CameraRig::Read(rig_file);
   Target target = Target::Read(target_file);

@@ -142,5 +142,34 @@ TEST(Cli, BadRigTargetAndTimesAreRefused) {
   ExpectRefused(g, "track --quiet " + g.string(), "ball_radius_m");
 }
 
+// An output that cannot be written is refused before the work (seconds to minutes of
+// tracking, rendering or simulation), with the option named, exit 2, and the file
+// standing in the way untouched.
+TEST(Cli, UnusableOutputIsRefusedBeforeTheWork) {
+  const fs::path d = Copy("outputs");
+  const fs::path file = d / "a_file";
+  {
+    std::ofstream(file) << "keep\n";
+  }
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"track --quiet " + d.string() + " -o " + d.string(), "track -o"},
+      {"render -o " + file.string(), "render -o"},
+      {"demo -o " + file.string(), "demo -o"},
+      {"iso9283 --simulate -o " + d.string(), "iso9283 -o"},
+      {"iso9283 --simulate --write-measurements " + file.string(), "iso9283 --write-measurements"},
+  };
+  for (const auto& [args, needle] : cases) {
+    SCOPED_TRACE(args);
+    const CliRun r = Mcms(args, d);
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << "stderr: " << r.err;
+    EXPECT_NE(r.err.find("nothing was written"), std::string::npos) << "stderr: " << r.err;
+  }
+  std::ifstream in(file);
+  std::string text;
+  std::getline(in, text);
+  EXPECT_EQ(text, "keep");
+}
+
 }  // namespace
 }  // namespace mcms
