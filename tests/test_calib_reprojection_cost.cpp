@@ -44,9 +44,11 @@ const ceres::NumericDiffOptions kCentral = [] {
   o.relative_step_size = 1e-6;
   return o;
 }();
-// Relative agreement between analytic and central-difference Jacobians: central
-// differences with step 1e-6 are good to about 1e-8 relative here; 1e-6 leaves room.
-constexpr double kRelativePrecision = 1e-6;
+// Relative agreement between analytic and central-difference Jacobians. Central
+// differences with step 1e-6 agree to about 1e-8 on the large entries; the smallest
+// (e.g. d v / d k6 = -2.4e-7 px at this point) carry about 1e-6 relative rounding noise
+// (measured worst: 1.4e-6), so 1e-5. A 1 % error is caught (CheckerCatchesAWrongJacobian).
+constexpr double kRelativePrecision = 1e-5;
 
 const std::vector<const ceres::Manifold*>* kNoManifolds = nullptr;
 
