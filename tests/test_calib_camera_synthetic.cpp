@@ -10,6 +10,7 @@
 
 #include "calib/calibration_board.h"
 #include "calib/camera_calibration.h"
+#include "calib/mrcal_optimization_inputs.h"
 #include "core/error.h"
 #include "core/random.h"
 
@@ -198,6 +199,20 @@ TEST(CalibCameraSynthetic, LensModelAutoKeepsTheTrueSimpleModel) {
   EXPECT_NE(std::find(log.begin(), log.end(), r.lens_model_choice), log.end());
   // The noise level is recovered by the chosen model.
   EXPECT_NEAR(r.rms_px, kNoisePx, 0.1 * kNoisePx);
+
+  // mrcal's optimization_inputs: the board is mrcal's 9x6 grid of 0.05 m; any other
+  // grid puts points off it, which is refused with the point named.
+  const std::string oi = MrcalOptimizationInputs(r, MrcalBoardGrid{9, 6, 0.05});
+  EXPECT_EQ(oi.substr(0, 2), "b'");
+  EXPECT_EQ(oi.back(), '\'');
+  try {
+    MrcalOptimizationInputs(r, MrcalBoardGrid{9, 6, 0.04});
+    ADD_FAILURE() << "a board spacing that does not fit the points was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("is not on mrcal's 9x6 grid of spacing 0.04 m"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(MrcalOptimizationInputs(CameraCalibrationResult{}, MrcalBoardGrid{9, 6, 0.05}), InputError);
 }
 
 TEST(CalibCameraSynthetic, BadInputNamesTheCameraAndTheRemedy) {
