@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <memory>
@@ -685,13 +686,16 @@ CameraCalibrationResult SelectLensModel(const CameraCalibrationInput& input, con
   }
   trials[best].chosen = true;
   std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(1);
   s << "lens model auto: chose " << trials[best].lensmodel << " (" << why << ")";
   for (const LensModelTrial& t : trials) {
     if (t.chosen) continue;
     s << "; " << t.lensmodel << ": ";
     if (!t.converged) s << "did not converge in " << t.iterations << " iterations";
     else if (t.largest_distortion_std >= options.auto_max_distortion_std)
-      s << "a distortion coefficient is undetermined (1 sigma " << t.largest_distortion_std << ")";
+      s << "a distortion coefficient is undetermined (1 sigma " << std::setprecision(3) << std::defaultfloat
+        << t.largest_distortion_std << std::fixed << std::setprecision(1) << ")";
     else
       s << "BIC " << (t.bic > trials[best].bic ? "higher" : "lower") << " by " << std::abs(t.bic - trials[best].bic);
   }
