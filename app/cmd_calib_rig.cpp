@@ -1,6 +1,8 @@
 // mcms calib-rig: calibration-board images per camera -> every camera's intrinsics
-// and pose in the rig (camera 0 = rig frame), as mrcal .cameramodel, OpenCV YAML and
-// rig.yaml, with a residual summary and per-camera residual plots.
+// and pose in the rig (camera 0 = rig frame), as mrcal .cameramodel (with mrcal's
+// optimization_inputs for chessboards), OpenCV YAML and rig.yaml, with a residual
+// summary and per-camera residual plots. The lens model is chosen by the data unless
+// given; a solve that did not converge writes nothing.
 #include <algorithm>
 #include <cstdio>
 #include <map>
@@ -11,6 +13,7 @@
 #include "app/commands.h"
 #include "calib/calibration_board.h"
 #include "calib/camera_calibration.h"
+#include "calib/mrcal_optimization_inputs.h"
 #include "core/error.h"
 #include "core/io.h"
 
@@ -20,7 +23,8 @@ namespace {
 struct CalibRigArgs {
   std::string board;
   std::vector<std::string> folders;
-  std::string lensmodel = "LENSMODEL_OPENCV8";
+  std::string lensmodel = "auto";
+  int max_iterations = 200;
   std::string output = "calib-rig";
   double outlier_k = 4.0;
   double range_m = 10.0;
@@ -40,6 +44,7 @@ int RunCalibRig(const CalibRigArgs& a) {
   const CalibrationBoard board = CalibrationBoard::Read(a.board);
   CameraCalibrationOptions options;
   options.lensmodel = a.lensmodel;
+  options.max_iterations = a.max_iterations;
   options.outlier_k = a.outlier_k;
   options.solve_board_warp = a.board_warp;
   if (!a.quiet) options.log = [](const std::string& s) { std::fprintf(stderr, "calib-rig: %s\n", s.c_str()); };
@@ -105,6 +110,26 @@ int RunCalibRig(const CalibRigArgs& a) {
   progress.Finish();
 
   const CameraCalibrationResult r = CalibrateCameras(input, options);
+  if (!r.lens_model_trials.empty()) {
+    std::printf("lens model (auto): BIC = n ln(RSS/n) + k ln(n) over the %d residuals every candidate kept\n",
+                r.lens_model_trials[0].num_residuals);
+    for (const LensModelTrial& t : r.lens_model_trials)
+      std::printf("  %-18s %s %4d iterations, RMS %.4f px, %d parameters, BIC %.1f, largest distortion 1-sigma %.3g%s\n",
+                  t.lensmodel.c_str(), t.converged ? "converged    " : "NOT CONVERGED", t.iterations, t.rms_px,
+                  t.num_parameters, t.bic, t.largest_distortion_std, t.chosen ? "  <- chosen" : "");
+    std::printf("%s\n", r.lens_model_choice.c_str());
+  }
+  if (!r.converged)
+    Throw("calib-rig: the bundle adjustment with ", r.lensmodel, " did not converge in ", r.iterations,
+          " iterations (Ceres: ", r.solver_message, "); its parameters are not a solution. Raise --max-iterations "
+          "(now ", a.max_iterations, ") or choose a simpler --lensmodel (or auto); no output written");
+  // mrcal's optimization_inputs need the board as a regular grid: chessboards only.
+  std::string optimization_inputs, no_inputs_why;
+  if (board.type == CalibrationBoard::Type::kChessboard)
+    optimization_inputs = MrcalOptimizationInputs(r, MrcalBoardGrid{board.cols, board.rows, board.square_m});
+  else
+    no_inputs_why = "the models carry no optimization_inputs: mrcal describes a board as a regular grid of points, "
+                    "and an AprilTag grid's corners are not one (mrcal's uncertainty tools need a chessboard)";
 
   // Everything is computed; only now write the outputs (each atomically): plots first,
   // then the models, rig.yaml last, so a failure part-way leaves no rig.yaml.
@@ -116,7 +141,10 @@ int RunCalibRig(const CalibRigArgs& a) {
     WriteResidualPlot(r, static_cast<int>(c), out / ("residuals-" + r.rig.names[c] + ".svg"));
   for (size_t c = 0; c < r.rig.size(); ++c) {
     const std::string& name = r.rig.names[c];
-    r.rig.cameras[c].WriteCameramodel(out / (name + ".cameramodel"));
+    if (optimization_inputs.empty())
+      r.rig.cameras[c].WriteCameramodel(out / (name + ".cameramodel"));
+    else
+      WriteCameramodelWithOptimizationInputs(r, static_cast<int>(c), optimization_inputs, out / (name + ".cameramodel"));
     r.rig.cameras[c].WriteOpenCvYaml(out / (name + ".yml"));
   }
   r.rig.Write(out / "rig.yaml");
@@ -136,8 +164,9 @@ int RunCalibRig(const CalibRigArgs& a) {
       std::printf("\n");
     }
   }
-  std::printf("wrote %zu camera models (.cameramodel, .yml), residual plots and rig.yaml to %s\n", r.rig.size(),
-              out.string().c_str());
+  std::printf("wrote %zu camera models (.cameramodel%s, .yml), residual plots and rig.yaml to %s\n", r.rig.size(),
+              optimization_inputs.empty() ? "" : " with mrcal's optimization_inputs", out.string().c_str());
+  if (!no_inputs_why.empty()) std::printf("note: %s\n", no_inputs_why.c_str());
   return 0;
 }
 
@@ -148,7 +177,8 @@ McmsCommand calib_rig_command([](CLI::App& app) {
       "Calibrate a camera rig from calibration-board images: every camera's intrinsics (mrcal lens model) and pose "
       "in the rig (the first camera defines the rig frame), by bundle adjustment with outlier rejection. Give one "
       "image folder per camera (images of the same moment share a file name) or a single folder for one camera. "
-      "Writes <camera>.cameramodel (mrcal), <camera>.yml (OpenCV), rig.yaml and residuals-<camera>.svg to the "
+      "Writes <camera>.cameramodel (mrcal; with optimization_inputs for chessboards, so mrcal's uncertainty and diff "
+      "tools read it), <camera>.yml (OpenCV), rig.yaml and residuals-<camera>.svg to the "
       "output folder, and prints residuals, parameter standard deviations and the projection uncertainty.");
   cmd->add_option("BOARD", args->board,
                   "board description (Kalibr YAML: target_type aprilgrid with tagCols, tagRows, tagSize, tagSpacing; "
@@ -156,7 +186,13 @@ McmsCommand calib_rig_command([](CLI::App& app) {
       ->required();
   cmd->add_option("FOLDERS", args->folders, "image folder per camera (its name names the camera)")->required();
   cmd->add_option("-m,--lensmodel", args->lensmodel,
-                  "LENSMODEL_OPENCV8 (default), LENSMODEL_OPENCV4, _OPENCV5, _OPENCV12 or LENSMODEL_PINHOLE");
+                  "auto (default: solves LENSMODEL_OPENCV4, _OPENCV5 and _OPENCV8 and keeps the converged one with "
+                  "every distortion coefficient determined and the lowest BIC; prints why), or one of "
+                  "LENSMODEL_OPENCV4, _OPENCV5, _OPENCV8, _OPENCV12, LENSMODEL_PINHOLE");
+  cmd->add_option("--max-iterations", args->max_iterations,
+                  "iteration limit of each bundle-adjustment solve (default 200); a solve that reaches it has not "
+                  "converged and nothing is written")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("-o,--output", args->output, "output folder (created; default ./calib-rig)");
   cmd->add_option("--outlier-k", args->outlier_k,
                   "reject points with a coordinate beyond k sigma and re-solve, in rounds where one exceeds "

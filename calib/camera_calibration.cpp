@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <memory>
@@ -16,6 +17,7 @@
 #include <Eigen/SparseCore>
 #include <opencv2/calib3d.hpp>
 
+#include "calib/reprojection_cost.h"
 #include "core/error.h"
 #include "core/svg_plot.h"
 
@@ -27,6 +29,8 @@ bool CameraCalibrationOptions::IsValid(std::string* why) const {
   else if (!(outlier_trigger >= 0.0)) s << "outlier_trigger must be >= 0 (got " << outlier_trigger << ")";
   else if (max_outlier_rounds < 0) s << "max_outlier_rounds must be >= 0";
   else if (max_iterations < 1) s << "max_iterations must be >= 1";
+  else if (lensmodel == "auto" && auto_lensmodels.empty()) s << "lensmodel auto needs at least one candidate in auto_lensmodels";
+  else if (!(auto_max_distortion_std > 0.0)) s << "auto_max_distortion_std must be > 0";
   else if (min_points_per_observation < 4) s << "min_points_per_observation must be >= 4 (a pose needs 4 points)";
   else if (max_init_views < 3) s << "max_init_views must be >= 3";
   else if (fix_intrinsics && (initial_intrinsics.empty() ||
@@ -54,85 +58,9 @@ LensSupport SupportOf(const std::string& lensmodel) {
   if (lensmodel == "LENSMODEL_OPENCV8") return {8, cv::CALIB_RATIONAL_MODEL};
   if (lensmodel == "LENSMODEL_OPENCV12") return {12, cv::CALIB_RATIONAL_MODEL | cv::CALIB_THIN_PRISM_MODEL};
   Throw("lens model '", lensmodel,
-        "' cannot be calibrated here: use LENSMODEL_PINHOLE, LENSMODEL_OPENCV4, LENSMODEL_OPENCV5, "
+        "' cannot be calibrated here: use auto, LENSMODEL_PINHOLE, LENSMODEL_OPENCV4, LENSMODEL_OPENCV5, "
         "LENSMODEL_OPENCV8 or LENSMODEL_OPENCV12");
 }
-
-// p_cam = R(rc) (R(rb) P' + tb) + tc; residual = weight * (Project(p_cam) - q_obs),
-// with P' = P + (wx a + wy b) e_z when the board warp is solved (a, b: the point's
-// warp shape factors 1 - u^2, 1 - v^2).
-// Parameter blocks: intrinsics (n), rt_rig_board (6), then rt_cam_rig (6) unless the
-// camera is camera 0 (the rig frame), then the warp (2) when solved.
-class ReprojectionCost : public ceres::CostFunction {
- public:
-  ReprojectionCost(const CameraModel& model, const Vec3& P, const Vec2& q, double weight, bool has_extrinsics,
-                   std::optional<Eigen::Vector2d> warp_shape)
-      : model_(model), P_(P), q_(q), w_(weight), has_extrinsics_(has_extrinsics), warp_shape_(warp_shape) {
-    set_num_residuals(2);
-    mutable_parameter_block_sizes()->push_back(model.NumIntrinsics());
-    mutable_parameter_block_sizes()->push_back(6);
-    if (has_extrinsics) mutable_parameter_block_sizes()->push_back(6);
-    if (warp_shape) mutable_parameter_block_sizes()->push_back(2);
-  }
-
-  bool Evaluate(double const* const* params, double* residuals, double** jacobians) const override {
-    const int n = model_.NumIntrinsics();
-    CameraModel model = model_;  // a private copy: Evaluate may run on several threads
-    std::copy(params[0], params[0] + n, model.MutableIntrinsics().begin());
-    const Vec3 rb(params[1][0], params[1][1], params[1][2]), tb(params[1][3], params[1][4], params[1][5]);
-    const Mat3 Rb = ExpSO3(rb);
-    const int warp_block = has_extrinsics_ ? 3 : 2;
-    Vec3 P = P_;
-    if (warp_shape_) P.z() += params[warp_block][0] * warp_shape_->x() + params[warp_block][1] * warp_shape_->y();
-    const Vec3 RbP = Rb * P;
-    const Vec3 p_rig = RbP + tb;
-    Mat3 Rc = Mat3::Identity();
-    Vec3 rc = Vec3::Zero(), tc = Vec3::Zero();
-    if (has_extrinsics_) {
-      rc = Vec3(params[2][0], params[2][1], params[2][2]);
-      tc = Vec3(params[2][3], params[2][4], params[2][5]);
-      Rc = ExpSO3(rc);
-    }
-    const Vec3 Rc_prig = Rc * p_rig;
-    const Vec3 p_cam = Rc_prig + tc;
-    if (!(p_cam.z() > 1e-9) && !model.CanProjectBehindCamera()) return false;
-    Eigen::Matrix<double, 2, 3> dq_dp;
-    std::vector<double> dq_di;
-    const bool want = jacobians != nullptr;
-    const Vec2 q = model.Project(p_cam, want ? &dq_dp : nullptr, want ? &dq_di : nullptr);
-    if (!q.allFinite()) return false;
-    residuals[0] = w_ * (q.x() - q_.x());
-    residuals[1] = w_ * (q.y() - q_.y());
-    if (!want) return true;
-    dq_dp *= w_;
-    if (jacobians[0])
-      for (size_t k = 0; k < dq_di.size(); ++k) jacobians[0][k] = w_ * dq_di[k];
-    if (jacobians[1]) {
-      Eigen::Map<Eigen::Matrix<double, 2, 6, Eigen::RowMajor>> J(jacobians[1]);
-      const Eigen::Matrix<double, 2, 3> dq_dprig = dq_dp * Rc;
-      J.leftCols<3>() = dq_dprig * (-Skew(RbP) * LeftJacobianSO3(rb));
-      J.rightCols<3>() = dq_dprig;
-    }
-    if (has_extrinsics_ && jacobians[2]) {
-      Eigen::Map<Eigen::Matrix<double, 2, 6, Eigen::RowMajor>> J(jacobians[2]);
-      J.leftCols<3>() = dq_dp * (-Skew(Rc_prig) * LeftJacobianSO3(rc));
-      J.rightCols<3>() = dq_dp;
-    }
-    if (warp_shape_ && jacobians[warp_block]) {
-      Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>> J(jacobians[warp_block]);
-      J = (dq_dp * Rc * Rb.col(2)) * warp_shape_->transpose();
-    }
-    return true;
-  }
-
- private:
-  CameraModel model_;
-  Vec3 P_;
-  Vec2 q_;
-  double w_;
-  bool has_extrinsics_;
-  std::optional<Eigen::Vector2d> warp_shape_;
-};
 
 using Rt = std::array<double, 6>;
 Rt ToRt(const Pose& T) {
@@ -219,23 +147,17 @@ Pose MedoidPose(const std::vector<Pose>& poses) {
   return poses[best];
 }
 
-struct State {
-  std::vector<std::vector<double>> intrinsics;
-  std::vector<Rt> rt_cam_rig;                 // [0] stays identity
-  std::vector<std::optional<Rt>> rt_rig_board;
+using LogFn = std::function<void(const std::string&)>;
+
+// --- Step 1: the observations that take part, validated ---------------------------
+
+struct Observations {
+  std::vector<BoardObservation> obs;                     // only points with weight > 0
+  std::vector<std::vector<const BoardObservation*>> per_cam;
+  int nframes = 0;
 };
 
-struct PointRef {
-  size_t obs;
-  size_t index;
-};
-
-}  // namespace
-
-CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, const CameraCalibrationOptions& options) {
-  std::string why;
-  if (!options.IsValid(&why)) Throw("camera calibration options: ", why);
-  const LensSupport lens = SupportOf(options.lensmodel);
+Observations PrepareObservations(const CameraCalibrationInput& input, const CameraCalibrationOptions& options) {
   const int ncam = static_cast<int>(input.camera_names.size());
   if (ncam == 0) Throw("camera calibration: no cameras given");
   if (!options.initial_intrinsics.empty() && static_cast<int>(options.initial_intrinsics.size()) != ncam)
@@ -243,13 +165,7 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
   if (static_cast<int>(input.widths.size()) != ncam || static_cast<int>(input.heights.size()) != ncam)
     Throw("camera calibration: ", ncam, " camera names but ", input.widths.size(), " widths and ",
           input.heights.size(), " heights");
-  auto log = [&](const std::string& s) {
-    if (options.log) options.log(s);
-  };
-
-  // Usable observations per camera.
-  std::vector<BoardObservation> obs;
-  int nframes = 0;
+  Observations out;
   for (const BoardObservation& o : input.observations) {
     if (o.camera < 0 || o.camera >= ncam) Throw("camera calibration: observation of camera ", o.camera, " but only ", ncam, " cameras");
     if (o.frame < 0) Throw("camera calibration: negative frame index ", o.frame);
@@ -270,47 +186,58 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
         if (!o.weights.empty()) kept.weights.push_back(o.weights[k]);
       }
     if (static_cast<int>(kept.pixels.size()) < options.min_points_per_observation) continue;
-    obs.push_back(std::move(kept));
-    nframes = std::max(nframes, o.frame + 1);
+    out.obs.push_back(std::move(kept));
+    out.nframes = std::max(out.nframes, o.frame + 1);
   }
-  std::vector<std::vector<const BoardObservation*>> per_cam(ncam);
-  for (const BoardObservation& o : obs) per_cam[o.camera].push_back(&o);
+  out.per_cam.resize(ncam);
+  for (const BoardObservation& o : out.obs) out.per_cam[o.camera].push_back(&o);
   for (int c = 0; c < ncam; ++c) {
     if (input.widths[c] <= 0 || input.heights[c] <= 0)
       Throw("camera ", input.camera_names[c], ": image size ", input.widths[c], "x", input.heights[c], " is not valid");
-    if (per_cam[c].size() < 3)
+    if (out.per_cam[c].size() < 3)
       Throw("camera ", input.camera_names[c], " saw the calibration board (with at least ",
-            options.min_points_per_observation, " points) in only ", per_cam[c].size(),
+            options.min_points_per_observation, " points) in only ", out.per_cam[c].size(),
             " images; at least 3 views are needed: take more images with the whole board in view, tilted in "
             "different directions, or check the board description");
   }
+  return out;
+}
 
-  // --- Initialisation ---
-  State st;
+// --- Step 2: initial values ---------------------------------------------------------
+
+struct State {
+  std::vector<std::vector<double>> intrinsics;
+  std::vector<Rt> rt_cam_rig;                 // [0] stays identity
+  std::vector<std::optional<Rt>> rt_rig_board;
+  Eigen::Vector2d warp = Eigen::Vector2d::Zero();
+};
+
+// Every camera's intrinsics: given, or from cv::calibrateCamera.
+std::vector<CameraModel> InitialCameras(const CameraCalibrationInput& input, const Observations& ob,
+                                        const CameraCalibrationOptions& options, const LogFn& log) {
+  const LensSupport lens = SupportOf(options.lensmodel);
   std::vector<CameraModel> models;
-  for (int c = 0; c < ncam; ++c) {
+  for (size_t c = 0; c < input.camera_names.size(); ++c) {
+    std::vector<double> intrinsics;
     if (!options.initial_intrinsics.empty() && !options.initial_intrinsics[c].empty()) {
-      st.intrinsics.push_back(options.initial_intrinsics[c]);
-      // Validates the count against the lens model (InputError naming both).
-      models.emplace_back(options.lensmodel, st.intrinsics.back(), input.widths[c], input.heights[c]);
-      continue;
+      intrinsics = options.initial_intrinsics[c];
+    } else {
+      log("initialising intrinsics of " + input.camera_names[c] + " from " +
+          std::to_string(std::min<size_t>(ob.per_cam[c].size(), options.max_init_views)) + " of " +
+          std::to_string(ob.per_cam[c].size()) + " views (cv::calibrateCamera)");
+      intrinsics = InitIntrinsics(ob.per_cam[c], input.widths[c], input.heights[c], lens, options.max_init_views);
     }
-    log("initialising intrinsics of " + input.camera_names[c] + " from " +
-        std::to_string(std::min<size_t>(per_cam[c].size(), options.max_init_views)) + " of " +
-        std::to_string(per_cam[c].size()) + " views (cv::calibrateCamera)");
-    st.intrinsics.push_back(
-        InitIntrinsics(per_cam[c], input.widths[c], input.heights[c], lens, options.max_init_views));
-    models.emplace_back(options.lensmodel, st.intrinsics.back(), input.widths[c], input.heights[c]);
+    // Validates the count against the lens model (InputError naming both).
+    models.emplace_back(options.lensmodel, intrinsics, input.widths[c], input.heights[c]);
   }
-  // Board pose in each observing camera.
-  std::vector<std::optional<Pose>> T_cam_board(obs.size());
-  std::vector<std::map<int, size_t>> obs_of_frame(nframes);  // frame -> camera -> obs index
-  for (size_t i = 0; i < obs.size(); ++i) {
-    T_cam_board[i] = SolveBoardPose(obs[i], models[obs[i].camera]);
-    if (T_cam_board[i]) obs_of_frame[obs[i].frame][obs[i].camera] = i;
-  }
-  // Extrinsics: grow the set of placed cameras from camera 0 through shared frames,
-  // taking the camera with the most shared frames first.
+  return models;
+}
+
+// T_cam_rig of every camera, grown from camera 0 through shared frames, the camera
+// with the most shared frames first; each from the medoid of its candidates.
+std::vector<Pose> PlaceCameras(const CameraCalibrationInput& input, const std::vector<std::optional<Pose>>& T_cam_board,
+                               const std::vector<std::map<int, size_t>>& obs_of_frame, const LogFn& log) {
+  const int ncam = static_cast<int>(input.camera_names.size());
   std::vector<std::optional<Pose>> T_cam_rig(ncam);
   T_cam_rig[0] = Pose::Identity();
   for (int placed = 1; placed < ncam; ++placed) {
@@ -341,73 +268,94 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
     log("placed " + input.camera_names[best_cam] + " from " + std::to_string(best_candidates.size()) +
         " shared board views");
   }
-  for (int c = 0; c < ncam; ++c) st.rt_cam_rig.push_back(ToRt(*T_cam_rig[c]));
-  st.rt_rig_board.resize(nframes);
-  for (int f = 0; f < nframes; ++f) {
+  std::vector<Pose> out;
+  for (const auto& T : T_cam_rig) out.push_back(*T);
+  return out;
+}
+
+// Intrinsics, extrinsics and one board pose per frame (medoid of its cameras' PnP poses).
+State Initialise(const CameraCalibrationInput& input, const Observations& ob, const CameraCalibrationOptions& options,
+                 const LogFn& log) {
+  const std::vector<CameraModel> models = InitialCameras(input, ob, options, log);
+  std::vector<std::optional<Pose>> T_cam_board(ob.obs.size());
+  std::vector<std::map<int, size_t>> obs_of_frame(ob.nframes);  // frame -> camera -> obs index
+  for (size_t i = 0; i < ob.obs.size(); ++i) {
+    T_cam_board[i] = SolveBoardPose(ob.obs[i], models[ob.obs[i].camera]);
+    if (T_cam_board[i]) obs_of_frame[ob.obs[i].frame][ob.obs[i].camera] = i;
+  }
+  const std::vector<Pose> T_cam_rig = PlaceCameras(input, T_cam_board, obs_of_frame, log);
+  State st;
+  for (const CameraModel& m : models) st.intrinsics.push_back(m.Intrinsics());
+  for (const Pose& T : T_cam_rig) st.rt_cam_rig.push_back(ToRt(T));
+  st.rt_rig_board.resize(ob.nframes);
+  for (int f = 0; f < ob.nframes; ++f) {
     std::vector<Pose> candidates;
-    for (const auto& [c, oi] : obs_of_frame[f]) candidates.push_back(T_cam_rig[c]->Inverse() * *T_cam_board[oi]);
+    for (const auto& [c, oi] : obs_of_frame[f]) candidates.push_back(T_cam_rig[c].Inverse() * *T_cam_board[oi]);
     if (!candidates.empty()) st.rt_rig_board[f] = ToRt(MedoidPose(candidates));
   }
+  return st;
+}
 
-  // Points that take part (observation has a board pose).
-  std::vector<PointRef> points;
-  for (size_t i = 0; i < obs.size(); ++i)
-    if (st.rt_rig_board[obs[i].frame])
-      for (size_t k = 0; k < obs[i].pixels.size(); ++k) points.push_back({i, k});
-  std::vector<bool> inlier(points.size(), true);
+// --- Step 3: the least-squares problem ------------------------------------------------
 
-  // Board extent for the warp shape (u, v = -1..1 across it).
-  Eigen::Vector2d warp = Eigen::Vector2d::Zero();
-  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (const BoardObservation& o : obs)
-    for (const Vec3& P : o.points_board) lo = lo.cwiseMin(P.head<2>()), hi = hi.cwiseMax(P.head<2>());
-  auto warp_shape = [&](const Vec3& P) -> std::optional<Eigen::Vector2d> {
-    if (!options.solve_board_warp) return std::nullopt;
-    Eigen::Vector2d s;
-    for (int k = 0; k < 2; ++k) {
-      const double u = hi[k] > lo[k] ? 2.0 * (P[k] - lo[k]) / (hi[k] - lo[k]) - 1.0 : 0.0;
-      s[k] = 1.0 - u * u;
+// The bundle adjustment over the state: one ReprojectionCost per observed point
+// (created once, evaluated by Ceres and by Residual()), and the inlier set.
+class RigProblem {
+ public:
+  RigProblem(const Observations& ob, State st, const CameraCalibrationOptions& options)
+      : ob_(ob), st(std::move(st)), options_(options) {
+    // Board extent for the warp shape (u, v = -1..1 across it).
+    Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const BoardObservation& o : ob_.obs)
+      for (const Vec3& P : o.points_board) lo = lo.cwiseMin(P.head<2>()), hi = hi.cwiseMax(P.head<2>());
+    for (size_t i = 0; i < ob_.obs.size(); ++i) {
+      const BoardObservation& o = ob_.obs[i];
+      if (!this->st.rt_rig_board[o.frame]) continue;
+      for (size_t k = 0; k < o.pixels.size(); ++k) {
+        std::optional<Eigen::Vector2d> shape;
+        if (options_.solve_board_warp) {
+          shape.emplace();
+          for (int d = 0; d < 2; ++d) {
+            const double u = hi[d] > lo[d] ? 2.0 * (o.points_board[k][d] - lo[d]) / (hi[d] - lo[d]) - 1.0 : 0.0;
+            (*shape)[d] = 1.0 - u * u;
+          }
+        }
+        points_.push_back({i, k});
+        costs_.push_back(std::make_unique<ReprojectionCost>(options_.lensmodel, o.points_board[k], o.pixels[k],
+                                                            o.Weight(k), o.camera != 0, shape));
+      }
     }
-    return s;
-  };
-  auto warped = [&](const Vec3& P) {
-    const auto s = warp_shape(P);
-    return s ? Vec3(P.x(), P.y(), P.z() + warp.dot(*s)) : P;
-  };
+    inlier.assign(points_.size(), true);
+  }
 
-  auto residual_of = [&](const PointRef& pr) -> Vec2 {
-    const BoardObservation& o = obs[pr.obs];
-    CameraModel m = models[o.camera];
-    m.MutableIntrinsics() = st.intrinsics[o.camera];
-    const Pose T = FromRt(st.rt_cam_rig[o.camera]) * FromRt(*st.rt_rig_board[o.frame]);
-    const Vec3 p = T * warped(o.points_board[pr.index]);
-    if (!(p.z() > 0.0) && !m.CanProjectBehindCamera()) return Vec2::Constant(std::numeric_limits<double>::infinity());
-    return o.Weight(pr.index) * (m.Project(p) - o.pixels[pr.index]);
-  };
+  size_t NumPoints() const { return points_.size(); }
+  const BoardObservation& Observation(size_t i) const { return ob_.obs[points_[i].obs]; }
+  size_t PointIndex(size_t i) const { return points_[i].index; }
 
-  // Builds the problem over the current inliers. Block order (used by the
-  // covariance below): intrinsics, extrinsics of cameras 1.., board poses.
-  auto build = [&](ceres::Problem& problem) {
-    for (size_t i = 0; i < points.size(); ++i) {
+  // Adds the inliers' residuals. Block order (used by the covariance): intrinsics,
+  // extrinsics of cameras 1.., warp, board poses.
+  void Build(ceres::Problem& problem) {
+    for (size_t i = 0; i < points_.size(); ++i) {
       if (!inlier[i]) continue;
-      const BoardObservation& o = obs[points[i].obs];
-      const bool ext = o.camera != 0;
-      const Vec3& P = o.points_board[points[i].index];
-      auto* cost = new ReprojectionCost(models[o.camera], P, o.pixels[points[i].index], o.Weight(points[i].index), ext,
-                                        warp_shape(P));
-      std::vector<double*> blocks = {st.intrinsics[o.camera].data(), st.rt_rig_board[o.frame]->data()};
-      if (ext) blocks.push_back(st.rt_cam_rig[o.camera].data());
-      if (options.solve_board_warp) blocks.push_back(warp.data());
-      problem.AddResidualBlock(cost, nullptr, blocks);
-      if (options.fix_intrinsics) problem.SetParameterBlockConstant(st.intrinsics[o.camera].data());
+      problem.AddResidualBlock(costs_[i].get(), nullptr, Blocks(i));
+      if (options_.fix_intrinsics) problem.SetParameterBlockConstant(st.intrinsics[Observation(i).camera].data());
     }
-  };
-  auto solve = [&]() {
-    ceres::Problem problem;
-    build(problem);
+  }
+
+  // Weighted residual of point i at the current state (infinite where it does not project).
+  Vec2 Residual(size_t i) {
+    const std::vector<double*> blocks = Blocks(i);
+    Vec2 r;
+    if (!costs_[i]->Evaluate(blocks.data(), r.data(), nullptr)) return Vec2::Constant(std::numeric_limits<double>::infinity());
+    return r;
+  }
+
+  ceres::Solver::Summary Solve(int max_iterations) {
+    ceres::Problem problem(ProblemOptions());
+    Build(problem);
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::SPARSE_SCHUR;
-    so.max_num_iterations = options.max_iterations;
+    so.max_num_iterations = max_iterations;
     so.num_threads = 1;
     so.function_tolerance = 1e-12;
     so.parameter_tolerance = 1e-12;
@@ -416,58 +364,102 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
     ceres::Solve(so, &problem, &summary);
     if (!summary.IsSolutionUsable()) Throw("camera calibration: the bundle adjustment failed: ", summary.message);
     return summary;
-  };
+  }
 
-  CameraCalibrationResult res;
-  int round = 0;
-  for (;; ++round) {
-    const auto summary = solve();
+  static ceres::Problem::Options ProblemOptions() {
+    ceres::Problem::Options po;
+    po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;  // the costs live in costs_
+    return po;
+  }
+
+ private:
+  struct PointRef {
+    size_t obs;
+    size_t index;
+  };
+  std::vector<double*> Blocks(size_t i) {
+    const BoardObservation& o = Observation(i);
+    std::vector<double*> blocks = {st.intrinsics[o.camera].data(), st.rt_rig_board[o.frame]->data()};
+    if (o.camera != 0) blocks.push_back(st.rt_cam_rig[o.camera].data());
+    if (options_.solve_board_warp) blocks.push_back(st.warp.data());
+    return blocks;
+  }
+
+  const Observations& ob_;
+
+ public:
+  State st;
+  std::vector<bool> inlier;
+
+ private:
+  const CameraCalibrationOptions& options_;
+  std::vector<PointRef> points_;
+  std::vector<std::unique_ptr<ReprojectionCost>> costs_;
+};
+
+// --- Step 4: solve, reject outliers, re-solve ---------------------------------------
+
+void SolveWithOutlierRejection(RigProblem& rp, const CameraCalibrationOptions& options, const LogFn& log,
+                               CameraCalibrationResult& res) {
+  for (int round = 0;; ++round) {
+    const ceres::Solver::Summary summary = rp.Solve(options.max_iterations);
     double ss = 0.0;
     int n = 0;
-    std::vector<Vec2> e(points.size());
-    for (size_t i = 0; i < points.size(); ++i) {
-      e[i] = residual_of(points[i]);
-      if (inlier[i]) ss += e[i].squaredNorm(), ++n;
+    std::vector<Vec2> e(rp.NumPoints());
+    for (size_t i = 0; i < e.size(); ++i) {
+      e[i] = rp.Residual(i);
+      if (rp.inlier[i]) ss += e[i].squaredNorm(), ++n;
     }
     const double sigma = std::sqrt(ss / std::max(1, 2 * n));
     int added = 0;
     if (options.outlier_k > 0.0 && round < options.max_outlier_rounds) {
       bool triggered = false;
-      for (size_t i = 0; i < points.size() && !triggered; ++i)
-        triggered = inlier[i] && !(e[i].cwiseAbs().maxCoeff() <= (options.outlier_k + options.outlier_trigger) * sigma);
+      for (size_t i = 0; i < e.size() && !triggered; ++i)
+        triggered = rp.inlier[i] && !(e[i].cwiseAbs().maxCoeff() <= (options.outlier_k + options.outlier_trigger) * sigma);
       if (triggered)
-        for (size_t i = 0; i < points.size(); ++i)
-          if (inlier[i] && !(e[i].cwiseAbs().maxCoeff() <= options.outlier_k * sigma)) inlier[i] = false, ++added;
+        for (size_t i = 0; i < e.size(); ++i)
+          if (rp.inlier[i] && !(e[i].cwiseAbs().maxCoeff() <= options.outlier_k * sigma)) rp.inlier[i] = false, ++added;
     }
+    const bool converged = summary.termination_type == ceres::CONVERGENCE;
+    const int iterations = static_cast<int>(summary.iterations.size()) - 1;  // [0] is the initial state
     std::ostringstream s;
-    s << "solve " << round << ": " << summary.iterations.size() << " iterations, RMS " << sigma
-      << " px per coordinate over " << n << " points; " << added << " new outliers";
+    s << "solve " << round << ": " << iterations << " iterations" << (converged ? "" : " (NOT CONVERGED)") << ", RMS "
+      << sigma << " px per coordinate over " << n << " points; " << added << " new outliers";
     log(s.str());
+    res.outlier_rounds = round;
+    res.converged = converged;
+    res.iterations = iterations;
+    res.solver_message = summary.message;
     if (added == 0) break;
   }
-  res.outlier_rounds = round;
+}
 
-  // --- Results ---
+// --- Step 5: the solution and its residuals -------------------------------------------
+
+void CollectSolution(RigProblem& rp, const CameraCalibrationInput& input, const Observations& ob,
+                     const CameraCalibrationOptions& options, CameraCalibrationResult& res) {
+  const int ncam = static_cast<int>(input.camera_names.size());
+  const State& st = rp.st;
   for (int c = 0; c < ncam; ++c) {
-    CameraModel m(options.lensmodel, st.intrinsics[c], input.widths[c], input.heights[c], FromRt(st.rt_cam_rig[c]));
     res.rig.names.push_back(input.camera_names[c]);
-    res.rig.cameras.push_back(m);
+    res.rig.cameras.emplace_back(options.lensmodel, st.intrinsics[c], input.widths[c], input.heights[c],
+                                 FromRt(st.rt_cam_rig[c]));
   }
-  for (int f = 0; f < nframes; ++f)
+  for (int f = 0; f < ob.nframes; ++f)
     res.T_rig_board.push_back(st.rt_rig_board[f] ? std::optional<Pose>(FromRt(*st.rt_rig_board[f])) : std::nullopt);
-  res.residuals.resize(ncam);
+  res.residuals.assign(ncam, {});
   double ss_all = 0.0;
   std::vector<double> ss(ncam, 0.0);
-  for (size_t i = 0; i < points.size(); ++i) {
-    const int c = obs[points[i].obs].camera;
-    const Vec2 e = residual_of(points[i]);
-    auto& r = res.residuals[c];
-    r.pixels.push_back(obs[points[i].obs].pixels[points[i].index]);
+  for (size_t i = 0; i < rp.NumPoints(); ++i) {
+    const BoardObservation& o = rp.Observation(i);
+    const Vec2 e = rp.Residual(i);
+    auto& r = res.residuals[o.camera];
+    r.pixels.push_back(o.pixels[rp.PointIndex(i)]);
     r.residuals.push_back(e);
-    r.inlier.push_back(inlier[i]);
+    r.inlier.push_back(rp.inlier[i]);
     ++r.num_points;
-    if (inlier[i]) {
-      ss[c] += e.squaredNorm();
+    if (rp.inlier[i]) {
+      ss[o.camera] += e.squaredNorm();
       ss_all += e.squaredNorm();
       r.max_px = std::max(r.max_px, e.norm());
       ++res.num_inliers;
@@ -476,7 +468,18 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
       ++res.num_outliers;
     }
   }
-  for (const BoardObservation& o : obs)
+  // The observations behind the points, in the same order, for writers that need them
+  // (mrcal's optimization_inputs).
+  res.observations.clear();
+  res.observation_inliers.clear();
+  for (size_t i = 0; i < rp.NumPoints(); ++i) {
+    if (rp.PointIndex(i) == 0) {
+      res.observations.push_back(rp.Observation(i));
+      res.observation_inliers.emplace_back();
+    }
+    res.observation_inliers.back().push_back(rp.inlier[i]);
+  }
+  for (const BoardObservation& o : ob.obs)
     if (st.rt_rig_board[o.frame]) ++res.residuals[o.camera].num_observations;
   for (int c = 0; c < ncam; ++c) {
     auto& r = res.residuals[c];
@@ -485,93 +488,233 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
     r.rms_point_px = std::sqrt(ss[c] / std::max(1, n));
   }
   res.rms_px = std::sqrt(ss_all / std::max(1, 2 * res.num_inliers));
+  res.sum_squared_px2 = ss_all;
+  if (options.solve_board_warp) res.board_warp_m = st.warp;
+}
 
-  // --- Covariance: inverse normal matrix, boards marginalised by the Schur complement ---
-  {
-    ceres::Problem problem;
-    build(problem);
-    std::vector<double*> blocks;
-    std::vector<int> cam_offset(ncam), ext_offset(ncam, -1);
-    int na = 0;
-    for (int c = 0; c < ncam && !options.fix_intrinsics; ++c) {
-      blocks.push_back(st.intrinsics[c].data());
-      cam_offset[c] = na;
-      na += static_cast<int>(st.intrinsics[c].size());
-    }
-    for (int c = 1; c < ncam; ++c) {
-      blocks.push_back(st.rt_cam_rig[c].data());
-      ext_offset[c] = na;
-      na += 6;
-    }
-    const int warp_offset = na;
-    if (options.solve_board_warp) {
-      blocks.push_back(warp.data());
-      na += 2;
-    }
-    int nb = 0;
-    std::vector<int> frames_in_solve;  // frame index of each 6-column board block, in order
-    for (int f = 0; f < nframes; ++f)
-      if (st.rt_rig_board[f] && problem.HasParameterBlock(st.rt_rig_board[f]->data())) {
-        blocks.push_back(st.rt_rig_board[f]->data());
-        frames_in_solve.push_back(f);
-        nb += 6;
-      }
-    ceres::Problem::EvaluateOptions eo;
-    eo.parameter_blocks = blocks;
-    ceres::CRSMatrix crs;
-    problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs);
-    Eigen::SparseMatrix<double, Eigen::RowMajor> J(crs.num_rows, crs.num_cols);
-    std::vector<Eigen::Triplet<double>> trip;
-    for (int r = 0; r < crs.num_rows; ++r)
-      for (int k = crs.rows[r]; k < crs.rows[r + 1]; ++k) trip.emplace_back(r, crs.cols[k], crs.values[k]);
-    J.setFromTriplets(trip.begin(), trip.end());
-    const Eigen::SparseMatrix<double> N = Eigen::SparseMatrix<double>(J.transpose()) * J;
-    const Eigen::MatrixXd A = Eigen::MatrixXd(N.topLeftCorner(na, na));
-    const Eigen::MatrixXd B = Eigen::MatrixXd(N.block(0, na, na, nb));
-    Eigen::MatrixXd S = A;
-    std::vector<Mat6> D_inv(frames_in_solve.size());
-    std::vector<Eigen::MatrixXd> gain(frames_in_solve.size());  // K_f = D_f^-1 B_f^T
-    for (int b = 0; b < nb; b += 6) {
-      const Mat6 D = Eigen::MatrixXd(N.block(na + b, na + b, 6, 6));
-      const Eigen::MatrixXd Bb = B.middleCols(b, 6);
-      D_inv[b / 6] = D.ldlt().solve(Mat6::Identity());
-      gain[b / 6] = D_inv[b / 6] * Bb.transpose();
-      S -= Bb * gain[b / 6];
-    }
-    const int dof = 2 * res.num_inliers - na - nb;
-    res.residual_variance_px2 = dof > 0 ? ss_all / dof : std::numeric_limits<double>::quiet_NaN();
-    const Eigen::MatrixXd cov = S.ldlt().solve(Eigen::MatrixXd::Identity(na, na)) * res.residual_variance_px2;
-    CalibrationCovariance& full = res.covariance;
-    full.a_cov = cov;
-    full.intrinsics_offset.assign(ncam, -1);
-    if (!options.fix_intrinsics) full.intrinsics_offset = cam_offset;
-    full.extrinsics_offset = ext_offset;
-    full.warp_offset = options.solve_board_warp ? warp_offset : -1;
-    full.frame_in_solve.assign(nframes, false);
-    full.frame_conditional_cov.assign(nframes, Mat6::Zero());
-    full.frame_gain.assign(nframes, Eigen::MatrixXd());
-    for (size_t k = 0; k < frames_in_solve.size(); ++k) {
-      const int f = frames_in_solve[k];
-      full.frame_in_solve[f] = true;
-      full.frame_conditional_cov[f] = D_inv[k] * res.residual_variance_px2;
-      full.frame_gain[f] = std::move(gain[k]);
-    }
-    for (int c = 0; c < ncam; ++c) {
-      const int n = static_cast<int>(st.intrinsics[c].size());
-      res.intrinsics_covariance.push_back(options.fix_intrinsics ? Eigen::MatrixXd::Zero(n, n)
-                                                                 : Eigen::MatrixXd(cov.block(cam_offset[c], cam_offset[c], n, n)));
-      res.intrinsics_std.push_back(res.intrinsics_covariance.back().diagonal().cwiseMax(0.0).cwiseSqrt());
-      Vec6 s = Vec6::Zero();
-      if (c > 0) s = cov.block<6, 6>(ext_offset[c], ext_offset[c]).diagonal().cwiseMax(0.0).cwiseSqrt();
-      res.extrinsics_std.push_back(s);
-    }
-    if (options.solve_board_warp) {
-      res.board_warp_m = warp;
-      res.board_warp_std_m = cov.block<2, 2>(warp_offset, warp_offset).diagonal().cwiseMax(0.0).cwiseSqrt();
-    }
+// --- Step 6: covariance: inverse normal matrix, boards marginalised (Schur complement)
+
+void ComputeCovariance(RigProblem& rp, const CameraCalibrationOptions& options, CameraCalibrationResult& res) {
+  State& st = rp.st;
+  const int ncam = static_cast<int>(st.intrinsics.size());
+  const int nframes = static_cast<int>(st.rt_rig_board.size());
+  ceres::Problem problem(RigProblem::ProblemOptions());
+  rp.Build(problem);
+  std::vector<double*> blocks;
+  std::vector<int> cam_offset(ncam), ext_offset(ncam, -1);
+  int na = 0;
+  for (int c = 0; c < ncam && !options.fix_intrinsics; ++c) {
+    blocks.push_back(st.intrinsics[c].data());
+    cam_offset[c] = na;
+    na += static_cast<int>(st.intrinsics[c].size());
   }
+  for (int c = 1; c < ncam; ++c) {
+    blocks.push_back(st.rt_cam_rig[c].data());
+    ext_offset[c] = na;
+    na += 6;
+  }
+  const int warp_offset = na;
+  if (options.solve_board_warp) {
+    blocks.push_back(st.warp.data());
+    na += 2;
+  }
+  int nb = 0;
+  std::vector<int> frames_in_solve;  // frame index of each 6-column board block, in order
+  for (int f = 0; f < nframes; ++f)
+    if (st.rt_rig_board[f] && problem.HasParameterBlock(st.rt_rig_board[f]->data())) {
+      blocks.push_back(st.rt_rig_board[f]->data());
+      frames_in_solve.push_back(f);
+      nb += 6;
+    }
+  ceres::Problem::EvaluateOptions eo;
+  eo.parameter_blocks = blocks;
+  ceres::CRSMatrix crs;
+  problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs);
+  Eigen::SparseMatrix<double, Eigen::RowMajor> J(crs.num_rows, crs.num_cols);
+  std::vector<Eigen::Triplet<double>> trip;
+  for (int r = 0; r < crs.num_rows; ++r)
+    for (int k = crs.rows[r]; k < crs.rows[r + 1]; ++k) trip.emplace_back(r, crs.cols[k], crs.values[k]);
+  J.setFromTriplets(trip.begin(), trip.end());
+  const Eigen::SparseMatrix<double> N = Eigen::SparseMatrix<double>(J.transpose()) * J;
+  const Eigen::MatrixXd A = Eigen::MatrixXd(N.topLeftCorner(na, na));
+  const Eigen::MatrixXd B = Eigen::MatrixXd(N.block(0, na, na, nb));
+  Eigen::MatrixXd S = A;
+  std::vector<Mat6> D_inv(frames_in_solve.size());
+  std::vector<Eigen::MatrixXd> gain(frames_in_solve.size());  // K_f = D_f^-1 B_f^T
+  for (int b = 0; b < nb; b += 6) {
+    const Mat6 D = Eigen::MatrixXd(N.block(na + b, na + b, 6, 6));
+    const Eigen::MatrixXd Bb = B.middleCols(b, 6);
+    D_inv[b / 6] = D.ldlt().solve(Mat6::Identity());
+    gain[b / 6] = D_inv[b / 6] * Bb.transpose();
+    S -= Bb * gain[b / 6];
+  }
+  res.num_parameters = na + nb;
+  const int dof = 2 * res.num_inliers - na - nb;
+  res.residual_variance_px2 = dof > 0 ? res.sum_squared_px2 / dof : std::numeric_limits<double>::quiet_NaN();
+  const Eigen::MatrixXd cov = S.ldlt().solve(Eigen::MatrixXd::Identity(na, na)) * res.residual_variance_px2;
+  CalibrationCovariance& full = res.covariance;
+  full.a_cov = cov;
+  full.intrinsics_offset.assign(ncam, -1);
+  if (!options.fix_intrinsics) full.intrinsics_offset = cam_offset;
+  full.extrinsics_offset = ext_offset;
+  full.warp_offset = options.solve_board_warp ? warp_offset : -1;
+  full.frame_in_solve.assign(nframes, false);
+  full.frame_conditional_cov.assign(nframes, Mat6::Zero());
+  full.frame_gain.assign(nframes, Eigen::MatrixXd());
+  for (size_t k = 0; k < frames_in_solve.size(); ++k) {
+    const int f = frames_in_solve[k];
+    full.frame_in_solve[f] = true;
+    full.frame_conditional_cov[f] = D_inv[k] * res.residual_variance_px2;
+    full.frame_gain[f] = std::move(gain[k]);
+  }
+  // A normal matrix that is singular to working precision (parameters the views do
+  // not separate, e.g. the rational model's numerator and denominator on a small
+  // board) gives a "covariance" with zero or negative variances: report those
+  // parameters' std as infinite, not as zero.
+  auto stddev = [](const Eigen::VectorXd& variance) {
+    Eigen::VectorXd s(variance.size());
+    for (int i = 0; i < variance.size(); ++i)
+      s[i] = variance[i] > 0.0 && std::isfinite(variance[i]) ? std::sqrt(variance[i])
+                                                             : std::numeric_limits<double>::infinity();
+    return s;
+  };
+  for (int i = 0; i < na; ++i) res.covariance_singular |= !(cov(i, i) > 0.0 && std::isfinite(cov(i, i)));
+  for (int c = 0; c < ncam; ++c) {
+    const int n = static_cast<int>(st.intrinsics[c].size());
+    res.intrinsics_covariance.push_back(options.fix_intrinsics ? Eigen::MatrixXd::Zero(n, n)
+                                                               : Eigen::MatrixXd(cov.block(cam_offset[c], cam_offset[c], n, n)));
+    res.intrinsics_std.push_back(options.fix_intrinsics ? Eigen::VectorXd::Zero(n)
+                                                        : stddev(res.intrinsics_covariance.back().diagonal()));
+    Vec6 s = Vec6::Zero();
+    if (c > 0) s = stddev(cov.block<6, 6>(ext_offset[c], ext_offset[c]).diagonal());
+    res.extrinsics_std.push_back(s);
+  }
+  if (options.solve_board_warp)
+    res.board_warp_std_m = stddev(cov.block<2, 2>(warp_offset, warp_offset).diagonal());
+}
+
+// One lens model, all steps.
+CameraCalibrationResult CalibrateWithLensModel(const CameraCalibrationInput& input,
+                                               const CameraCalibrationOptions& options) {
+  SupportOf(options.lensmodel);  // InputError for a model that cannot be calibrated here
+  const LogFn log = [&](const std::string& s) {
+    if (options.log) options.log(s);
+  };
+  const Observations ob = PrepareObservations(input, options);
+  RigProblem rp(ob, Initialise(input, ob, options, log), options);
+  CameraCalibrationResult res;
+  SolveWithOutlierRejection(rp, options, log, res);
+  CollectSolution(rp, input, ob, options, res);
+  ComputeCovariance(rp, options, res);
+  res.lensmodel = options.lensmodel;
   return res;
 }
+
+// --- Lens-model selection ("auto") -------------------------------------------------
+
+double LargestDistortionStd(const CameraCalibrationResult& r) {
+  double m = 0.0;
+  for (const Eigen::VectorXd& s : r.intrinsics_std)
+    for (int i = 4; i < s.size(); ++i) m = std::max(m, s[i]);
+  return m;
+}
+
+CameraCalibrationResult SelectLensModel(const CameraCalibrationInput& input, const CameraCalibrationOptions& options) {
+  if (options.auto_lensmodels.empty()) Throw("camera calibration: lensmodel auto needs at least one candidate model");
+  const LogFn log = [&](const std::string& s) {
+    if (options.log) options.log(s);
+  };
+  std::vector<CameraCalibrationResult> results;
+  for (const std::string& model : options.auto_lensmodels) {
+    CameraCalibrationOptions o = options;
+    o.lensmodel = model;
+    log("lens model auto: trying " + model);
+    results.push_back(CalibrateWithLensModel(input, o));
+  }
+  // Compare on the same points: those every candidate kept as inliers (the inlier sets
+  // differ by a few points between models; comparing each on its own set would
+  // favour the model that rejected more).
+  const size_t ncam = results[0].residuals.size();
+  bool same_points = true;
+  for (const auto& r : results)
+    for (size_t c = 0; c < ncam; ++c) same_points &= r.residuals[c].num_points == results[0].residuals[c].num_points;
+  std::vector<LensModelTrial> trials;
+  for (const auto& r : results) {
+    LensModelTrial t;
+    t.lensmodel = r.lensmodel;
+    t.converged = r.converged;
+    t.iterations = r.iterations;
+    t.rms_px = r.rms_px;
+    t.num_parameters = r.num_parameters;
+    t.largest_distortion_std = LargestDistortionStd(r);
+    double ss = 0.0;
+    int n = 0;
+    for (size_t c = 0; c < ncam; ++c)
+      for (size_t i = 0; i < r.residuals[c].residuals.size(); ++i) {
+        bool common = r.residuals[c].inlier[i];
+        if (same_points)
+          for (const auto& other : results) common = common && other.residuals[c].inlier[i];
+        if (common) ss += r.residuals[c].residuals[i].squaredNorm(), ++n;
+      }
+    t.num_residuals = 2 * n;
+    t.bic = t.num_residuals * std::log(ss / std::max(1, t.num_residuals)) + t.num_parameters * std::log(t.num_residuals);
+    trials.push_back(t);
+  }
+  // Eligible: converged, every distortion coefficient determined (1 sigma below
+  // kMaxDistortionStd); the lowest BIC among the eligible wins. Fallbacks: the lowest
+  // BIC among the converged, then among all (the result then says it did not converge).
+  auto pick = [&](auto&& eligible) {
+    int best = -1;
+    for (size_t k = 0; k < trials.size(); ++k)
+      if (eligible(trials[k]) && (best < 0 || trials[k].bic < trials[best].bic)) best = static_cast<int>(k);
+    return best;
+  };
+  int best = pick([&](const LensModelTrial& t) {
+    return t.converged && t.largest_distortion_std < options.auto_max_distortion_std;
+  });
+  std::string why;
+  if (best >= 0) {
+    why = "lowest BIC among the converged candidates with every distortion coefficient determined (1 sigma < " +
+          std::to_string(options.auto_max_distortion_std).substr(0, 4) + ")";
+  } else if ((best = pick([](const LensModelTrial& t) { return t.converged; })) >= 0) {
+    why = "lowest BIC among the converged candidates; WARNING: no candidate determines every distortion "
+          "coefficient (1 sigma < " + std::to_string(options.auto_max_distortion_std).substr(0, 4) +
+          "): the views do not constrain the lens well";
+  } else {
+    best = pick([](const LensModelTrial&) { return true; });
+    why = "lowest BIC; WARNING: no candidate converged";
+  }
+  trials[best].chosen = true;
+  std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(1);
+  s << "lens model auto: chose " << trials[best].lensmodel << " (" << why << ")";
+  for (const LensModelTrial& t : trials) {
+    if (t.chosen) continue;
+    s << "; " << t.lensmodel << ": ";
+    if (!t.converged) s << "did not converge in " << t.iterations << " iterations";
+    else if (t.largest_distortion_std >= options.auto_max_distortion_std)
+      s << "a distortion coefficient is undetermined (1 sigma " << std::setprecision(3) << std::defaultfloat
+        << t.largest_distortion_std << std::fixed << std::setprecision(1) << ")";
+    else
+      s << "BIC " << (t.bic > trials[best].bic ? "higher" : "lower") << " by " << std::abs(t.bic - trials[best].bic);
+  }
+  CameraCalibrationResult res = std::move(results[best]);
+  res.lens_model_trials = trials;
+  res.lens_model_choice = s.str();
+  log(res.lens_model_choice);
+  return res;
+}
+
+}  // namespace
+
+CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, const CameraCalibrationOptions& options) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("camera calibration options: ", why);
+  if (options.lensmodel == "auto") return SelectLensModel(input, options);
+  return CalibrateWithLensModel(input, options);
+}
+
 
 std::optional<Mat2> ProjectionCovariance(const CameraModel& camera, const Eigen::MatrixXd& cov_intrinsics,
                                          const Vec2& q, double range_m) {
@@ -705,6 +848,14 @@ std::string SummarizeCalibration(const CameraCalibrationResult& r) {
   s.precision(4);
   s << "residual RMS " << r.rms_px << " px per coordinate, " << r.num_inliers << " inlier points, " << r.num_outliers
     << " rejected\n";
+  s << "last solve: " << r.iterations << " iterations, "
+    << (r.converged ? "converged" : "NOT CONVERGED (the iteration limit was reached)") << "\n";
+  const double limit = CameraCalibrationOptions{}.auto_max_distortion_std;
+  if (r.covariance_singular || LargestDistortionStd(r) >= limit)
+    s << "WARNING: the views do not determine every parameter of " << r.lensmodel << " (a distortion coefficient's "
+      << "1 sigma is " << LargestDistortionStd(r) << (r.covariance_singular ? "; the normal matrix is singular" : "")
+      << "): its coefficients trade off against each other; use a simpler lens model (lens model auto picks "
+      << "the one the data support) or views that fill the image, corners included\n";
   for (size_t c = 0; c < r.rig.size(); ++c) {
     const auto& st = r.residuals[c];
     const CameraModel& m = r.rig.cameras[c];

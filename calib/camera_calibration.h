@@ -1,8 +1,14 @@
 // Joint calibration of a camera rig from calibration-board observations: every
-// camera's intrinsics (mrcal lens models LENSMODEL_PINHOLE / OPENCV4 / 5 / 8 / 12),
-// the extrinsics T_cam_rig (camera 0 defines the rig frame) and one pose
-// T_rig_board per board placement ("frame"), by bundle adjustment in Ceres with
-// analytic derivatives (CameraModel::Project's dq_dp and dq_dintrinsics).
+// camera's intrinsics (mrcal lens models LENSMODEL_PINHOLE / OPENCV4 / 5 / 8 / 12, or
+// "auto": the model the data support, see LensModelTrial), the extrinsics T_cam_rig
+// (camera 0 defines the rig frame) and one pose T_rig_board per board placement
+// ("frame"), by bundle adjustment in Ceres with analytic derivatives
+// (calib/reprojection_cost.h: libmrcal's projection gradients on the parameter blocks).
+//
+// Steps (camera_calibration.cpp): PrepareObservations (validate, drop unusable
+// views) -> Initialise (intrinsics, board poses by PnP, PlaceCameras, frame poses)
+// -> SolveWithOutlierRejection (RigProblem) -> CollectSolution (residuals) ->
+// ComputeCovariance; "auto" runs these per candidate model and SelectLensModel picks.
 //
 // Initialisation: cv::calibrateCamera per camera, cv::solvePnP per observation,
 // extrinsics from the board poses of frames that two cameras share. Outliers are
@@ -54,11 +60,18 @@ struct CameraCalibrationInput {
 };
 
 struct CameraCalibrationOptions {
-  std::string lensmodel = "LENSMODEL_OPENCV8";
+  // A supported mrcal lens model name, or "auto": every model of auto_lensmodels is
+  // solved and the one the data support is kept (see LensModelTrial).
+  std::string lensmodel = "auto";
+  std::vector<std::string> auto_lensmodels = {"LENSMODEL_OPENCV4", "LENSMODEL_OPENCV5", "LENSMODEL_OPENCV8"};
+  // "auto" passes over a model with a distortion coefficient whose 1-sigma exceeds
+  // this (dimensionless: k_i multiplies r^(2i) of the normalised radius, which is below
+  // about 1 over a normal lens' image): such a coefficient is not determined by the views.
+  double auto_max_distortion_std = 1.0;
   double outlier_k = 4.0;          // drop points with max(|ex|, |ey|) > k sigma (0 = no rejection)
   double outlier_trigger = 1.0;    // ... but only in rounds where an inlier exceeds (k + this) sigma
   int max_outlier_rounds = 10;
-  int max_iterations = 200;        // per Ceres solve
+  int max_iterations = 200;        // per Ceres solve (CameraCalibrationResult::converged says whether it sufficed)
   int min_points_per_observation = 6;
   // Solve mrcal's board-flatness model ("calobject_warp"): the board point (x, y)
   // sits at z = w_x (1 - u^2) + w_y (1 - v^2), u and v running -1..1 across the
@@ -116,7 +129,32 @@ struct CalibrationCovariance {
   std::vector<Eigen::MatrixXd> frame_gain;  // K_f, 6 x na
 };
 
+// One candidate of lens model "auto": its solve and its Bayesian information
+// criterion, BIC = n ln(RSS / n) + k ln(n), n = residuals (2 per point), k = free
+// parameters (intrinsics, extrinsics, board poses, warp), RSS over the points every
+// candidate kept as inliers. Lower is better; a model's extra coefficients must lower
+// n ln(RSS) by ln(n) each (7.2 for 700 points) to be worth having.
+struct LensModelTrial {
+  std::string lensmodel;
+  bool converged = false;
+  int iterations = 0;                  // of the last solve
+  double rms_px = 0.0;                 // per coordinate, over its own inliers
+  int num_residuals = 0, num_parameters = 0;
+  double bic = 0.0;
+  double largest_distortion_std = 0.0;  // largest 1-sigma of a distortion coefficient, any camera
+  bool chosen = false;
+};
+
 struct CameraCalibrationResult {
+  std::string lensmodel;  // the model solved (the chosen one for "auto")
+  // The last Ceres solve (after the last outlier round): did it converge (Ceres'
+  // CONVERGENCE, not the iteration limit), how many iterations, Ceres' message.
+  bool converged = false;
+  int iterations = 0;
+  std::string solver_message;
+  // For lensmodel "auto": every candidate and one line saying which was chosen and why.
+  std::vector<LensModelTrial> lens_model_trials;
+  std::string lens_model_choice;
   CameraRig rig;                                // intrinsics and T_cam_rig per camera
   std::vector<std::optional<Pose>> T_rig_board;  // per frame index; nullopt when unobserved
   std::vector<CameraResidualStats> residuals;   // per camera
@@ -126,9 +164,18 @@ struct CameraCalibrationResult {
   // sigma^2 = sum |e|^2 / (2 N_inliers - number of free parameters): the residual
   // variance that scales the inverse normal matrix into covariances.
   double residual_variance_px2 = 0.0;
+  double sum_squared_px2 = 0.0;  // sum |e|^2 over the inliers
+  int num_parameters = 0;        // free parameters of the solve
+  // The observations that took part (points with weight > 0, frames with a board
+  // pose), and per observation and point whether it stayed an inlier.
+  std::vector<BoardObservation> observations;
+  std::vector<std::vector<bool>> observation_inliers;
   // Covariance of each camera's intrinsics (NumIntrinsics square, in the units of
   // the intrinsics; zero when they were held fixed) and std of rt_cam_rig (rad, m; zero for camera 0, which
   // defines the rig frame). Board poses are marginalised (Schur complement).
+  // Standard deviations are +infinity (and covariance_singular true) where the normal
+  // matrix is singular to working precision: parameters the data do not determine.
+  bool covariance_singular = false;
   std::vector<Eigen::MatrixXd> intrinsics_covariance;
   std::vector<Eigen::VectorXd> intrinsics_std;
   std::vector<Vec6> extrinsics_std;

@@ -10,6 +10,7 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -386,6 +387,14 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
   EXPECT_LT(baseline, kBaselineRangeM[1]);
   EXPECT_LT(RotationAngle(T_right_rig.R, Mat3::Identity()), kMaxRelativeRotationRad);
 
+  // The lens model was chosen by the data ("auto", the default), with the reason printed.
+  const size_t chose = r.out.find("lens model auto: chose ");
+  ASSERT_NE(chose, std::string::npos) << r.out;
+  const std::string chosen = r.out.substr(chose + 23, r.out.find(' ', chose + 23) - chose - 23);
+  EXPECT_EQ(chosen, rig.cameras[0].LensModelName());
+  EXPECT_NE(r.out.find("<- chosen"), std::string::npos);
+  EXPECT_NE(r.out.find("with mrcal's optimization_inputs"), std::string::npos);
+
   // The .cameramodel is mrcal's own format: mrcal itself reads it and finds the lens.
   if (HasPythonMrcal()) {
     const CliRun py = Shell(d, "/usr/bin/python3 -c \"import mrcal; "
@@ -397,10 +406,62 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
     std::string lens;
     double fx = 0, width = 0, tx = 0;
     s >> lens >> fx >> width >> tx;
-    EXPECT_EQ(lens, "LENSMODEL_OPENCV8");
+    EXPECT_EQ(lens, chosen);
     EXPECT_NEAR(fx, rig.cameras[1].Intrinsics()[0], 1e-6);
     EXPECT_EQ(width, 640);
     EXPECT_NEAR(tx, T_right_rig.t.x(), 1e-9);
+
+    // mrcal's optimization_inputs are written: mrcal decodes them and its own
+    // projection_uncertainty runs on them. It must see our problem: per camera, mrcal's
+    // uncertainty (for a pixel noise of 1 px) times our noise estimate is the grid we
+    // printed, cell by cell (same Jacobian, same mean-frames propagation).
+    const double rms_px = Figure(r.out, "residual RMS", "residual RMS ");
+    for (int c = 0; c < 2; ++c) {
+      SCOPED_TRACE(rig.names[c]);
+      const CliRun u = Shell(d, "/usr/bin/python3 -c \"import mrcal, numpy as np\n"
+                                "m = mrcal.cameramodel('out/" + rig.names[c] + ".cameramodel')\n"
+                                "oi = m.optimization_inputs()\n"
+                                "W, H = m.imagersize()\n"
+                                "q = np.array([((i + 0.5) * W / 8 - 0.5, (j + 0.5) * H / 6 - 0.5) for j in range(6) for i in range(8)])\n"
+                                "v = mrcal.unproject(q, *m.intrinsics(), normalize=True)\n"
+                                "s = mrcal.projection_uncertainty(v * 10.0, model=m, what='worstdirection-stdev', observed_pixel_uncertainty=1.0)\n"
+                                "print(oi['observations_board'].shape[0], oi['lensmodel'], m.icam_intrinsics(), ' '.join('%.12g' % x for x in s))\"");
+      ASSERT_EQ(u.code, 0) << u.err;
+      std::istringstream us(u.out);
+      int nobs = 0, icam = -1;
+      std::string oi_lens;
+      us >> nobs >> oi_lens >> icam;
+      EXPECT_EQ(nobs, 26);  // 13 views by each camera
+      EXPECT_EQ(oi_lens, chosen);
+      EXPECT_EQ(icam, c);
+      std::vector<double> mrcal_sigma(48);
+      for (double& v : mrcal_sigma) us >> v;
+      ASSERT_TRUE(us) << u.out;
+      // Our grid: the 6 lines after "<camera>: projection uncertainty".
+      const size_t at = r.out.find(rig.names[c] + ": projection uncertainty");
+      ASSERT_NE(at, std::string::npos);
+      std::istringstream g(r.out.substr(r.out.find('\n', at) + 1));
+      std::vector<double> ours(48);
+      for (double& v : ours) g >> v;
+      ASSERT_TRUE(g);
+      // Least-squares scale k (our noise estimate), then every cell within the printed
+      // rounding (0.0005 px; measured worst 0.00054 px with k fitted) plus 0.1 %.
+      double num = 0.0, den = 0.0;
+      for (int k = 0; k < 48; ++k) num += ours[k] * mrcal_sigma[k], den += mrcal_sigma[k] * mrcal_sigma[k];
+      const double k_sigma = num / den;
+      double worst = 0.0;
+      for (int k = 0; k < 48; ++k) {
+        const double diff = std::abs(ours[k] - k_sigma * mrcal_sigma[k]);
+        worst = std::max(worst, diff);
+        EXPECT_LE(diff, 0.0006 + 1e-3 * ours[k]) << "cell " << k << ": ours " << ours[k] << ", mrcal "
+                                                  << mrcal_sigma[k] << " x " << k_sigma;
+      }
+      std::printf("%s: our projection uncertainty = mrcal's (1 px noise) x %.5f, worst cell off by %.5f px "
+                  "(residual RMS %.4f px)\n", rig.names[c].c_str(), k_sigma, worst, rms_px);
+      // k is our noise estimate sqrt(sum e^2 / dof), slightly above the RMS.
+      EXPECT_GT(k_sigma, rms_px);
+      EXPECT_LT(k_sigma, 1.1 * rms_px);
+    }
   } else {
     std::printf("python3-mrcal not available: the mrcal load check is not run\n");
   }
@@ -441,6 +502,18 @@ TEST(AppCalibRig, BadInputIsRefusedWithoutOutput) {
     ExpectRefused(Mcms(d, "calib-rig -q noboard.yaml left -o out"), d, {"noboard.yaml"},
                   {d / "out" / "left.cameramodel"});
   }
+}
+
+// A solve that stops at the iteration limit has not converged: calib-rig says so, exits
+// non-zero and writes no model.
+TEST(AppCalibRig, UnconvergedSolveIsRefusedWithoutOutput) {
+  MCMS_REQUIRE_DATA(data, "opencv-stereo-chessboard");
+  const fs::path d = test::ScratchDir("app_calib_rig_unconverged");
+  WriteText(d / "board.yaml", kChessboardYaml);
+  LinkLeftViews(data, d / "left");
+  const CliRun r = Mcms(d, "calib-rig -q board.yaml left -m LENSMODEL_OPENCV5 --max-iterations 2 -o out");
+  ExpectRefused(r, d, {"did not converge in 2 iterations", "--max-iterations", "no output written"},
+                {d / "out" / "left.cameramodel", d / "out" / "left.yml", d / "out" / "rig.yaml"});
 }
 
 // -o naming an existing file (not a folder) is bad input: an input error naming it

@@ -10,6 +10,7 @@
 
 #include "calib/calibration_board.h"
 #include "calib/camera_calibration.h"
+#include "calib/mrcal_optimization_inputs.h"
 #include "core/error.h"
 #include "core/random.h"
 
@@ -145,6 +146,7 @@ TEST(CalibCameraSynthetic, OutlierRejectionDropsGrossErrorsAndSettles) {
   size_t total = 0;
   for (const auto& o : in.observations) total += o.pixels.size();
   CameraCalibrationOptions opt;
+  opt.lensmodel = "LENSMODEL_OPENCV8";  // the true model (this test is about the outliers)
   const CameraCalibrationResult r = CalibrateCameras(in, opt);
   // A gross error is found by its (unique, perturbed) pixel among its camera's points.
   int caught = 0;
@@ -162,6 +164,55 @@ TEST(CalibCameraSynthetic, OutlierRejectionDropsGrossErrorsAndSettles) {
   EXPECT_LE(false_rejections, kMaxFalseRejections);
   EXPECT_LT(r.outlier_rounds, opt.max_outlier_rounds);
   EXPECT_NEAR(r.rms_px, kNoisePx, 0.05 * kNoisePx);
+}
+
+// Lens model auto: one camera whose true lens is LENSMODEL_OPENCV4 (the real left
+// camera's k1, k2), the views of 200 board placements that show the whole board. Every candidate fits; the extra coefficients of OPENCV5
+// and OPENCV8 buy less than their BIC penalty (ln n = 8.6 each; a true-zero
+// coefficient lowers n ln RSS by chi-square(1), above 8.6 with probability 0.003),
+// so auto must keep the true model, list all three candidates and say why.
+TEST(CalibCameraSynthetic, LensModelAutoKeepsTheTrueSimpleModel) {
+  Rng rng(kSeed + 2);
+  CameraRig truth;
+  truth.names = {"cam0"};
+  truth.cameras.emplace_back("LENSMODEL_OPENCV4", std::vector<double>{534, 534, 342, 235, -0.28, 0.09, 0.001, -0.0001},
+                             640, 480);
+  // Observe() places the board 0.6-1.2 m away; only the views that show it whole count.
+  const CameraCalibrationInput in = Observe(truth, CalibrationBoard::Chessboard(9, 6, 0.05), 200, rng);
+  ASSERT_GE(in.observations.size(), 20u) << "too few synthetic views see the whole board";
+  CameraCalibrationOptions opt;  // lensmodel "auto" is the default
+  std::vector<std::string> log;
+  opt.log = [&](const std::string& s) { log.push_back(s); };
+  const CameraCalibrationResult r = CalibrateCameras(in, opt);
+  std::printf("%zu views; %s\n", in.observations.size(), r.lens_model_choice.c_str());
+  for (const LensModelTrial& t : r.lens_model_trials)
+    std::printf("  %s: converged %d, RMS %.4f px, BIC %.1f, largest distortion std %.3g%s\n", t.lensmodel.c_str(),
+                t.converged, t.rms_px, t.bic, t.largest_distortion_std, t.chosen ? " (chosen)" : "");
+  ASSERT_EQ(r.lens_model_trials.size(), 3u);
+  EXPECT_EQ(std::count_if(r.lens_model_trials.begin(), r.lens_model_trials.end(),
+                          [](const LensModelTrial& t) { return t.chosen; }),
+            1);
+  EXPECT_EQ(r.lensmodel, "LENSMODEL_OPENCV4");
+  EXPECT_EQ(r.rig.cameras[0].LensModelName(), "LENSMODEL_OPENCV4");
+  EXPECT_TRUE(r.converged);
+  EXPECT_NE(r.lens_model_choice.find("chose LENSMODEL_OPENCV4"), std::string::npos);
+  EXPECT_NE(std::find(log.begin(), log.end(), r.lens_model_choice), log.end());
+  // The noise level is recovered by the chosen model.
+  EXPECT_NEAR(r.rms_px, kNoisePx, 0.1 * kNoisePx);
+
+  // mrcal's optimization_inputs: the board is mrcal's 9x6 grid of 0.05 m; any other
+  // grid puts points off it, which is refused with the point named.
+  const std::string oi = MrcalOptimizationInputs(r, MrcalBoardGrid{9, 6, 0.05});
+  EXPECT_EQ(oi.substr(0, 2), "b'");
+  EXPECT_EQ(oi.back(), '\'');
+  try {
+    MrcalOptimizationInputs(r, MrcalBoardGrid{9, 6, 0.04});
+    ADD_FAILURE() << "a board spacing that does not fit the points was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("is not on mrcal's 9x6 grid of spacing 0.04 m"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(MrcalOptimizationInputs(CameraCalibrationResult{}, MrcalBoardGrid{9, 6, 0.05}), InputError);
 }
 
 TEST(CalibCameraSynthetic, BadInputNamesTheCameraAndTheRemedy) {
