@@ -40,6 +40,11 @@ int RunAudit(const AuditArgs& a) {
   if (audit.worst < 0) {
     std::printf("every camera is consistent with the rest of the rig\n");
   } else if (!a.repaired.empty()) {
+    if (audit.cameras[audit.worst].cause == "noise model")
+      Throw("camera ", audit.cameras[audit.worst].name,
+            "'s residuals are larger than the pixel noise model predicts and neither a camera move nor lens distortion "
+            "explains them: check --gain and --read-noise (or leave them out to measure the noise); no repaired rig "
+            "written");
     if (audit.cameras[audit.worst].cause != "camera moved")
       Throw("camera ", audit.cameras[audit.worst].name, " is inconsistent (", audit.cameras[audit.worst].cause,
             "): re-calibrate its lens (mcms calib-rig); no repaired rig written");
@@ -56,7 +61,8 @@ McmsCommand audit_command([](CLI::App& app) {
       "audit",
       "Track a recording (as `mcms track`) and test every camera against the rest of the rig: leave-one-camera-out "
       "residuals against chi-square. An inconsistent camera is named with the cause that explains its residuals "
-      "(camera moved, or lens distortion), and a moved camera's pose is re-estimated.");
+      "(camera moved, lens distortion, or a pixel noise model that is too optimistic), and a moved camera's pose is "
+      "re-estimated. The pixel noise model is measured from the images unless --gain is given (as in `mcms track`).");
   cmd->add_option("DIR", args->dir, "recording folder (images/, rig.yaml, target.yaml, optional frames.csv)")->required();
   cmd->add_option("--repaired-rig", args->repaired, "write the rig with the re-estimated camera pose here");
   cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames.csv")->check(CLI::PositiveNumber);

@@ -60,15 +60,23 @@ Scenario ThreeCameras(const Noise& n) {
   return sc;
 }
 
-// A rendered recording per noise model, shared by the tests of this process.
+// A rendered recording per noise model, shared by the tests (ctest runs each in its own
+// process, possibly in parallel): rendered into a folder of this process and renamed into
+// place; a process that finds it in place uses it.
 fs::path Recording(const Noise& n) {
-  static std::map<uint64_t, fs::path> done;
-  const uint64_t key = n.seed * 1000003 + static_cast<uint64_t>(100 * n.gain) * 101 + static_cast<uint64_t>(10 * n.read_noise);
-  auto it = done.find(key);
-  if (it != done.end()) return it->second;
-  const fs::path d = test::ScratchDir("noise_rec_" + std::to_string(::getpid()) + "_" + std::to_string(key)) / "rec";
-  RenderSequence(ThreeCameras(n), d, true, 2);
-  return done[key] = d;
+  char key[96];
+  std::snprintf(key, sizeof(key), "noise_rec_g%g_r%g_s%llu", n.gain, n.read_noise, static_cast<unsigned long long>(n.seed));
+  const fs::path shared = fs::path(MCMS_BINARY_DIR) / "test-scratch" / key / "rec";
+  const Scenario sc = ThreeCameras(n);
+  if (fs::exists(shared / "truth" / "poses.csv") && Slurp(shared / "scenario.yaml") == sc.ToYaml()) return shared;
+  std::error_code ec;
+  fs::remove_all(shared, ec);  // absent, incomplete or of another scenario
+  const fs::path mine = test::ScratchDir(std::string(key) + "_" + std::to_string(::getpid())) / "rec";
+  RenderSequence(sc, mine, true, 2);
+  fs::create_directories(shared.parent_path());
+  fs::rename(mine, shared, ec);  // fails when another process was first: use its copy
+  fs::remove_all(mine.parent_path(), ec);
+  return shared;
 }
 
 struct TrackStats {
@@ -117,8 +125,9 @@ TrackStats Evaluate(const fs::path& poses, const fs::path& truth_csv) {
 }
 
 TrackStats Track(const fs::path& rec, const std::string& options, const std::string& tag) {
-  const fs::path out = rec.parent_path() / ("poses_" + tag + ".csv");
-  const CliRun r = Mcms("track --quiet " + options + " -o " + out.string() + " " + rec.string(), rec.parent_path());
+  const fs::path dir = test::ScratchDir("noise_track_" + tag + "_" + std::to_string(::getpid()));
+  const fs::path out = dir / "poses.csv";
+  const CliRun r = Mcms("track --quiet " + options + " -o " + out.string() + " " + rec.string(), dir);
   EXPECT_EQ(r.code, 0) << r.err;
   std::printf("mcms track %s:\n%s", options.c_str(), r.out.c_str());
   return Evaluate(out, rec / "truth" / "poses.csv");
@@ -131,9 +140,10 @@ TEST(HonestDefaults, TrackMeasuresTheNoiseModelAndItsCovarianceIsHonest) {
     const fs::path rec = Recording(n);
     char truth_gain[32];
     std::snprintf(truth_gain, sizeof(truth_gain), "--gain %g", n.gain);
-    const TrackStats est = Track(rec, "", "default");
-    const TrackStats exact = Track(rec, truth_gain, "exact");
-    const TrackStats none = Track(rec, "--gain 0", "gain0");
+    const std::string tag = std::to_string(n.seed);
+    const TrackStats est = Track(rec, "", "default" + tag);
+    const TrackStats exact = Track(rec, truth_gain, "exact" + tag);
+    const TrackStats none = Track(rec, "--gain 0", "gain0" + tag);
     std::printf("gain %g, read noise %g DN, seed %llu: mean NEES default %.2f, --gain %g %.2f, --gain 0 %.2f "
                 "(band %.2f-%.2f, %d frames); position sigma ratio to the true model: default %.3f, gain 0 %.3f\n",
                 n.gain, n.read_noise, static_cast<unsigned long long>(n.seed), est.mean_nees, n.gain, exact.mean_nees,
@@ -160,7 +170,7 @@ TEST(HonestDefaults, TrackMeasuresTheNoiseModelAndItsCovarianceIsHonest) {
 TEST(HonestDefaults, AuditNamesNoCameraOnCleanRecordings) {
   for (const Noise& n : kNoises) {
     const fs::path rec = Recording(n);
-    const CliRun r = Mcms("audit --quiet " + rec.string(), rec.parent_path());
+    const CliRun r = Mcms("audit --quiet " + rec.string(), test::ScratchDir("noise_audit_" + std::to_string(::getpid())));
     std::printf("%s", r.out.c_str());
     EXPECT_EQ(r.code, 0) << r.err;
     EXPECT_NE(r.out.find("every camera is consistent"), std::string::npos) << r.out;
@@ -168,9 +178,9 @@ TEST(HonestDefaults, AuditNamesNoCameraOnCleanRecordings) {
 }
 
 // Cameras with different sensors: cam0's images from a recording at gain 2, the others
-// from the same scene at gain 8.
+// from the same scene (same seed) at gain 8.
 TEST(HonestDefaults, CamerasWithDifferentGainsGetTheirOwn) {
-  const fs::path a = Recording({2.0, 2.0, 9}), b = Recording({8.0, 2.0, 9});
+  const fs::path a = Recording(kNoises[0]), b = Recording({8.0, 3.0, kNoises[0].seed});
   const CameraRig rig = CameraRig::Read(b / "rig.yaml");
   ImageSequence seq = ScanImageSequence({b / "images", b / "frames.csv", 10}, rig);
   const ImageSequence seq_a = ScanImageSequence({a / "images", a / "frames.csv", 10}, rig);
@@ -195,10 +205,11 @@ TEST(HonestDefaults, CamerasWithDifferentGainsGetTheirOwn) {
 // Threads change nothing in the output; progress into a file is one line per update.
 TEST(HonestDefaults, ThreadsDoNotChangeTheOutputAndRedirectedProgressIsLines) {
   const fs::path rec = Recording(kNoises[0]);
-  const fs::path one = rec.parent_path() / "t1.csv", two = rec.parent_path() / "t2.csv";
-  const CliRun r1 = Mcms("track --threads 1 -o " + one.string() + " " + rec.string(), rec.parent_path());
+  const fs::path dir = test::ScratchDir("noise_threads_" + std::to_string(::getpid()));
+  const fs::path one = dir / "t1.csv", two = dir / "t2.csv";
+  const CliRun r1 = Mcms("track --threads 1 -o " + one.string() + " " + rec.string(), dir);
   ASSERT_EQ(r1.code, 0) << r1.err;
-  const CliRun r2 = Mcms("track -q --threads 2 -o " + two.string() + " " + rec.string(), rec.parent_path());
+  const CliRun r2 = Mcms("track -q --threads 2 -o " + two.string() + " " + rec.string(), dir);
   ASSERT_EQ(r2.code, 0) << r2.err;
   EXPECT_EQ(Slurp(one), Slurp(two));
   EXPECT_EQ(r1.err.find('\r'), std::string::npos);

@@ -17,7 +17,7 @@ struct Synth {
   double gain = 2;          // e-/DN
   double read_noise = 3;    // DN
   double background = 12;   // DN
-  double level = 200;       // DN of the discs (bright) or of the dots (dark)
+  double level = 150;       // DN of the discs (bright) or of the dots (dark); unclipped at gain 0.5
   bool dark = false;
   bool sixteen_bit = false;
 };
