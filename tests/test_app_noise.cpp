@@ -164,6 +164,10 @@ TEST(HonestDefaults, TrackMeasuresTheNoiseModelAndItsCovarianceIsHonest) {
     EXPECT_NE(all.find("# noise model: one gain for every camera"), std::string::npos) << all;
     EXPECT_NE(all.find("# pose-fit residuals: chi2/dof"), std::string::npos) << all;
     EXPECT_NE(exact.comments.front().find("(--gain)"), std::string::npos);
+    // The pose fits' residuals confirm the measured model and catch the missing photon noise.
+    EXPECT_NE(est.comments.back().find("the noise model explains them"), std::string::npos) << est.comments.back();
+    EXPECT_NE(none.comments.back().find("LARGER than the noise model predicts"), std::string::npos)
+        << none.comments.back();
   }
 }
 

@@ -121,10 +121,11 @@ std::string PoseResidualCheck::Describe() const {
   char buf[320];
   std::snprintf(buf, sizeof(buf), "pose-fit residuals: chi2/dof %.3f over %d dof in %d frames (95 %% band %.3f-%.3f)%s",
                 Chi2PerDof(), dof, frames, band_lo, band_hi,
-                InBand()                 ? ": the noise model explains them"
-                : Chi2PerDof() > band_hi ? ": LARGER than the noise model predicts, the covariance is optimistic "
-                                           "(noise model or camera model; try mcms audit)"
-                                         : ": smaller than the noise model predicts, the covariance is conservative");
+                InBand()        ? ": the noise model explains them"
+                : Optimistic()  ? ": LARGER than the noise model predicts, the covariance is optimistic "
+                                  "(noise model or camera model; try mcms audit)"
+                : Chi2PerDof() > band_hi ? ": the noise model explains them within the model tolerance"
+                                : ": smaller than the noise model predicts, the covariance is conservative");
   return buf;
 }
 
