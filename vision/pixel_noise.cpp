@@ -273,7 +273,7 @@ PixelNoiseEstimate EstimatePixelNoise(const std::vector<PixelNoiseSample>& sampl
 }
 
 std::string PixelNoiseEstimate::Describe() const {
-  char buf[320];
+  char buf[512];
   if (!valid()) return "no usable blob (none with a plateau of enough pixels, unsaturated, uncrowded)";
   if (gain_e_per_dn > 0) {
     const double g_sigma = inv_gain_sigma / (inv_gain * inv_gain);
@@ -281,6 +281,14 @@ std::string PixelNoiseEstimate::Describe() const {
                   "gain %.3g +- %.2g e-/DN (photon noise 1/gain %.4g +- %.2g DN per DN of signal), background noise "
                   "%.3g DN, from %d blobs (signal %.0f DN)",
                   gain_e_per_dn, g_sigma, inv_gain, inv_gain_sigma, background_noise_dn, blobs, mean_signal_dn);
+  } else if (inv_gain < -3 * inv_gain_sigma) {
+    // Variance falling with the signal is not photon noise: a response that saturates
+    // softly (a knee), compression or denoising in the camera.
+    std::snprintf(buf, sizeof(buf),
+                  "no photon noise measurable: the plateaus are quieter than the background (1/gain %.3g +- %.2g; a "
+                  "saturating, compressed or denoised response), background noise %.3g DN, from %d blobs (signal "
+                  "%.0f DN)",
+                  inv_gain, inv_gain_sigma, background_noise_dn, blobs, mean_signal_dn);
   } else {
     std::snprintf(buf, sizeof(buf),
                   "no photon noise measurable (1/gain %.3g +- %.2g), background noise %.3g DN, from %d blobs "
