@@ -46,6 +46,7 @@ CliRun Mcms(const std::string& args, const fs::path& scratch) {
 struct Noise {
   double gain, read_noise;
   uint64_t seed;
+  double ball_dn = 200;
 };
 
 Scenario ThreeCameras(const Noise& n) {
@@ -56,6 +57,7 @@ Scenario ThreeCameras(const Noise& n) {
   sc.T_rig_target.resize(10);
   sc.render.gain_e_per_dn = n.gain;
   sc.render.read_noise_dn = n.read_noise;
+  sc.render.ball_dn = n.ball_dn;
   sc.seed = n.seed;
   return sc;
 }
@@ -65,7 +67,8 @@ Scenario ThreeCameras(const Noise& n) {
 // place; a process that finds it in place uses it.
 fs::path Recording(const Noise& n) {
   char key[96];
-  std::snprintf(key, sizeof(key), "noise_rec_g%g_r%g_s%llu", n.gain, n.read_noise, static_cast<unsigned long long>(n.seed));
+  std::snprintf(key, sizeof(key), "noise_rec_g%g_r%g_s%llu_b%g", n.gain, n.read_noise,
+                static_cast<unsigned long long>(n.seed), n.ball_dn);
   const fs::path shared = fs::path(MCMS_BINARY_DIR) / "test-scratch" / key / "rec";
   const Scenario sc = ThreeCameras(n);
   if (fs::exists(shared / "truth" / "poses.csv") && Slurp(shared / "scenario.yaml") == sc.ToYaml()) return shared;
@@ -179,6 +182,26 @@ TEST(HonestDefaults, AuditNamesNoCameraOnCleanRecordings) {
     EXPECT_EQ(r.code, 0) << r.err;
     EXPECT_NE(r.out.find("every camera is consistent"), std::string::npos) << r.out;
   }
+}
+
+// Photon noise far above the read noise (gain 0.5, read noise 1 DN): with --gain 0 the
+// audit finds every camera's residuals too large for the noise model and no camera move
+// or lens term to explain them, and refuses to write a "repaired" rig; by default it
+// finds nothing.
+TEST(HonestDefaults, AuditBlamesTheNoiseModelNotTheCameras) {
+  const fs::path rec = Recording({0.5, 1.0, 7, 100});
+  const fs::path dir = test::ScratchDir("noise_audit_blame_" + std::to_string(::getpid()));
+  const CliRun bad = Mcms("audit -q --gain 0 --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
+  std::printf("%s%s", bad.out.c_str(), bad.err.c_str());
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.out.find("INCONSISTENT: noise model"), std::string::npos) << bad.out;
+  EXPECT_EQ(bad.out.find("camera moved"), std::string::npos) << bad.out;
+  EXPECT_NE(bad.err.find("larger than the pixel noise model predicts"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(dir / "rig.yaml"));
+  const CliRun good = Mcms("audit -q --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
+  std::printf("%s", good.out.c_str());
+  EXPECT_EQ(good.code, 0) << good.err;
+  EXPECT_NE(good.out.find("every camera is consistent"), std::string::npos) << good.out;
 }
 
 // Cameras with different sensors: cam0's images from a recording at gain 2, the others

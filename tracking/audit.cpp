@@ -184,10 +184,13 @@ SequenceAudit AuditCameras(const CameraRig& rig, const Target& target, const std
       a.radial_k = FitRadial(cam, target, samples);
       a.after_radial = Chi2(cam, cam.T_cam_rig(), target, samples, a.radial_k) / (dof - 1);
       a.cause = a.after_moved <= a.after_radial ? "camera moved" : "lens distortion";
-      // Neither cause brings the residuals down to what the noise predicts: they are
-      // larger everywhere, so the pixel noise model is what is wrong (photon noise left
-      // out, a gain too high), not this camera.
-      if (std::min(a.after_moved, a.after_radial) > a.chi2_threshold) a.cause = "noise model";
+      // A cause explains the residuals when its fit brings chi-square under the threshold
+      // and removes most of the excess over 1. When neither does, the residuals are too
+      // large everywhere: the pixel noise model is what is wrong (photon noise left out, a
+      // gain too high), not this camera.
+      const double best = std::min(a.after_moved, a.after_radial);
+      const bool explained = best <= a.chi2_threshold && (a.chi2_per_dof - best) >= 0.5 * (a.chi2_per_dof - 1);
+      if (!explained) a.cause = "noise model";
     }
     if (!a.consistent && a.chi2_per_dof > worst) {
       worst = a.chi2_per_dof;

@@ -11,9 +11,10 @@
 // Candidate causes (the simulation's camera model is exact; a real rig is not):
 //   - "camera moved"  : a rigid change of T_cam_rig (bumped camera, drifting mount), 6 dof;
 //   - "lens distortion": a radial term the lens model lacks, dq = k * r^2 * (q - c), 1 dof;
-//   - "noise model"   : neither cause explains the residuals (chi-square after either fit
-//                       is still beyond the threshold): the pixel noise model is too
-//                       optimistic (tracking/noise_estimate.h), not the camera;
+//   - "noise model"   : neither cause explains the residuals (neither fit brings chi-square
+//                       under the threshold while removing at least half of its excess
+//                       over 1): the pixel noise model is too optimistic
+//                       (tracking/noise_estimate.h), not the camera;
 //   - "none"          : noise; the camera is consistent with the rest.
 #pragma once
 
