@@ -3,9 +3,11 @@
 #include <cstdio>
 
 #include "app/commands.h"
+#include "app/tracking_options.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "tracking/audit.h"
+#include "tracking/noise_estimate.h"
 #include "tracking/sequence.h"
 
 namespace mcms::app {
@@ -14,8 +16,8 @@ namespace {
 struct AuditArgs {
   std::string dir, repaired;
   double rate = 10.0;
-  double gain = 0;
   bool quiet = false;
+  TrackerCli tracker;
 };
 
 int RunAudit(const AuditArgs& a) {
@@ -24,17 +26,25 @@ int RunAudit(const AuditArgs& a) {
   const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
   const Target target = Target::Read(dir / "target.yaml");
   const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate}, rig);
-  TrackerOptions o;
-  o.detector.gain_e_per_dn = a.gain;
-  Tracker tracker(rig, target, o);
+  std::vector<std::string> notes;
+  Tracker tracker(rig, target, a.tracker.Options(seq, rig, &notes));
+  for (const auto& line : notes) std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
   Progress progress("track", seq.frames.size(), a.quiet);
-  const auto results = TrackImageSequence(seq, tracker, [&](size_t d, size_t) { progress.Update(d); });
+  const auto results = TrackImageSequence(
+      seq, tracker, [&](size_t d, size_t) { progress.Update(d); }, a.tracker.Threads());
   progress.Finish();
+  std::printf("%s\n", CheckPoseResiduals(results).Describe().c_str());
   const SequenceAudit audit = AuditCameras(rig, target, results);
   std::printf("%s", audit.Report().c_str());
   if (audit.worst < 0) {
     std::printf("every camera is consistent with the rest of the rig\n");
   } else if (!a.repaired.empty()) {
+    if (audit.cameras[audit.worst].cause == "noise model")
+      Throw("camera ", audit.cameras[audit.worst].name,
+            "'s residuals are larger than the pixel noise model predicts and neither a camera move nor lens distortion "
+            "explains them: check --gain and --read-noise (or leave them out to measure the noise); no repaired rig "
+            "written");
     if (audit.cameras[audit.worst].cause != "camera moved")
       Throw("camera ", audit.cameras[audit.worst].name, " is inconsistent (", audit.cameras[audit.worst].cause,
             "): re-calibrate its lens (mcms calib-rig); no repaired rig written");
@@ -51,12 +61,12 @@ McmsCommand audit_command([](CLI::App& app) {
       "audit",
       "Track a recording (as `mcms track`) and test every camera against the rest of the rig: leave-one-camera-out "
       "residuals against chi-square. An inconsistent camera is named with the cause that explains its residuals "
-      "(camera moved, or lens distortion), and a moved camera's pose is re-estimated.");
+      "(camera moved, lens distortion, or a pixel noise model that is too optimistic), and a moved camera's pose is "
+      "re-estimated. The pixel noise model is measured from the images unless --gain is given (as in `mcms track`).");
   cmd->add_option("DIR", args->dir, "recording folder (images/, rig.yaml, target.yaml, optional frames.csv)")->required();
   cmd->add_option("--repaired-rig", args->repaired, "write the rig with the re-estimated camera pose here");
   cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames.csv")->check(CLI::PositiveNumber);
-  cmd->add_option("--gain", args->gain, "camera gain in electrons per DN (0 = no photon-noise term)")
-      ->check(CLI::NonNegativeNumber);
+  args->tracker.Add(cmd);
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args] { return RunAudit(*args); }));
 });

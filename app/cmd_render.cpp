@@ -4,6 +4,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "app/commands.h"
 #include "core/error.h"
@@ -21,6 +22,7 @@ struct RenderArgs {
   std::optional<uint64_t> seed;
   bool quiet = false;
   bool print_default = false;
+  int threads = 0;  // 0 = all cores
 };
 
 int RunRender(const RenderArgs& a) {
@@ -39,7 +41,8 @@ int RunRender(const RenderArgs& a) {
     s.T_rig_target.resize(static_cast<size_t>(a.frames));
   }
   if (a.seed) s.seed = *a.seed;
-  RenderSequence(s, a.out, a.quiet);
+  const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  RenderSequence(s, a.out, a.quiet, threads);
   if (!a.quiet)
     std::fprintf(stderr, "render: %zu frames x %zu cameras written to %s\n", s.NumFrames(), s.rig.size(),
                  a.out.c_str());
@@ -68,7 +71,10 @@ const McmsCommand kRender([](CLI::App& app) {
       ->check(CLI::PositiveNumber)
       ->type_name("N");
   sub->add_option("--seed", args->seed, "Random seed, overriding the scenario's")->type_name("S");
-  sub->add_flag("--quiet", args->quiet, "No progress on stderr");
+  sub->add_option("--threads", args->threads, "Threads rendering frames (0 = all cores); the output does not depend on it")
+      ->check(CLI::NonNegativeNumber)
+      ->type_name("N");
+  sub->add_flag("-q,--quiet", args->quiet, "No progress on stderr");
   sub->add_flag("--print-default", args->print_default, "Print the default scenario file and exit");
   return std::make_pair(sub, Runner([args] { return RunRender(*args); }));
 });

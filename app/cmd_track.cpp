@@ -1,6 +1,7 @@
 // mcms track: image sequence + rig + target -> one CSV row per frame with the pose
 // and its 6x6 covariance.
 #include <cstdio>
+#include <thread>
 
 #include "app/commands.h"
 #include "app/tracking_options.h"
@@ -12,8 +13,8 @@ namespace mcms::app {
 
 void TrackerCli::Add(CLI::App* cmd) {
   cmd->add_option("--gain", gain_e_per_dn,
-                  "camera gain in electrons per DN, for the photon-noise part of the centre covariance "
-                  "(0 = leave it out)")
+                  "camera gain in electrons per DN, for the photon-noise part of the centre covariance (0 = leave "
+                  "it out); default: measured per camera from the balls' images in the recording")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--read-noise", read_noise_dn,
                   "noise std of a background pixel in DN (0 = measure it around each blob)")
@@ -22,14 +23,40 @@ void TrackerCli::Add(CLI::App* cmd) {
       ->check(CLI::IsMember({"bright", "dark"}));
   cmd->add_option("--threshold", threshold_dn, "detection threshold in DN beyond the background (0 = automatic)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--noise-frames", noise_frames,
+                  "frames (spread over the recording) from which the gain is measured when --gain is not given")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--threads", threads, "threads for reading images and detecting blobs (0 = all cores)")
+      ->check(CLI::NonNegativeNumber);
 }
 
-TrackerOptions TrackerCli::Options() const {
+int TrackerCli::Threads() const {
+  return threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+TrackerOptions TrackerCli::Options(const ImageSequence& seq, const CameraRig& rig,
+                                   std::vector<std::string>* notes) const {
   TrackerOptions o;
-  o.detector.gain_e_per_dn = gain_e_per_dn;
   o.detector.read_noise_dn = read_noise_dn;
   o.detector.polarity = polarity == "dark" ? Polarity::kDark : Polarity::kBright;
   o.detector.threshold_dn = threshold_dn;
+  char buf[160];
+  if (gain_e_per_dn) {
+    o.detector.gain_e_per_dn = *gain_e_per_dn;
+    std::snprintf(buf, sizeof(buf), "noise model: gain %.4g e-/DN for every camera (--gain)%s", *gain_e_per_dn,
+                  *gain_e_per_dn > 0 ? "" : ": photon noise left out");
+    notes->push_back(buf);
+  } else {
+    NoiseEstimateOptions no;
+    no.frames = noise_frames;
+    const SequenceNoiseModel m = EstimateSequenceNoise(seq, rig, o.detector, no, Threads());
+    o.camera_gain_e_per_dn = m.gain_e_per_dn;
+    for (const auto& line : m.Describe()) notes->push_back(line);
+  }
+  if (read_noise_dn > 0) {
+    std::snprintf(buf, sizeof(buf), "noise model: background pixel noise %.4g DN (--read-noise)", read_noise_dn);
+    notes->push_back(buf);
+  }
   return o;
 }
 
@@ -61,16 +88,23 @@ int RunTrack(const TrackArgs& a) {
   CameraRig rig = CameraRig::Read(rig_file);
   Target target = Target::Read(target_file);
   const ImageSequence seq = ScanImageSequence({images, frames, a.rate}, rig);
-  Tracker tracker(rig, target, a.tracker.Options());
+  std::vector<std::string> notes;
+  Tracker tracker(rig, target, a.tracker.Options(seq, rig, &notes));
+  for (const auto& line : notes) std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
   Progress progress("track", seq.frames.size(), a.quiet);
-  const auto results = TrackImageSequence(seq, tracker, [&](size_t d, size_t) { progress.Update(d); });
+  const auto results = TrackImageSequence(
+      seq, tracker, [&](size_t d, size_t) { progress.Update(d); }, a.tracker.Threads());
   progress.Finish();
   int ok = 0, degraded = 0, lost = 0;
   for (const auto& r : results) (r.status == FrameStatus::kOk ? ok : r.status == FrameStatus::kDegraded ? degraded : lost)++;
   if (ok + degraded == 0)
     Throw("target never found in any of the ", results.size(), " frames of ", images.string(),
           " (first frame: ", results.front().reason, "); no output written");
-  WritePoseCsv(out, results);
+  const PoseResidualCheck check = CheckPoseResiduals(results);
+  notes.push_back(check.Describe());
+  std::printf("%s\n", check.Describe().c_str());
+  WritePoseCsv(out, results, notes);
   std::printf("tracked %zu frames: %d ok, %d degraded, %d lost -> %s\n", results.size(), ok, degraded, lost,
               out.string().c_str());
   return 0;
@@ -83,7 +117,9 @@ McmsCommand track_command([](CLI::App& app) {
       "Track the five-ball target through a multi-camera image sequence: detect, match, triangulate, identify, "
       "bundle-adjust. Writes one CSV row per frame: frame, time_s, status (ok/degraded/lost) and reason, position "
       "x_m,y_m,z_m and orientation qw,qx,qy,qz of T_rig_target, diagnostics, and the 6x6 pose covariance "
-      "cov_<a>_<b> in the [rotation rx,ry,rz (rad); position px,py,pz (m)] layout of docs/conventions.md.");
+      "cov_<a>_<b> in the [rotation rx,ry,rz (rad); position px,py,pz (m)] layout of docs/conventions.md. The "
+      "pixel-noise model the covariances assume is measured from the images unless --gain is given, printed, and "
+      "written as '#' lines at the top of the CSV with the check of the pose fits' residuals.");
   cmd->add_option("DIR", args->dir,
                   "recording folder holding images/<camera>/<frame>.png, rig.yaml, target.yaml and optionally "
                   "frames.csv (what `mcms render` writes)");

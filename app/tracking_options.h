@@ -1,22 +1,33 @@
-// CLI options shared by the commands that run the tracker.
+// CLI options shared by the commands that run the tracker (track, audit).
 #pragma once
 
 #include <CLI/CLI.hpp>
 
+#include <optional>
 #include <string>
+#include <vector>
 
+#include "tracking/noise_estimate.h"
+#include "tracking/sequence.h"
 #include "tracking/tracker.h"
 
 namespace mcms::app {
 
 struct TrackerCli {
-  double gain_e_per_dn = 0;
+  std::optional<double> gain_e_per_dn;  // absent: measured from the recording's images
   double read_noise_dn = 0;
   std::string polarity = "bright";
   double threshold_dn = 0;
+  size_t noise_frames = 12;
+  int threads = 0;  // 0 = the machine's cores
 
   void Add(CLI::App* cmd);
-  TrackerOptions Options() const;
+  int Threads() const;
+  // The tracker options for this recording: the options given, and, unless --gain was
+  // given, the per-camera gain measured from the images (tracking/noise_estimate.h).
+  // Appends the noise model's description to `notes` (printed, and written as the '#'
+  // header of poses.csv).
+  TrackerOptions Options(const ImageSequence& seq, const CameraRig& rig, std::vector<std::string>* notes) const;
 };
 
 }  // namespace mcms::app

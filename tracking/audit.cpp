@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 #include <set>
+#include <algorithm>
+#include <vector>
 
 #include "tracking/pose_refinement.h"
 #include "vision/sphere_projection.h"
@@ -16,6 +18,11 @@ namespace {
 // Association gate for a camera's blobs around the predicted ball images: wide enough
 // for a camera moved by a few mrad, narrow against the other balls (tens of px apart).
 constexpr double kAuditGatePx = 8.0;
+// A sample beyond the chi-square(2) quantile 1 - kOutlierP, scaled by the camera's robust
+// spread, is a gross outlier.
+constexpr double kOutlierP = 1e-5;
+// Factor on the 99.9 % chi-square quantile before a camera is called inconsistent.
+constexpr double kModelMargin = 1.3;
 
 struct Sample {
   Pose T_rig_target;  // from the other cameras
@@ -120,7 +127,17 @@ SequenceAudit AuditCameras(const CameraRig& rig, const Target& target, const std
           }
         if (best < 0) continue;
         used[best] = true;
-        samples.push_back({r.T_rig_target, b, blobs[best].q, WhiteningOf(blobs[best].cov)});
+        // The prediction carries the leave-one-out pose's error: the residual's covariance
+        // is the blob's plus J C_pose J^T, with J = dq/dp_cam R_cam_rig [-(R p_target)x, I]
+        // for the pose perturbation of docs/conventions.md.
+        Eigen::Matrix<double, 2, 3> dq_dpcam;
+        PredictBall(rig.cameras[c], rig.cameras[c].T_cam_rig(), target, r.T_rig_target, b, &dq_dpcam, nullptr);
+        Eigen::Matrix<double, 3, 6> dprig;
+        dprig.leftCols<3>() = -Skew(r.T_rig_target.R * target.balls_target[b]);
+        dprig.rightCols<3>() = Mat3::Identity();
+        const Eigen::Matrix<double, 2, 6> J = dq_dpcam * rig.cameras[c].T_cam_rig().R * dprig;
+        const Mat2 S = blobs[best].cov + J * r.cov * J.transpose();
+        samples.push_back({r.T_rig_target, b, blobs[best].q, WhiteningOf(S)});
       }
     }
     a.observations = static_cast<int>(samples.size());
@@ -129,12 +146,30 @@ SequenceAudit AuditCameras(const CameraRig& rig, const Target& target, const std
       continue;
     }
     const CameraModel& cam = rig.cameras[c];
+    // Gross outliers (a ball image pulled by another one the detector did not flag) are
+    // left out, judged against the camera's own robust spread: the median whitened residual
+    // square against chi-square(2)'s, 2 ln 2. A moved camera's residuals are all large
+    // together, so its spread grows with them and few are left out.
+    {
+      std::vector<double> r2(samples.size());
+      for (size_t i = 0; i < samples.size(); ++i)
+        r2[i] = Chi2(cam, cam.T_cam_rig(), target, std::vector<Sample>{samples[i]});
+      std::vector<double> sorted = r2;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double spread = std::max(1.0, sorted[sorted.size() / 2] / (2 * std::log(2.0)));
+      const double cut = spread * boost::math::quantile(boost::math::chi_squared(2), 1 - kOutlierP);
+      std::vector<Sample> kept;
+      for (size_t i = 0; i < samples.size(); ++i)
+        if (r2[i] <= cut) kept.push_back(samples[i]);
+      a.outliers = static_cast<int>(samples.size() - kept.size());
+      samples.swap(kept);
+    }
     const double dof = 2.0 * samples.size();
     a.chi2_per_dof = Chi2(cam, cam.T_cam_rig(), target, samples) / dof;
-    // The leave-one-out pose carries its own error into the prediction, so the residuals
-    // are a little larger than the observation noise alone: allow a factor 2 on top of the
-    // 99.9 % quantile before calling a camera inconsistent.
-    a.chi2_threshold = 2.0 * boost::math::quantile(boost::math::chi_squared(dof), 0.999) / dof;
+    // The residuals are whitened with the prediction's covariance as well as the
+    // observation's; kModelMargin on top of the 99.9 % quantile allows for what the
+    // first-order propagation leaves out.
+    a.chi2_threshold = kModelMargin * boost::math::quantile(boost::math::chi_squared(dof), 0.999) / dof;
     a.consistent = a.chi2_per_dof <= a.chi2_threshold;
     Vec2 mean = Vec2::Zero();
     for (const Sample& x : samples)
@@ -149,6 +184,13 @@ SequenceAudit AuditCameras(const CameraRig& rig, const Target& target, const std
       a.radial_k = FitRadial(cam, target, samples);
       a.after_radial = Chi2(cam, cam.T_cam_rig(), target, samples, a.radial_k) / (dof - 1);
       a.cause = a.after_moved <= a.after_radial ? "camera moved" : "lens distortion";
+      // A cause explains the residuals when its fit brings chi-square under the threshold
+      // and removes most of the excess over 1. When neither does, the residuals are too
+      // large everywhere: the pixel noise model is what is wrong (photon noise left out, a
+      // gain too high), not this camera.
+      const double best = std::min(a.after_moved, a.after_radial);
+      const bool explained = best <= a.chi2_threshold && (a.chi2_per_dof - best) >= 0.5 * (a.chi2_per_dof - 1);
+      if (!explained) a.cause = "noise model";
     }
     if (!a.consistent && a.chi2_per_dof > worst) {
       worst = a.chi2_per_dof;
@@ -181,6 +223,7 @@ std::string SequenceAudit::Report() const {
                     1e3 * a.camera_move.tail<3>().norm());
       s += buf;
     }
+    if (a.outliers > 0) s += " (" + std::to_string(a.outliers) + " gross outlier(s) left out)";
     s += "\n";
   }
   return s;

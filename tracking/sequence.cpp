@@ -1,6 +1,10 @@
 #include "tracking/sequence.h"
 
 #include <algorithm>
+#include <atomic>
+#include <exception>
+#include <mutex>
+#include <thread>
 #include <cctype>
 #include <cstdio>
 #include <map>
@@ -107,31 +111,77 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   return seq;
 }
 
-std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
-                                            const std::function<void(size_t, size_t)>& progress) {
-  std::vector<FrameResult> out;
-  const size_t ncam = tracker.rig().size();
-  for (size_t i = 0; i < seq.frames.size(); ++i) {
-    std::vector<cv::Mat> images(ncam);
-    std::vector<std::string> problems(ncam);
-    for (size_t c = 0; c < ncam; ++c) {
-      const fs::path& p = seq.image_paths[i][c];
-      if (p.empty()) {
-        problems[c] = "image missing";
-        continue;
-      }
-      images[c] = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
-      if (images[c].empty()) problems[c] = "cannot decode " + p.string();
+std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems) {
+  const size_t ncam = seq.image_paths.at(i).size();
+  std::vector<cv::Mat> images(ncam);
+  problems->assign(ncam, std::string());
+  for (size_t c = 0; c < ncam; ++c) {
+    const fs::path& p = seq.image_paths[i][c];
+    if (p.empty()) {
+      (*problems)[c] = "image missing";
+      continue;
     }
-    out.push_back(tracker.ProcessFrame(seq.frames[i], seq.times_s[i], images, problems));
-    if (progress) progress(i + 1, seq.frames.size());
+    images[c] = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+    if (images[c].empty()) (*problems)[c] = "cannot decode " + p.string();
+  }
+  return images;
+}
+
+void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn) {
+  threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<size_t>(end - begin, 1))));
+  if (threads == 1) {
+    for (size_t i = begin; i < end; ++i) fn(i);
+    return;
+  }
+  std::atomic<size_t> next{begin};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  auto work = [&] {
+    for (size_t i; (i = next++) < end;) {
+      try {
+        fn(i);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+        next = end;
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (auto& th : pool) th.join();
+  if (error) std::rethrow_exception(error);
+}
+
+std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
+                                            const std::function<void(size_t, size_t)>& progress, int threads) {
+  std::vector<FrameResult> out;
+  const size_t n = seq.frames.size();
+  threads = std::max(threads, 1);
+  const size_t chunk = 4 * static_cast<size_t>(threads);
+  using Points = std::vector<std::optional<std::vector<ImagePoint>>>;
+  for (size_t f0 = 0; f0 < n; f0 += chunk) {
+    const size_t f1 = std::min(n, f0 + chunk);
+    std::vector<Points> points(f1 - f0);
+    std::vector<std::vector<std::string>> problems(f1 - f0);
+    ParallelFor(f0, f1, threads, [&](size_t i) {
+      const std::vector<cv::Mat> images = LoadFrameImages(seq, i, &problems[i - f0]);
+      points[i - f0] = tracker.DetectPoints(images, &problems[i - f0]);
+    });
+    for (size_t i = f0; i < f1; ++i) {
+      out.push_back(tracker.ProcessPoints(seq.frames[i], seq.times_s[i], points[i - f0], problems[i - f0]));
+      if (progress) progress(i + 1, n);
+    }
   }
   return out;
 }
 
-void WritePoseCsv(const fs::path& path, const std::vector<FrameResult>& results) {
+void WritePoseCsv(const fs::path& path, const std::vector<FrameResult>& results,
+                  const std::vector<std::string>& comments) {
   static const char* kAxes[6] = {"rx", "ry", "rz", "px", "py", "pz"};
   WriteFileAtomically(path, [&](std::ostream& o) {
+    for (const std::string& line : comments) o << "# " << line << "\n";
     o << "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,cameras,observations,id_margin_chi2,rms_px,"
          "chi2_per_dof";
     for (int r = 0; r < 6; ++r)

@@ -8,6 +8,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "tracking/tracker.h"
@@ -31,15 +32,29 @@ struct ImageSequence {
 // rig does not have, or the first image of a camera has another size than the rig says.
 ImageSequence ScanImageSequence(const SequenceInput& input, const CameraRig& rig);
 
+// The images of frame index i (seq.frames[i]), one per camera; a missing or undecodable
+// image is an empty Mat with the reason in problems[c].
+std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems);
+
+// Runs fn(i) for i in [begin, end) on `threads` threads (1 = in this thread, in order).
+// The first exception thrown by fn is rethrown after every thread has finished.
+void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn);
+
 // Runs the tracker over every frame (missing or undecodable images become per-frame
-// problems). progress(done, total) is called after each frame.
+// problems). Images are read and their blobs detected on `threads` threads, in chunks;
+// the frames are then processed in order, so the result does not depend on `threads`.
+// progress(done, total) is called after each frame.
 std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
-                                            const std::function<void(size_t, size_t)>& progress = {});
+                                            const std::function<void(size_t, size_t)>& progress = {},
+                                            int threads = 1);
 
 // One row per frame: frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz, diagnostics,
 // then the 36 entries of the 6x6 covariance in the [dtheta; dp] layout, named
 // cov_<row>_<col> with rows/cols rx,ry,rz (rad) and px,py,pz (m): units rad^2, rad*m, m^2.
-// Pose cells are empty for lost frames. Written atomically.
-void WritePoseCsv(const std::filesystem::path& path, const std::vector<FrameResult>& results);
+// Pose cells are empty for lost frames. Written atomically. Each line of `comments` is
+// written first as a line starting with "# " (the noise model the covariances assume);
+// the project's CSV readers skip such lines.
+void WritePoseCsv(const std::filesystem::path& path, const std::vector<FrameResult>& results,
+                  const std::vector<std::string>& comments = {});
 
 }  // namespace mcms

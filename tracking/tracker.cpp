@@ -34,6 +34,13 @@ Tracker::Tracker(CameraRig rig, Target target, TrackerOptions options)
   if (!options_.IsValid(&why)) Throw("tracker options: ", why);
   target_.MinDistanceGap();
   if (rig_.size() < 2) Throw("the rig needs at least 2 cameras to triangulate, it has ", rig_.size());
+  if (!options_.camera_gain_e_per_dn.empty()) {
+    if (options_.camera_gain_e_per_dn.size() != rig_.size())
+      Throw("tracker options: camera_gain_e_per_dn has ", options_.camera_gain_e_per_dn.size(),
+            " entries, the rig has ", rig_.size(), " cameras");
+    for (double g : options_.camera_gain_e_per_dn)
+      if (!(std::isfinite(g) && g >= 0)) Throw("tracker options: camera_gain_e_per_dn must be finite and >= 0, got ", g);
+  }
   options_.matching.triangulation.sphere_radius_m = target_.ball_radius;
 }
 
@@ -48,11 +55,16 @@ std::optional<Pose> Tracker::Predict(double t) const {
   return BoxPlus(T1, v * (t - t1));
 }
 
-FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
-                                  const std::vector<std::string>& problems) {
+BlobDetectorOptions Tracker::DetectorFor(size_t camera) const {
+  BlobDetectorOptions o = options_.detector;
+  if (camera < options_.camera_gain_e_per_dn.size()) o.gain_e_per_dn = options_.camera_gain_e_per_dn[camera];
+  return o;
+}
+
+std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPoints(const std::vector<cv::Mat>& images,
+                                                                          std::vector<std::string>* problems) const {
   std::vector<std::optional<std::vector<ImagePoint>>> pts(rig_.size());
-  std::vector<std::string> why(problems);
-  why.resize(rig_.size());
+  problems->resize(rig_.size());
   for (size_t c = 0; c < rig_.size(); ++c) {
     if (c >= images.size() || images[c].empty()) continue;
     const cv::Mat& im = images[c];
@@ -60,16 +72,23 @@ FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector
       std::ostringstream s;
       s << "image is " << im.cols << "x" << im.rows << ", the rig says " << rig_.cameras[c].Width() << "x"
         << rig_.cameras[c].Height();
-      why[c] = s.str();
+      (*problems)[c] = s.str();
       continue;
     }
     std::vector<ImagePoint> v;
-    for (const Blob& b : DetectBlobs(im, options_.detector)) {
+    for (const Blob& b : DetectBlobs(im, DetectorFor(c))) {
       if (b.touches_border || b.crowded) continue;  // a cut or pulled centre would bias the pose
       v.push_back({b.centre, b.cov});
     }
     pts[c] = std::move(v);
   }
+  return pts;
+}
+
+FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
+                                  const std::vector<std::string>& problems) {
+  std::vector<std::string> why(problems);
+  const auto pts = DetectPoints(images, &why);
   return ProcessPoints(frame, time_s, pts, why);
 }
 
@@ -160,7 +179,8 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
         const CameraModel& cam = rig_.cameras[c];
         const Vec3 p_cam = cam.T_cam_rig() * (T * target_.balls_target[b]);
         if (!cam.Sees(p_cam)) continue;
-        const Vec2 q = SphereImageCentroid(cam, p_cam, target_.ball_radius, 32);
+        const Vec2 q = SphereImageCentroid(cam, p_cam, target_.ball_radius,
+                                                options_.refinement.bias_outline_points);
         int best = -1;
         double best_d = gate;
         for (size_t k = 0; k < pts[c].size(); ++k) {

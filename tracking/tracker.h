@@ -34,6 +34,10 @@ struct TrackerOptions {
   double association_gate_px = 6.0;   // 2-D association of predicted ball images to blobs
   double max_chi2_per_dof = 6.0;      // a refined pose worse than this is rejected
   double max_prediction_age_s = 0.5;  // predictions older than this are not used
+  // Per rig camera: the gain (e-/DN) of its detector's photon-noise term, overriding
+  // detector.gain_e_per_dn (tracking/noise_estimate.h measures it). Empty = the same
+  // detector for every camera; otherwise one entry per camera.
+  std::vector<double> camera_gain_e_per_dn;
   bool IsValid(std::string* why) const;
 };
 
@@ -66,6 +70,14 @@ class Tracker {
   // problems[c] (may be empty) says why it is missing ("file missing", "cannot decode").
   FrameResult ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
                            const std::vector<std::string>& problems = {});
+
+  // The detection step of ProcessFrame alone: the usable blobs of every camera (empty
+  // optional = no usable image, with the reason in problems[c]). Const and thread-safe,
+  // so that frames can be detected in parallel and processed in order.
+  std::vector<std::optional<std::vector<ImagePoint>>> DetectPoints(const std::vector<cv::Mat>& images,
+                                                                   std::vector<std::string>* problems) const;
+  // The detector options used for camera c.
+  BlobDetectorOptions DetectorFor(size_t camera) const;
 
   // Same, from already detected image points per camera (an empty optional = no image).
   FrameResult ProcessPoints(size_t frame, double time_s,

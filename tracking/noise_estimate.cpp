@@ -1,0 +1,132 @@
+#include "tracking/noise_estimate.h"
+
+#include <boost/math/distributions/chi_squared.hpp>
+#include <cmath>
+#include <cstdio>
+#include <mutex>
+
+#include "core/error.h"
+
+namespace mcms {
+
+bool NoiseEstimateOptions::IsValid(std::string* why) const {
+  if (frames < 1) return (*why = "frames must be >= 1", false);
+  if (!(homogeneity_p > 0 && homogeneity_p < 1)) return (*why = "homogeneity_p must be in (0, 1)", false);
+  return pixel.IsValid(why);
+}
+
+SequenceNoiseModel EstimateSequenceNoise(const ImageSequence& seq,
+                                         const CameraRig& rig,
+                                         const BlobDetectorOptions& detector,
+                                         const NoiseEstimateOptions& options,
+                                         int threads) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("noise estimate options: ", why);
+  if (!detector.IsValid(&why)) Throw("noise estimate: invalid detector options: ", why);
+  const size_t ncam = rig.size();
+  const size_t n = seq.frames.size();
+  std::vector<size_t> picks;
+  const size_t k = std::min(options.frames, n);
+  for (size_t i = 0; i < k; ++i) picks.push_back(k > 1 ? i * (n - 1) / (k - 1) : 0);
+
+  std::vector<std::vector<std::vector<PixelNoiseSample>>> found(picks.size(), std::vector<std::vector<PixelNoiseSample>>(ncam));
+  ParallelFor(0, picks.size(), threads, [&](size_t j) {
+    std::vector<std::string> problems;
+    const std::vector<cv::Mat> images = LoadFrameImages(seq, picks[j], &problems);
+    for (size_t c = 0; c < ncam && c < images.size(); ++c) {
+      if (images[c].empty()) continue;
+      found[j][c] = MeasurePixelNoise(images[c], DetectBlobs(images[c], detector), options.pixel);
+    }
+  });
+
+  SequenceNoiseModel m;
+  m.cameras = rig.names;
+  m.frames_used = picks.size();
+  std::vector<PixelNoiseSample> all;
+  for (size_t c = 0; c < ncam; ++c) {
+    std::vector<PixelNoiseSample> mine;
+    for (const auto& f : found) mine.insert(mine.end(), f[c].begin(), f[c].end());
+    all.insert(all.end(), mine.begin(), mine.end());
+    m.per_camera.push_back(EstimatePixelNoise(mine));
+  }
+  m.pooled = EstimatePixelNoise(all);
+  int valid = 0;
+  for (const auto& e : m.per_camera) {
+    if (!e.valid()) continue;
+    m.homogeneity_chi2 += std::pow((e.inv_gain - m.pooled.inv_gain) / e.inv_gain_sigma, 2);
+    ++valid;
+  }
+  m.homogeneity_dof = std::max(valid - 1, 0);
+  m.cameras_differ = m.homogeneity_dof > 0 &&
+                     m.homogeneity_chi2 > boost::math::quantile(boost::math::chi_squared(m.homogeneity_dof),
+                                                                1 - options.homogeneity_p);
+  for (size_t c = 0; c < ncam; ++c) {
+    const PixelNoiseEstimate& e = m.cameras_differ && m.per_camera[c].valid() ? m.per_camera[c] : m.pooled;
+    m.gain_e_per_dn.push_back(e.valid() ? e.gain_e_per_dn : 0.0);
+  }
+  return m;
+}
+
+std::vector<std::string> SequenceNoiseModel::Describe() const {
+  std::vector<std::string> lines;
+  char buf[256];
+  for (size_t c = 0; c < cameras.size(); ++c) lines.push_back("noise " + cameras[c] + ": " + per_camera[c].Describe());
+  if (!pooled.valid()) {
+    lines.push_back("noise model: photon noise LEFT OUT (gain 0): no usable blob in " + std::to_string(frames_used) +
+                    " frames; the covariance is optimistic by the photon noise -- give --gain");
+    return lines;
+  }
+  if (cameras_differ) {
+    std::string g;
+    for (size_t c = 0; c < cameras.size(); ++c) {
+      std::snprintf(buf, sizeof(buf), "%s%s %.3g", g.empty() ? "" : ", ", cameras[c].c_str(), gain_e_per_dn[c]);
+      g += buf;
+    }
+    std::snprintf(buf, sizeof(buf), " (the cameras differ: chi2 %.1f for %d dof)", homogeneity_chi2, homogeneity_dof);
+    lines.push_back("noise model: per-camera gain e-/DN: " + g + buf);
+  } else {
+    std::snprintf(buf, sizeof(buf), "noise model: one gain for every camera, %s", pooled.Describe().c_str());
+    std::string s = buf;
+    if (homogeneity_dof > 0) {
+      std::snprintf(buf, sizeof(buf), " (the cameras agree: chi2 %.1f for %d dof)", homogeneity_chi2, homogeneity_dof);
+      s += buf;
+    }
+    lines.push_back(s);
+  }
+  lines.push_back("noise model: background noise measured around every blob; estimated from " +
+                  std::to_string(frames_used) + " frames");
+  return lines;
+}
+
+PoseResidualCheck CheckPoseResiduals(const std::vector<FrameResult>& results) {
+  PoseResidualCheck r;
+  for (const FrameResult& f : results) {
+    if (!f.T_rig_target) continue;
+    const int dof = 2 * f.observations - 6;
+    if (dof <= 0) continue;
+    ++r.frames;
+    r.dof += dof;
+    r.chi2 += f.chi2_per_dof * dof;
+  }
+  if (r.dof > 0) {
+    const boost::math::chi_squared d(r.dof);
+    r.band_lo = boost::math::quantile(d, 0.025) / r.dof;
+    r.band_hi = boost::math::quantile(d, 0.975) / r.dof;
+  }
+  return r;
+}
+
+std::string PoseResidualCheck::Describe() const {
+  if (dof <= 0) return "pose-fit residuals: no frame with redundant observations";
+  char buf[320];
+  std::snprintf(buf, sizeof(buf), "pose-fit residuals: chi2/dof %.3f over %d dof in %d frames (95 %% band %.3f-%.3f)%s",
+                Chi2PerDof(), dof, frames, band_lo, band_hi,
+                InBand()        ? ": the noise model explains them"
+                : Optimistic()  ? ": LARGER than the noise model predicts, the covariance is optimistic "
+                                  "(noise model or camera model; try mcms audit)"
+                : Chi2PerDof() > band_hi ? ": the noise model explains them within the model tolerance"
+                                : ": smaller than the noise model predicts, the covariance is conservative");
+  return buf;
+}
+
+}  // namespace mcms
