@@ -17,7 +17,7 @@ packages=(
   build-essential cmake pkg-config
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   mrcal python3-mrcal python3-opencv python3-numpy
 )
 missing=()
