@@ -159,6 +159,9 @@ void WriteIso9283AttainedCsv(const std::filesystem::path& path, const Iso9283Exp
 // The commanded path's calculation points and the attained runs of one condition in
 // `mcms iso9283 --path`'s input layout (run,x_m,y_m,z_m; run = commanded or run1..).
 void WriteIso9283PathCsv(const std::filesystem::path& path, const Iso9283Experiment& e, int condition);
+// Both of the above for every condition k = 1..4: dir/<prefix>attained_<k>.csv and
+// dir/<prefix>path_<k>.csv (the folder is created).
+void WriteIso9283Measurements(const std::filesystem::path& dir, const std::string& prefix, const Iso9283Experiment& e);
 // AP (log10 of mm) and RP (mm, with the prediction) per pose for the four conditions.
 void WriteIso9283ExperimentSvg(const std::filesystem::path& ap_path, const std::filesystem::path& rp_path,
                                const Iso9283Experiment& e);
