@@ -362,10 +362,20 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
     size_t e1 = e0;
     int robot_readings = 0;
     for (; e1 < events.size() && events[e1].t < t1; ++e1) robot_readings += events[e1].kind == SensorKind::kRobot;
+    // The filter starts at the window's first camera frame: a single joint reading, whose
+    // covariance carries the window's systematic error inflated, is no prior on its own.
+    // Samples before that frame are dropped; those at its time stamp follow it.
+    size_t first = e0;
+    while (first < e1 && events[first].kind != SensorKind::kCamera) ++first;
+    if (first == e1) {
+      e0 = e1;
+      continue;
+    }
     KalmanRun run(logs, setup, std::max(1, robot_readings));
-    for (size_t k = e0; k < e1; ++k) run.Process(events[k]);
+    run.Process(events[first]);
+    for (size_t k = e0; k < e1; ++k)
+      if (k != first && events[k].t >= events[first].t) run.Process(events[k]);
     e0 = e1;
-    if (!run.Initialized()) continue;
     const auto pred = run.Filter().Predict(std::max(run.Filter().Time(), t1));
     out.push_back(run.Report(static_cast<int>(w), t1, pred.T, pred.covariance));
   }

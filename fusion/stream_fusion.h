@@ -36,10 +36,11 @@
 //     encoder covariance divided by the number of readings; the accuracy covariance is not:
 //     it is one systematic error) and the mean inclinometer reading; the row exists when a
 //     camera frame or a joint reading lies in the window. The KF restarts in every window
-//     and is reported at the window's end; as the robot's kinematic error is the same at
-//     every reading of a window, the accuracy covariance of each joint reading is inflated
-//     by the number of readings in the window so that the window's readings together carry
-//     it once. With PoseKalmanOptions' process noise and velocity prior near zero
+//     at its first camera frame (samples before it are dropped, those at its time stamp
+//     follow it; no row without a camera frame) and is reported at the window's end. As
+//     the robot's kinematic error is the same at every reading of a window, the accuracy
+//     covariance of each joint reading is inflated by the number of readings in the window
+//     so that the window's readings together carry it once. With PoseKalmanOptions' process noise and velocity prior near zero
 //     (setup `kalman`) the KF then is the static filter of a standing robot.
 #pragma once
 

@@ -65,7 +65,8 @@
 //    calibrated model; (3) as (2), then at each visit the pose is measured by the camera
 //    alone and ONE correction move is made, q_c' = q_e + J^+ e with e = BoxMinus(commanded,
 //    measured) (the new move draws new repeatability noise); (4) as (3) with the pose
-//    measured by MOIFA over camera + robot + inclinometer. The attained pose after the
+//    measured by MOIFA over camera + robot + inclinometer (fusion/stream_fusion.h FuseEpoch,
+//    the instant fusion `mcms fuse` runs per frame). The attained pose after the
 //    correction is what ISO 9283 evaluates. The path is run with the model only (no
 //    correction is possible along a moving path in this scheme), so conditions 3 and 4
 //    report condition 2's path.
