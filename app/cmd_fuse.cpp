@@ -33,15 +33,11 @@ int RunFuse(const FuseArgs& a) {
   if (!a.quiet) {
     int flagged = 0;
     for (const auto& row : res.rows) flagged += row.flagged.empty() ? 0 : 1;
-    if (res.windows.empty())
-      std::printf("fused %zu tracked frames (%d lost rows skipped) by %s: %zu rows, %d with a flagged sensor -> %s\n",
-                  res.logs.tracker.samples.size(), res.logs.tracker.lost_rows, a.method.c_str(), res.rows.size(),
-                  flagged, a.output.c_str());
-    else
-      std::printf("fused %zu tracked frames (%d lost rows skipped) over %zu windows by %s: %zu rows, %d with a "
-                  "flagged sensor -> %s\n",
-                  res.logs.tracker.samples.size(), res.logs.tracker.lost_rows, res.windows.size(), a.method.c_str(),
-                  res.rows.size(), flagged, a.output.c_str());
+    const std::string windows =
+        res.windows.empty() ? std::string() : " over " + std::to_string(res.windows.size()) + " windows";
+    std::printf("fused %zu tracked frames (%d lost rows skipped)%s by %s: %zu rows, %d with a flagged sensor -> %s\n",
+                res.logs.tracker.samples.size(), res.logs.tracker.lost_rows, windows.c_str(), a.method.c_str(),
+                res.rows.size(), flagged, a.output.c_str());
   }
   return 0;
 }
@@ -51,7 +47,8 @@ McmsCommand fuse_command([](CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "fuse",
       "Fuse recorded tracker poses, robot joints and inclinometer readings into the flange pose T_base_flange "
-      "at every tracked camera frame, by MOIFA per frame and/or one Kalman filter over all samples.");
+      "at every tracked camera frame, by MOIFA per frame and/or one Kalman filter over all samples; with "
+      "--windows, once per window in which the robot stands still (fusion/stream_fusion.h).");
   cmd->add_option("--tracker", args->tracker,
                   "tracker pose CSV as written by `mcms track`: frame,time_s,status,...,x_m,y_m,z_m,qw,qx,qy,qz,...,"
                   "cov_<a>_<b> (a,b in rx,ry,rz,px,py,pz; T_rig_target, [dtheta; dp] covariance in the rig frame); "
