@@ -193,5 +193,48 @@ TEST(StreamFusion, WrittenLogsReadBackExactly) {
   EXPECT_THROW(WriteFusionSetup(d / "bad.yaml", s.setup), InputError);
 }
 
+TEST(StreamFusion, BadAccuracyCovariancesAndWindowFilesAreRefused) {
+  const std::string frames =
+      "T_base_rig:\n  translation_m: [0, 0, 0]\n  quaternion_wxyz: [1, 0, 0, 0]\n"
+      "T_flange_target:\n  translation_m: [0, 0, 0.1]\n  quaternion_wxyz: [1, 0, 0, 0]\n";
+  const auto setup = [&](const std::string& accuracy) {
+    return ParseFusionSetup(frames + "robot_accuracy:\n" + accuracy, "test.yaml", ".");
+  };
+  std::string diag = "  covariance: [";
+  for (int i = 0; i < 36; ++i) diag += std::string(i ? ", " : "") + (i % 7 == 0 ? "1e-8" : "0");
+  EXPECT_EQ(setup(diag + "]\n").robot_accuracy_covariance, Mat6(1e-8 * Mat6::Identity()));
+  const auto message = [&](const std::string& accuracy) {
+    try {
+      setup(accuracy);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message("  covariance: [1, 2, 3]\n").find("36 numbers"), std::string::npos);
+  std::string asym = diag;
+  asym.replace(asym.find("0,"), 1, "1e-9");  // entry (0, 1) without (1, 0)
+  EXPECT_NE(message(asym + "]\n").find("symmetric"), std::string::npos);
+  std::string negative = diag;
+  negative.replace(negative.find("1e-8"), 4, "-1e-8");
+  EXPECT_NE(message(negative + "]\n").find("positive semi-definite"), std::string::npos);
+  EXPECT_NE(message(diag + "]\n  orientation_sigma_rad: 1e-4\n").find("not both"), std::string::npos);
+
+  const fs::path d = test::ScratchDir("fusion_stream_windows");
+  const auto windows_error = [&](const std::string& text) {
+    WriteFileAtomically(d / "w.csv", [&](std::ostream& o) { o << text; });
+    try {
+      ReadFusionWindows(d / "w.csv");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(windows_error("start_s,end_s\n0,1\n2,2\n").find("line 3"), std::string::npos);
+  EXPECT_NE(windows_error("start_s,end_s\n0,1\n0.5,2\n").find("must not overlap"), std::string::npos);
+  EXPECT_NE(windows_error("start_s,end_s\n").find("no data rows"), std::string::npos);
+  EXPECT_NE(windows_error("start,end_s\n0,1\n").find("start_s"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace mcms
