@@ -1,6 +1,6 @@
 // mcms fuse: the user's tracker poses, robot joint log and inclinometer log fused into
-// T_base_flange per camera frame (fusion/log_fusion.h; formats in fusion/sensor_logs.h).
-#include <algorithm>
+// T_base_flange per camera frame or per window (fusion/log_fusion.h, fusion/stream_fusion.h;
+// formats in fusion/sensor_logs.h).
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -14,37 +14,30 @@ namespace mcms::app {
 namespace {
 
 struct FuseArgs {
-  std::string tracker, robot, inclinometer, setup, output, method = "both";
+  std::string tracker, robot, inclinometer, setup, windows, output, method = "both";
   bool quiet = false;
 };
 
 int RunFuse(const FuseArgs& a) {
-  // Every input is read and checked before anything is written.
-  RequireWritableFile(a.output, "fuse -o");
-  const FusionSetup setup = ReadFusionSetup(a.setup);
-  SensorLogs logs;
-  logs.tracker = ReadTrackerLog(a.tracker);
-  if (!a.robot.empty()) logs.robot = ReadJointLog(a.robot, setup.robot);
-  if (!a.inclinometer.empty()) logs.inclinometer = ReadInclinometerLog(a.inclinometer);
-  CheckTimeOverlap(logs);
-
-  std::vector<FusedSample> rows;
-  if (a.method != "kf") rows = FuseLogsMoifa(logs, setup);
-  if (a.method != "moifa") {
-    const auto kf = FuseLogsKalman(logs, setup);
-    rows.insert(rows.end(), kf.begin(), kf.end());
-  }
-  // Frame order; MOIFA before KF within a frame.
-  std::stable_sort(rows.begin(), rows.end(), [](const FusedSample& x, const FusedSample& y) {
-    return x.time_s < y.time_s || (x.time_s == y.time_s && x.method < y.method);
-  });
-  WriteFusedPoseCsv(a.output, rows);
+  RequireWritableFile(a.output, "fuse -o");  // every input is then read and checked before anything is written
+  FuseFilesRequest r;
+  r.tracker = a.tracker;
+  r.robot = a.robot;
+  r.inclinometer = a.inclinometer;
+  r.setup = a.setup;
+  r.windows = a.windows;
+  r.moifa = a.method != "kf";
+  r.kalman = a.method != "moifa";
+  r.output = a.output;
+  const FuseFilesResult res = FuseLogFiles(r);
   if (!a.quiet) {
     int flagged = 0;
-    for (const auto& r : rows) flagged += r.flagged.empty() ? 0 : 1;
-    std::printf("fused %zu tracked frames (%d lost rows skipped) by %s: %zu rows, %d with a flagged sensor -> %s\n",
-                logs.tracker.samples.size(), logs.tracker.lost_rows, a.method.c_str(), rows.size(), flagged,
-                a.output.c_str());
+    for (const auto& row : res.rows) flagged += row.flagged.empty() ? 0 : 1;
+    const std::string windows =
+        res.windows.empty() ? std::string() : " over " + std::to_string(res.windows.size()) + " windows";
+    std::printf("fused %zu tracked frames (%d lost rows skipped)%s by %s: %zu rows, %d with a flagged sensor -> %s\n",
+                res.logs.tracker.samples.size(), res.logs.tracker.lost_rows, windows.c_str(), a.method.c_str(),
+                res.rows.size(), flagged, a.output.c_str());
   }
   return 0;
 }
@@ -54,7 +47,8 @@ McmsCommand fuse_command([](CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "fuse",
       "Fuse recorded tracker poses, robot joints and inclinometer readings into the flange pose T_base_flange "
-      "at every tracked camera frame, by MOIFA per frame and/or one Kalman filter over all samples.");
+      "at every tracked camera frame, by MOIFA per frame and/or one Kalman filter over all samples; with "
+      "--windows, once per window in which the robot stands still (fusion/stream_fusion.h).");
   cmd->add_option("--tracker", args->tracker,
                   "tracker pose CSV as written by `mcms track`: frame,time_s,status,...,x_m,y_m,z_m,qw,qx,qy,qz,...,"
                   "cov_<a>_<b> (a,b in rx,ry,rz,px,py,pz; T_rig_target, [dtheta; dp] covariance in the rig frame); "
@@ -79,6 +73,10 @@ McmsCommand fuse_command([](CLI::App& app) {
                   "(T_base_flange),sensors,dof,p_value,flagged (';'-separated sensor names),cov_<a>_<b> (36, "
                   "[dtheta; dp] in the base frame)")
       ->required();
+  cmd->add_option("--windows", args->windows,
+                  "windows CSV start_s,end_s (time order, not overlapping) over which the robot stands still: one "
+                  "fused row per window instead of per camera frame (frame = window index, time_s = its end); the "
+                  "KF restarts in each window (fusion/stream_fusion.h). `mcms demo` writes its dwells so.");
   cmd->add_option("--method", args->method, "moifa, kf or both (default both)")
       ->check(CLI::IsMember({"moifa", "kf", "both"}));
   cmd->add_flag("-q,--quiet", args->quiet, "no summary on stdout");

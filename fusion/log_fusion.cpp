@@ -1,41 +1,14 @@
 #include "fusion/log_fusion.h"
 
-#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
-#include <Eigen/Cholesky>
-
 #include "core/error.h"
 #include "core/io.h"
-#include "fusion/chi_square.h"
-#include "fusion/consistency.h"
 
 namespace mcms {
 
 namespace {
-
-std::string Range(const std::filesystem::path& file, double first, double last) {
-  char b[96];
-  std::snprintf(b, sizeof b, " covers [%.6g, %.6g] s", first, last);
-  return file.string() + b;
-}
-
-// The inclinometer readings within +-period/2 of t: their mean, and the model with the
-// noise of that mean (sigma / sqrt(n)). nullopt when there is none.
-std::optional<std::pair<Vec2, Inclinometer>> InclinometerAt(const InclinometerLog& log, double t,
-                                                            const Inclinometer& model) {
-  const double half = 0.5 * model.period;
-  auto it = std::lower_bound(log.samples.begin(), log.samples.end(), t - half,
-                             [](const InclinometerSample& s, double v) { return s.time_s < v; });
-  Vec2 sum = Vec2::Zero();
-  int n = 0;
-  for (; it != log.samples.end() && it->time_s <= t + half; ++it, ++n) sum += it->reading;
-  if (n == 0) return std::nullopt;
-  Inclinometer mean_model = model;
-  mean_model.sigma = model.sigma / std::sqrt(static_cast<double>(n));
-  return std::make_pair(Vec2(sum / n), mean_model);
-}
 
 std::string Joined(const std::vector<std::string>& v) {
   std::string s;
@@ -43,167 +16,121 @@ std::string Joined(const std::vector<std::string>& v) {
   return s;
 }
 
+// %.17g: a double written and read back is the same double.
+std::string Exact(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+void WriteYamlPose(std::ostream& o, const char* name, const Pose& T) {
+  const Eigen::Quaterniond q = T.Quaternion();
+  o << name << ":\n  translation_m: [" << Exact(T.t.x()) << ", " << Exact(T.t.y()) << ", " << Exact(T.t.z())
+    << "]\n  quaternion_wxyz: [" << Exact(q.w()) << ", " << Exact(q.x()) << ", " << Exact(q.y()) << ", "
+    << Exact(q.z()) << "]\n";
+}
+
 }  // namespace
 
-const char* ToString(FusionMethod m) { return m == FusionMethod::kMoifa ? "moifa" : "kf"; }
-
-void CheckTimeOverlap(const SensorLogs& logs) {
-  if (!logs.robot && !logs.inclinometer)
-    Throw("fusion needs the tracker log and at least one other sensor log (robot joints or inclinometer)");
-  const TrackerLog& tr = logs.tracker;
-  const double a0 = tr.samples.front().time_s, a1 = tr.samples.back().time_s;
-  const auto check = [&](const std::filesystem::path& file, double b0, double b1) {
-    if (std::max(a0, b0) > std::min(a1, b1))
-      Throw("no time overlap between the sensors: ", Range(tr.source, a0, a1), " (tracked frames), ",
-            Range(file, b0, b1));
-  };
-  if (logs.robot) check(logs.robot->source, logs.robot->samples.front().time_s, logs.robot->samples.back().time_s);
-  if (logs.inclinometer)
-    check(logs.inclinometer->source, logs.inclinometer->samples.front().time_s,
-          logs.inclinometer->samples.back().time_s);
-}
-
-PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covariance_rig, const FusionSetup& setup) {
-  return CameraFlangePose(CellGeometry{setup.T_base_rig, setup.T_base_rig_covariance, setup.T_flange_target},
-                          T_rig_target, covariance_rig);
-}
-
-PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& setup) {
-  PoseWithCovariance out =
-      RobotFlangePose(setup.robot, q, setup.robot.EncoderCovariance(), setup.robot_accuracy_covariance);
-  if (out.covariance.llt().info() != Eigen::Success || !(out.covariance.diagonal().minCoeff() > 0))
-    Throw("robot '", setup.robot.Name(), "': its pose covariance is singular; give encoder sigmas in the robot file or ",
-          "robot_accuracy in the setup file ", setup.source.string());
-  return out;
-}
-
-std::vector<FusedSample> FuseLogsMoifa(const SensorLogs& logs, const FusionSetup& setup) {
-  CheckTimeOverlap(logs);
-  ConsistencyOptions copt;
-  copt.significance = setup.consistency_significance;
-  std::vector<FusedSample> out;
-  for (const TrackerSample& s : logs.tracker.samples) {
-    std::vector<PoseMeasurement> full;
-    const PoseWithCovariance cam = CameraFlangePose(s.T_rig_target, s.covariance, setup);
-    full.push_back(PoseMeasurement::FromCovariance("camera", cam.T, cam.covariance));
-    Eigen::VectorXd q;
-    if (logs.robot && logs.robot->Interpolate(s.time_s, &q)) {
-      const PoseWithCovariance rob = RobotFlangePose(q, setup);
-      full.push_back(PoseMeasurement::FromCovariance("robot", rob.T, rob.covariance));
-    }
-    FusedPose fused = FusePoses(full);
-    std::vector<PoseMeasurement> all = full;
-    if (logs.inclinometer) {
-      if (const auto incl = InclinometerAt(*logs.inclinometer, s.time_s, setup.inclinometer)) {
-        // Linearize at the other sensors' fused orientation, then once more at the result:
-        // the constraint is first order in the orientation error.
-        for (int pass = 0; pass < 2; ++pass) {
-          if (!incl->second.InRange(fused.T.R)) break;
-          all = full;
-          all.push_back(
-              PoseMeasurement::FromOrientation("inclinometer", incl->second.Constraint(incl->first, fused.T.R)));
-          fused = FusePoses(all);
-        }
-      }
-    }
-    FusedSample r;
-    r.frame = s.frame;
-    r.time_s = s.time_s;
-    r.method = FusionMethod::kMoifa;
-    r.T_base_flange = fused.T;
-    r.covariance = fused.covariance;
-    for (const auto& m : all) r.sensors.push_back(m.name);
-    const ConsistencyReport rep = CheckConsistency(all, copt);
-    r.dof = rep.dof;
-    r.p_value = rep.p_value;
-    for (const auto& sc : rep.sensors)
-      if (sc.flagged) r.flagged.push_back(sc.name);
-    out.push_back(std::move(r));
+std::vector<FusionWindow> ReadFusionWindows(const std::filesystem::path& path) {
+  const CsvTable t = ReadCsv(path);
+  const int a = t.Column("start_s"), b = t.Column("end_s");
+  if (t.rows.empty()) Throw(path.string(), ": header but no data rows, expected at least one window start_s,end_s");
+  std::vector<FusionWindow> w;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    w.push_back({t.Number(i, a), t.Number(i, b)});
+    if (!(w.back().end_s > w.back().start_s))
+      Throw(path.string(), " line ", t.line_of_row[i], ": end_s ", w.back().end_s, " must exceed start_s ",
+            w.back().start_s);
+    if (i > 0 && w[i].start_s < w[i - 1].end_s)
+      Throw(path.string(), " line ", t.line_of_row[i], ": window starts at ", w[i].start_s,
+            " s, before the previous one ends (", w[i - 1].end_s,
+            " s); windows must be in time order and must not overlap");
   }
-  return out;
+  return w;
 }
 
-std::vector<FusedSample> FuseLogsKalman(const SensorLogs& logs, const FusionSetup& setup) {
-  CheckTimeOverlap(logs);
-  enum Kind { kRobot = 0, kIncl = 1, kCamera = 2 };
-  static const char* const kName[3] = {"robot", "inclinometer", "camera"};
-  struct Event {
-    double t;
-    Kind kind;
-    size_t index;
-  };
-  std::vector<Event> events;
-  const double t_end = logs.tracker.samples.back().time_s;
-  for (size_t i = 0; i < logs.tracker.samples.size(); ++i)
-    events.push_back({logs.tracker.samples[i].time_s, kCamera, i});
-  if (logs.robot)
-    for (size_t i = 0; i < logs.robot->samples.size(); ++i)
-      if (logs.robot->samples[i].time_s <= t_end) events.push_back({logs.robot->samples[i].time_s, kRobot, i});
-  if (logs.inclinometer)
-    for (size_t i = 0; i < logs.inclinometer->samples.size(); ++i)
-      if (logs.inclinometer->samples[i].time_s <= t_end)
-        events.push_back({logs.inclinometer->samples[i].time_s, kIncl, i});
-  std::stable_sort(events.begin(), events.end(),
-                   [](const Event& a, const Event& b) { return a.t < b.t || (a.t == b.t && a.kind < b.kind); });
+void WriteFusionWindows(const std::filesystem::path& path, const std::vector<FusionWindow>& windows) {
+  CheckWindows(windows);
+  WriteFileAtomically(path, [&](std::ostream& o) {
+    o << "start_s,end_s\n";
+    for (const auto& w : windows) o << Exact(w.start_s) << "," << Exact(w.end_s) << "\n";
+  });
+}
 
-  PoseKalmanFilter kf(setup.kalman);
-  double nis[3] = {0, 0, 0};
-  int dof[3] = {0, 0, 0};
-  bool used[3] = {false, false, false};
-  const auto note = [&](Kind k, const PoseKalmanFilter::UpdateResult& u) {
-    used[k] = true;
-    if (u.accepted) {
-      nis[k] += u.nis;
-      dof[k] += u.dof;
+void WriteJointLog(const std::filesystem::path& path, const JointLog& log, const RobotModel& robot) {
+  WriteFileAtomically(path, [&](std::ostream& o) {
+    o << "time_s";
+    for (int j = 0; j < robot.NumJoints(); ++j)
+      o << ",q" << j + 1 << (robot.Joints()[j].type == JointType::kPrismatic ? "_m" : "_rad");
+    o << "\n";
+    for (const JointSample& s : log.samples) {
+      if (s.q.size() != robot.NumJoints())
+        Throw("WriteJointLog ", path.string(), ": a sample has ", s.q.size(), " joints, robot '", robot.Name(),
+              "' has ", robot.NumJoints());
+      o << Exact(s.time_s);
+      for (int j = 0; j < s.q.size(); ++j) o << "," << Exact(s.q[j]);
+      o << "\n";
     }
-  };
-  std::vector<FusedSample> out;
-  for (const Event& e : events) {
-    if (e.kind == kIncl) {
-      // Needs an orientation to linearize at, and one the sensor can read.
-      if (!kf.Initialized() || !setup.inclinometer.InRange(kf.Predict(e.t).T.R)) continue;
-      note(kIncl, kf.UpdateInclinometer(e.t, logs.inclinometer->samples[e.index].reading, setup.inclinometer));
-      continue;
-    }
-    PoseWithCovariance m;
-    if (e.kind == kRobot) {
-      m = RobotFlangePose(logs.robot->samples[e.index].q, setup);
-    } else {
-      const TrackerSample& s = logs.tracker.samples[e.index];
-      m = CameraFlangePose(s.T_rig_target, s.covariance, setup);
-    }
-    if (!kf.Initialized()) {
-      kf.Initialize(e.t, m.T, m.covariance);
-      used[e.kind] = true;
-    } else {
-      note(e.kind, kf.UpdatePose(e.t, m.T, m.covariance));
-    }
-    if (e.kind != kCamera) continue;
-    const TrackerSample& s = logs.tracker.samples[e.index];
-    FusedSample r;
-    r.frame = s.frame;
-    r.time_s = s.time_s;
-    r.method = FusionMethod::kKalman;
-    r.T_base_flange = kf.PoseEstimate();
-    r.covariance = kf.PoseCovariance();
-    double total = 0.0;
-    for (int k = 0; k < 3; ++k) {
-      if (used[k]) r.sensors.push_back(kName[k]);
-      total += nis[k];
-      r.dof += dof[k];
-      if (dof[k] > 0 && ChiSquareSurvival(nis[k], dof[k]) < setup.consistency_significance)
-        r.flagged.push_back(kName[k]);
-    }
-    // Camera first, as in the MOIFA rows.
-    std::rotate(r.sensors.rbegin(), r.sensors.rbegin() + 1, r.sensors.rend());
-    r.p_value = r.dof > 0 ? ChiSquareSurvival(total, r.dof) : 1.0;
-    out.push_back(std::move(r));
-    for (int k = 0; k < 3; ++k) {
-      nis[k] = 0;
-      dof[k] = 0;
-      used[k] = false;
-    }
-  }
+  });
+}
+
+void WriteInclinometerLog(const std::filesystem::path& path, const InclinometerLog& log) {
+  WriteFileAtomically(path, [&](std::ostream& o) {
+    o << "time_s,tilt_x_rad,tilt_y_rad\n";
+    for (const InclinometerSample& s : log.samples)
+      o << Exact(s.time_s) << "," << Exact(s.reading.x()) << "," << Exact(s.reading.y()) << "\n";
+  });
+}
+
+void WriteFusionSetup(const std::filesystem::path& path, const FusionSetup& setup, const std::string& robot_file) {
+  const Mat6& Cb = setup.T_base_rig_covariance;
+  Mat6 form = Mat6::Zero();
+  form.diagonal() << Cb(0, 0), Cb(0, 0), Cb(0, 0), Cb(3, 3), Cb(3, 3), Cb(3, 3);
+  if (Cb != form)
+    Throw("WriteFusionSetup ", path.string(),
+          ": the setup format holds one rotation and one translation sigma for T_base_rig; its covariance is not "
+          "of that form");
+  WriteFileAtomically(path, [&](std::ostream& o) {
+    o << "# fusion setup (fusion/sensor_logs.h), written by mcms\n";
+    if (!robot_file.empty()) o << "robot: " << robot_file << "\n";
+    WriteYamlPose(o, "T_base_rig", setup.T_base_rig);
+    if (Cb(0, 0) > 0) o << "  sigma_rotation_rad: " << Exact(std::sqrt(Cb(0, 0))) << "\n";
+    if (Cb(3, 3) > 0) o << "  sigma_translation_m: " << Exact(std::sqrt(Cb(3, 3))) << "\n";
+    WriteYamlPose(o, "T_flange_target", setup.T_flange_target);
+    const Inclinometer& in = setup.inclinometer;
+    const Eigen::Quaterniond qi(in.R_flange_incl);
+    o << "inclinometer:\n  quaternion_wxyz: [" << Exact(qi.w()) << ", " << Exact(qi.x()) << ", " << Exact(qi.y())
+      << ", " << Exact(qi.z()) << "]\n  bias_rad: [" << Exact(in.bias.x()) << ", " << Exact(in.bias.y())
+      << "]\n  sigma_rad: " << Exact(in.sigma) << "\n  period_s: " << Exact(in.period)
+      << "\n  range_rad: " << Exact(in.range) << "\n";
+    o << "robot_accuracy:\n  covariance: [";
+    for (int i = 0; i < 36; ++i) o << (i ? ", " : "") << Exact(setup.robot_accuracy_covariance(i / 6, i % 6));
+    o << "]\n";
+    const PoseKalmanOptions& k = setup.kalman;
+    o << "kalman:\n  angular_acceleration_psd: " << Exact(k.angular_acceleration_psd)
+      << "\n  linear_acceleration_psd: " << Exact(k.linear_acceleration_psd)
+      << "\n  initial_angular_velocity_sigma_rad_s: " << Exact(k.initial_angular_velocity_sigma)
+      << "\n  initial_linear_velocity_sigma_m_s: " << Exact(k.initial_linear_velocity_sigma)
+      << "\n  nis_gate_probability: " << Exact(k.nis_gate_probability) << "\n";
+    o << "consistency_significance: " << Exact(setup.consistency_significance) << "\n";
+  });
+}
+
+FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
+  FuseFilesResult out;
+  out.setup = ReadFusionSetup(r.setup);
+  out.logs.tracker = ReadTrackerLog(r.tracker);
+  if (!r.robot.empty()) out.logs.robot = ReadJointLog(r.robot, out.setup.robot);
+  if (!r.inclinometer.empty()) out.logs.inclinometer = ReadInclinometerLog(r.inclinometer);
+  if (!r.windows.empty()) out.windows = ReadFusionWindows(r.windows);
+  CheckTimeOverlap(out.logs);
+  StreamFusionOptions so;
+  so.moifa = r.moifa;
+  so.kalman = r.kalman;
+  so.windows = out.windows;
+  out.rows = FuseStream(out.logs, out.setup, so);
+  if (!r.output.empty()) WriteFusedPoseCsv(r.output, out.rows);
   return out;
 }
 

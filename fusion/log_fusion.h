@@ -1,86 +1,56 @@
-// Fusion of the user's recorded sensor logs (fusion/sensor_logs.h) into the flange pose
-// T_base_flange in the robot base frame, at every tracked camera frame.
-//
-// Each sensor in the base frame:
-//  camera        T_base_flange = T_base_rig * T_rig_target * T_flange_target^-1. Its
-//                covariance is carried through the fixed transforms in the [dtheta; dp]
-//                layout: with a = R_base_rig R_rig_target p_target_flange (the base-frame
-//                lever from the target origin to the flange origin),
-//                    dtheta_base = R_br dtheta_rig,   dp_base = R_br dp_rig - [a]x R_br dtheta_rig.
-//                The registration's own uncertainty (setup T_base_rig sigmas) adds
-//                J C_base_rig J^T with J = [I 0; -[p_base_flange - p_base_rig]x I]. It is a
-//                fixed error shared by every frame; treating it as independent per frame is
-//                right for one frame's uncertainty but optimistic for averages over frames.
-//  robot         FK of the joint readings linearly interpolated at the frame time (absent
-//                when the time lies outside the joint log), covariance J Q_enc J^T (encoder
-//                noise, model/robot_model.h) plus the setup's absolute-accuracy covariance.
-//  inclinometer  the readings within +-period/2 of the frame time, averaged; n readings
-//                carry n times the information of one (independent noise). A rank-2
-//                orientation constraint (no yaw), linearized at the fused orientation of the
-//                other sensors and relinearized once at the result. Skipped when the
-//                estimated orientation is outside the sensor's range.
-//
-// (1) MOIFA (fusion/moifa.h, FusePoses) of the sensors present at each frame, with the
-//     chi-square consistency check (fusion/consistency.h) and the sensors it flags.
-// (2) KF: one PoseKalmanFilter (fusion/kalman.h) over the time-merged stream of all
-//     sensor samples (robot and inclinometer at their own time stamps, camera last among
-//     equal stamps), started at the first camera or robot sample; its causal estimate is
-//     reported after the update at each camera frame. The row's p-value tests the
-//     innovations of all updates since the previous row (sum of NIS against the sum of
-//     their dof), and a sensor is flagged when its own summed NIS fails at the setup's
-//     significance.
+// `mcms fuse` on files: the user's recorded sensor logs (formats in fusion/sensor_logs.h)
+// read, checked and fused by the one fusion path (fusion/stream_fusion.h), and the fused
+// poses written. Also the writers of the logs the fusion reads (robot joints, inclinometer,
+// setup, windows), so that a simulation (the demo) can write the very files it fuses and
+// `mcms fuse` on them reproduces its numbers.
 #pragma once
 
 #include <filesystem>
-#include <optional>
 #include <string>
 #include <vector>
 
-#include "model/flange_pose.h"
-#include "fusion/sensor_logs.h"
+#include "fusion/stream_fusion.h"
 
 namespace mcms {
 
-struct SensorLogs {
-  TrackerLog tracker;
-  std::optional<JointLog> robot;
-  std::optional<InclinometerLog> inclinometer;
+// Fusion windows (see fusion/stream_fusion.h), CSV: start_s,end_s, one window [start_s,
+// end_s) per row, in time order, not overlapping. InputError naming the file and line.
+std::vector<FusionWindow> ReadFusionWindows(const std::filesystem::path& path);
+void WriteFusionWindows(const std::filesystem::path& path, const std::vector<FusionWindow>& windows);
+
+// Writers of the formats fusion/sensor_logs.h reads, at full precision (%.17g), atomically.
+// Joint log: time_s,q1_rad,...,qN_rad (every joint written in rad or m as `robot` says).
+void WriteJointLog(const std::filesystem::path& path, const JointLog& log, const RobotModel& robot);
+// Inclinometer log: time_s,tilt_x_rad,tilt_y_rad.
+void WriteInclinometerLog(const std::filesystem::path& path, const InclinometerLog& log);
+// The setup YAML. `robot_file` is written as the setup's robot (relative to the setup's
+// folder, or absolute); empty writes none, which the reader takes as RobotModel::Default():
+// the caller's setup.robot must then be that robot. The robot's accuracy is written as its
+// full covariance.
+void WriteFusionSetup(const std::filesystem::path& path, const FusionSetup& setup, const std::string& robot_file = "");
+
+struct FuseFilesRequest {
+  std::filesystem::path tracker, robot, inclinometer, setup;  // robot, inclinometer: empty when absent
+  std::filesystem::path windows;                             // empty: one sample per camera frame
+  bool moifa = true, kalman = true;
+  std::filesystem::path output;                              // fused pose CSV; empty: not written
 };
 
-// InputError when neither robot nor inclinometer log is given, or when a given log's time
-// range does not overlap the tracker's; the message names both files and their ranges.
-void CheckTimeOverlap(const SensorLogs& logs);
-
-// The camera's measurement of T_base_flange with its covariance: model/flange_pose.h with
-// the setup's cell geometry.
-PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covariance_rig, const FusionSetup& setup);
-// FK at q with encoder and absolute-accuracy covariance. InputError when that covariance is
-// singular (a robot file without encoder sigmas and no robot_accuracy in the setup).
-PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& setup);
-
-enum class FusionMethod { kMoifa, kKalman };
-const char* ToString(FusionMethod m);
-
-struct FusedSample {
-  int frame = 0;
-  double time_s = 0.0;
-  FusionMethod method = FusionMethod::kMoifa;
-  Pose T_base_flange;
-  Mat6 covariance = Mat6::Zero();     // [dtheta; dp], base frame
-  std::vector<std::string> sensors;   // camera, robot, inclinometer: those that contributed
-  int dof = 0;                        // of the consistency test
-  double p_value = 1.0;               // 1 when nothing can be compared (dof 0)
-  std::vector<std::string> flagged;   // sensors whose p-value is below the significance
+struct FuseFilesResult {
+  SensorLogs logs;
+  FusionSetup setup;
+  std::vector<FusionWindow> windows;
+  std::vector<FusedSample> rows;  // FuseStream's order
 };
 
-// One row per tracked frame. CheckTimeOverlap first; InputError on inconsistent inputs.
-std::vector<FusedSample> FuseLogsMoifa(const SensorLogs& logs, const FusionSetup& setup);
-std::vector<FusedSample> FuseLogsKalman(const SensorLogs& logs, const FusionSetup& setup);
+// Reads and checks every input before anything is written (InputError naming the file),
+// fuses them (FuseStream) and writes `output` when given.
+FuseFilesResult FuseLogFiles(const FuseFilesRequest& request);
 
 // frame,time_s,method,x_m,y_m,z_m,qw,qx,qy,qz,sensors,dof,p_value,flagged, then the 36
 // covariance entries cov_<a>_<b>, a, b in rx,ry,rz,px,py,pz (as the tracker's CSV). The
 // pose is T_base_flange; sensors and flagged are ';'-separated names (flagged may be
-// empty). Written atomically.
+// empty). With windows, frame is the window's index and time_s its end. Written atomically.
 void WriteFusedPoseCsv(const std::filesystem::path& path, const std::vector<FusedSample>& samples);
 
 }  // namespace mcms

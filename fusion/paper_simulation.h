@@ -27,9 +27,12 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "core/io.h"
 #include "core/pose_math.h"
 
 namespace mcms {
@@ -91,5 +94,16 @@ double AnalyticMoifaRmsReduction(const Vec3& camera_sigma, const Vec3& robot_sig
 // sqrt(H_N / N): RMS over steps 1..N of the error of a running mean, in units of one
 // measurement's sigma (the static KF started from its first measurement).
 double RunningMeanRmsFactor(int n);
+
+// `mcms paper fusion`'s inputs and report. The published figures file: `given` (must exist;
+// InputError otherwise), else $MCMS_DATA_DIR/paper/fusion_results.csv, else
+// ../shared/data/paper/fusion_results.csv from the working directory; nullopt when none
+// exists, with the places looked at in `looked`.
+std::optional<std::filesystem::path> FindPaperResults(const std::string& given, std::string* looked);
+// Table 3 ours (three-sigma rule and RMS), the analytic figures, the paper's figures from
+// `paper_table` (its fusion_results.csv; when null, a line naming `looked`), and the notes
+// with the weights of the printed and of the correct eq. 13 for these options.
+std::string FormatPaperFusionReport(const PaperFusionOptions& o, const PaperFusionResult& r,
+                                    const CsvTable* paper_table, const std::string& looked);
 
 }  // namespace mcms

@@ -212,7 +212,20 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
   }
 
   if (const YAML::Node ra = root["robot_accuracy"]) {
-    y.Keys(ra, {"position_sigma_m", "orientation_sigma_rad", "orientation_sigma_deg"}, "robot_accuracy");
+    y.Keys(ra, {"position_sigma_m", "orientation_sigma_rad", "orientation_sigma_deg", "covariance"},
+           "robot_accuracy");
+    if (const YAML::Node n = ra["covariance"]) {
+      if (ra["position_sigma_m"] || ra["orientation_sigma_rad"] || ra["orientation_sigma_deg"])
+        y.Fail(n, "robot_accuracy: give either 'covariance' or the sigmas, not both");
+      const auto v = y.Numbers(n, 36, "robot_accuracy.covariance");
+      Mat6 C;
+      for (int i = 0; i < 36; ++i) C(i / 6, i % 6) = v[i];
+      if ((C - C.transpose()).cwiseAbs().maxCoeff() > 1e-9 * C.cwiseAbs().maxCoeff())
+        y.Fail(n, "robot_accuracy.covariance must be symmetric");
+      if (Eigen::SelfAdjointEigenSolver<Mat6>(C).eigenvalues().minCoeff() < -1e-12 * C.diagonal().cwiseAbs().maxCoeff())
+        y.Fail(n, "robot_accuracy.covariance must be positive semi-definite");
+      s.robot_accuracy_covariance = C;
+    }
     if (const YAML::Node n = ra["position_sigma_m"]) {
       const auto v = y.Numbers(n, 3, "robot_accuracy.position_sigma_m");
       for (int i = 0; i < 3; ++i) {
@@ -227,7 +240,16 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
   }
 
   if (const YAML::Node k = root["kalman"]) {
-    y.Keys(k, {"angular_acceleration_psd", "linear_acceleration_psd", "nis_gate_probability"}, "kalman");
+    y.Keys(k,
+           {"angular_acceleration_psd", "linear_acceleration_psd", "nis_gate_probability",
+            "initial_angular_velocity_sigma_rad_s", "initial_linear_velocity_sigma_m_s"},
+           "kalman");
+    if (k["initial_angular_velocity_sigma_rad_s"])
+      s.kalman.initial_angular_velocity_sigma =
+          y.Number(k["initial_angular_velocity_sigma_rad_s"], "kalman.initial_angular_velocity_sigma_rad_s");
+    if (k["initial_linear_velocity_sigma_m_s"])
+      s.kalman.initial_linear_velocity_sigma =
+          y.Number(k["initial_linear_velocity_sigma_m_s"], "kalman.initial_linear_velocity_sigma_m_s");
     if (k["angular_acceleration_psd"])
       s.kalman.angular_acceleration_psd = y.Number(k["angular_acceleration_psd"], "kalman.angular_acceleration_psd");
     if (k["linear_acceleration_psd"])

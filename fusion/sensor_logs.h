@@ -44,9 +44,13 @@
 //    robot_accuracy:                  # optional; absolute accuracy added to encoder noise
 //      position_sigma_m: [sx, sy, sz] # base frame
 //      orientation_sigma_rad: 1e-4    # or orientation_sigma_deg; per axis
+//      covariance: [36 numbers]       # instead of the sigmas: the full 6x6 [dtheta; dp]
+//                                     # covariance, row-major, rad^2 / rad m / m^2, base frame
 //    kalman:                          # optional: PoseKalmanOptions (fusion/kalman.h)
 //      angular_acceleration_psd: 1e-2 # rad^2/s^3
 //      linear_acceleration_psd: 1e-2  # m^2/s^3
+//      initial_angular_velocity_sigma_rad_s: 0.5  # prior sigma of the velocities at the start
+//      initial_linear_velocity_sigma_m_s: 0.5
 //    consistency_significance: 0.01   # optional: flag a sensor when its p-value is below
 #pragma once
 

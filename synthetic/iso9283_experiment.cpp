@@ -14,7 +14,7 @@
 #include "core/io.h"
 #include "core/random.h"
 #include "core/svg_plot.h"
-#include "fusion/moifa.h"
+#include "fusion/stream_fusion.h"
 #include "synthetic/lab_scenario.h"
 #include "synthetic/scenario.h"
 #include "tracking/pose_refinement.h"
@@ -411,15 +411,15 @@ Iso9283Experiment RunIso9283Experiment(const Iso9283ExperimentOptions& o) {
         Mat6 W_robot = Mat6::Zero();
         if (corrections[k] == Correction::kFused) {
           const Mat6 C_robot = enc + ModelCovariance(cal, qe) + unmodelled;
-          std::vector<PoseMeasurement> all;
-          all.push_back(PoseMeasurement::FromCovariance("camera", cm->T_rig_target, cm->cov));
-          all.push_back(PoseMeasurement::FromCovariance("robot", T_pred, C_robot));
-          // The inclinometer sits on the target plate, its mounting known (see the header);
-          // linearized at the camera's orientation of the target.
-          if (const auto reading = incl.Simulate(truth.Tool(qa).R, crng))
-            all.push_back(
-                PoseMeasurement::FromOrientation("inclinometer", incl.Constraint(*reading, cm->T_rig_target.R)));
-          const FusedPose f = FusePoses(all);
+          std::vector<PoseMeasurement> poses;
+          poses.push_back(PoseMeasurement::FromCovariance("camera", cm->T_rig_target, cm->cov));
+          poses.push_back(PoseMeasurement::FromCovariance("robot", T_pred, C_robot));
+          // The inclinometer sits on the target plate, its mounting known (see the header).
+          // The one fusion path's instant MOIFA (fusion/stream_fusion.h): linearized at the
+          // camera's and robot's fused orientation, then at the result.
+          std::optional<TiltReading> tilt;
+          if (const auto reading = incl.Simulate(truth.Tool(qa).R, crng)) tilt = TiltReading{*reading, incl};
+          const FusedPose f = FuseEpoch(poses, tilt, ConsistencyOptions{}).fused;
           T_est = f.T;
           P_est = f.covariance;
           W_robot = f.weights[1];
@@ -608,6 +608,14 @@ void WriteIso9283ExperimentSvg(const std::filesystem::path& ap_path, const std::
   }
   ap.WriteSvg(ap_path);
   rp.WriteSvg(rp_path);
+}
+
+void WriteIso9283Measurements(const std::filesystem::path& dir, const std::string& prefix, const Iso9283Experiment& e) {
+  std::filesystem::create_directories(dir);
+  for (int k = 0; k < static_cast<int>(e.conditions.size()); ++k) {
+    WriteIso9283AttainedCsv(dir / (prefix + "attained_" + std::to_string(k + 1) + ".csv"), e, k);
+    WriteIso9283PathCsv(dir / (prefix + "path_" + std::to_string(k + 1) + ".csv"), e, k);
+  }
 }
 
 }  // namespace mcms

@@ -65,7 +65,8 @@
 //    calibrated model; (3) as (2), then at each visit the pose is measured by the camera
 //    alone and ONE correction move is made, q_c' = q_e + J^+ e with e = BoxMinus(commanded,
 //    measured) (the new move draws new repeatability noise); (4) as (3) with the pose
-//    measured by MOIFA over camera + robot + inclinometer. The attained pose after the
+//    measured by MOIFA over camera + robot + inclinometer (fusion/stream_fusion.h FuseEpoch,
+//    the instant fusion `mcms fuse` runs per frame). The attained pose after the
 //    correction is what ISO 9283 evaluates. The path is run with the model only (no
 //    correction is possible along a moving path in this scheme), so conditions 3 and 4
 //    report condition 2's path.
@@ -159,6 +160,9 @@ void WriteIso9283AttainedCsv(const std::filesystem::path& path, const Iso9283Exp
 // The commanded path's calculation points and the attained runs of one condition in
 // `mcms iso9283 --path`'s input layout (run,x_m,y_m,z_m; run = commanded or run1..).
 void WriteIso9283PathCsv(const std::filesystem::path& path, const Iso9283Experiment& e, int condition);
+// Both of the above for every condition k = 1..4: dir/<prefix>attained_<k>.csv and
+// dir/<prefix>path_<k>.csv (the folder is created).
+void WriteIso9283Measurements(const std::filesystem::path& dir, const std::string& prefix, const Iso9283Experiment& e);
 // AP (log10 of mm) and RP (mm, with the prediction) per pose for the four conditions.
 void WriteIso9283ExperimentSvg(const std::filesystem::path& ap_path, const std::filesystem::path& rp_path,
                                const Iso9283Experiment& e);

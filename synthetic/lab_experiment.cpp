@@ -4,8 +4,6 @@
 #include <cmath>
 #include <cstdio>
 
-#include "fusion/kalman.h"
-#include "fusion/moifa.h"
 #include "synthetic/evaluation.h"
 
 namespace mcms {
@@ -50,147 +48,111 @@ LabMethodSummary Summarize(const std::string& name, const std::vector<PointEstim
 
 }  // namespace
 
-LabResult RunLabExperiment(const LabScenario& lab, const std::vector<FrameResult>& tracked,
-                           const LabExperimentOptions& options) {
+SensorLogs LabSensorLogs(const LabScenario& lab, const std::vector<FrameResult>& tracked) {
+  SensorLogs logs;
+  logs.tracker.source = "lab scenario: tracked frames";
+  for (size_t k = 0; k < tracked.size(); ++k) {
+    const FrameResult& f = tracked[k];
+    if (k == 0) logs.tracker.first_time_s = f.time_s;
+    logs.tracker.last_time_s = f.time_s;
+    if (!f.T_rig_target) {
+      ++logs.tracker.lost_rows;
+      continue;
+    }
+    TrackerSample s;
+    s.frame = static_cast<int>(f.frame);
+    s.time_s = f.time_s;
+    s.T_rig_target = *f.T_rig_target;
+    s.covariance = f.cov;
+    logs.tracker.samples.push_back(s);
+  }
+  JointLog robot;
+  robot.source = "lab scenario: encoder readings";
+  for (size_t k = 0; k < lab.robot_t.size(); ++k) robot.samples.push_back({lab.robot_t[k], 0, lab.robot_q[k]});
+  logs.robot = robot;
+  InclinometerLog incl;
+  incl.source = "lab scenario: inclinometer readings";
+  for (size_t k = 0; k < lab.incl_t.size(); ++k) incl.samples.push_back({lab.incl_t[k], 0, lab.incl_reading[k]});
+  logs.inclinometer = incl;
+  return logs;
+}
+
+FusionSetup LabFusionSetup(const LabScenario& lab, const LabExperimentOptions& options) {
+  FusionSetup s;
+  s.source = "lab scenario";
+  s.robot = lab.nominal;
+  s.robot.SetT_flange_tool(Pose::Identity());
+  s.T_base_rig = lab.T_base_rig;
+  s.T_flange_target = lab.T_flange_target;
+  s.inclinometer = lab.options.inclinometer;
+  s.robot_accuracy_covariance = lab.robot_accuracy_cov;
+  // The robot stands still in every window: the static mode of the filter.
+  s.kalman.angular_acceleration_psd = options.kf_angular_psd;
+  s.kalman.linear_acceleration_psd = options.kf_linear_psd;
+  s.kalman.initial_angular_velocity_sigma = 1e-10;
+  s.kalman.initial_linear_velocity_sigma = 1e-10;
+  return s;
+}
+
+std::vector<FusionWindow> LabWindows(const LabScenario& lab) {
+  std::vector<FusionWindow> w;
+  for (size_t i = 0; i < lab.dwell_start_s.size(); ++i) w.push_back({lab.dwell_start_s[i], lab.dwell_end_s[i]});
+  return w;
+}
+
+LabResult EvaluateLabExperiment(const LabScenario& lab, const SensorLogs& logs, const FusionSetup& setup,
+                                const std::vector<FusedSample>& fused) {
   const int np = lab.options.points;
+  const std::vector<FusionWindow> windows = LabWindows(lab);
   LabResult r;
   r.methods = {"camera", "robot", "MOIFA", "KF"};
   r.estimates.assign(4, std::vector<PointEstimate>(np));
-  const Pose T_target_flange = lab.T_flange_target.Inverse();
-
-  // Camera poses as flange poses in the base frame, with their covariances.
-  auto camera_flange = [&](const FrameResult& f, Pose* T, Mat6* cov) {
-    *T = lab.T_base_rig * *f.T_rig_target * T_target_flange;
-    *cov = TransformPoseCovariance(f.cov, lab.T_base_rig, *f.T_rig_target, T_target_flange);
-  };
-
   for (int i = 0; i < np; ++i) {
-    const double t0 = lab.dwell_start_s[i], t1 = lab.dwell_end_s[i];
+    const double t0 = windows[i].start_s, t1 = windows[i].end_s;
     const Pose truth = lab.TrueFlange(0.5 * (t0 + t1));
     r.truth.push_back(truth);
-    // Camera: every tracked frame of the dwell, fused (a minimum-variance average).
-    std::vector<PoseMeasurement> cam;
-    for (size_t k = 0; k < tracked.size(); ++k) {
-      if (lab.point_of_frame[k] != i || !tracked[k].T_rig_target) continue;
-      Pose T;
-      Mat6 C;
-      camera_flange(tracked[k], &T, &C);
-      cam.push_back(PoseMeasurement::FromCovariance("camera frame " + std::to_string(k), T, C));
+    // Each sensor alone over the dwell: the camera frames fused, the mean joint reading.
+    const WindowMeasurements m = MeasureWindow(logs, setup, windows[i]);
+    if (m.camera) {
+      r.estimates[0][i] = {true, m.camera->T, m.camera->covariance};
+      Score(&r.estimates[0][i], truth);
     }
-    PointEstimate& ce = r.estimates[0][i];
-    if (!cam.empty()) {
-      const FusedPose f = FusePoses(cam);
-      ce = {true, f.T, f.covariance};
-      Score(&ce, truth);
+    if (m.robot) {
+      r.estimates[1][i] = {true, m.robot->T, m.robot->covariance};
+      Score(&r.estimates[1][i], truth);
     }
-    // Robot: mean encoder reading over the dwell, nominal model.
-    Eigen::VectorXd qsum = Eigen::VectorXd::Zero(lab.nominal.NumJoints());
-    int nq = 0;
-    for (size_t k = 0; k < lab.robot_t.size(); ++k)
-      if (lab.robot_t[k] >= t0 && lab.robot_t[k] < t1) {
-        qsum += lab.robot_q[k];
-        ++nq;
-      }
-    PointEstimate& re = r.estimates[1][i];
-    if (nq > 0) {
-      const Eigen::VectorXd q = qsum / nq;
-      re.valid = true;
-      re.T = lab.nominal.T_base_flange(q);
-      const Eigen::MatrixXd Q = lab.nominal.EncoderCovariance() / nq;
-      re.cov = lab.nominal.PoseCovariance(q, Q, RobotModel::EndFrame::kFlange) + lab.robot_accuracy_cov;
-      Score(&re, truth);
-    }
-    // Inclinometer: mean reading over the dwell, its noise reduced accordingly.
-    Vec2 rsum = Vec2::Zero();
-    int nr = 0;
-    for (size_t k = 0; k < lab.incl_t.size(); ++k)
-      if (lab.incl_t[k] >= t0 && lab.incl_t[k] < t1) {
-        rsum += lab.incl_reading[k];
-        ++nr;
-      }
-    std::vector<PoseMeasurement> all;
-    if (ce.valid) all.push_back(PoseMeasurement::FromCovariance("camera", ce.T, ce.cov));
-    if (re.valid) all.push_back(PoseMeasurement::FromCovariance("robot", re.T, re.cov));
-    if (nr > 0) {
-      Inclinometer incl = lab.options.inclinometer;
-      incl.sigma /= std::sqrt(static_cast<double>(nr));
-      const Vec2 mean = rsum / nr;
-      const Mat3 R_lin = ce.valid ? ce.T.R : re.T.R;
-      all.push_back(PoseMeasurement::FromOrientation("inclinometer", incl.Constraint(mean, R_lin)));
-      r.incl_tilt_error_rad.push_back((mean - lab.options.inclinometer.Predict(truth.R)).norm());
-    }
-    PointEstimate& me = r.estimates[2][i];
-    if (all.size() >= 2 || (all.size() == 1 && (ce.valid || re.valid))) {
-      const FusedPose f = FusePoses(all);
-      me = {true, f.T, f.covariance};
-      Score(&me, truth);
-    }
+    if (m.inclinometer)
+      r.incl_tilt_error_rad.push_back((m.inclinometer->reading - setup.inclinometer.Predict(truth.R)).norm());
   }
-
-  // The multi-sensor KF over each dwell's time-ordered streams. The controller knows
-  // when the robot stands still, so the filter runs in its static mode there (velocity
-  // known to be zero, process noise from the options) and restarts at each dwell from the
-  // dwell's first camera frame; a constant-velocity model across the 1 s stop-and-go moves
-  // would have to carry process noise so large that every static point is smeared.
-  struct Event {
-    double t;
-    int kind;  // 0 camera, 1 robot, 2 inclinometer
-    size_t index;
-  };
-  std::vector<Event> events;
-  for (size_t k = 0; k < tracked.size(); ++k)
-    if (tracked[k].T_rig_target && lab.point_of_frame[k] >= 0) events.push_back({tracked[k].time_s, 0, k});
-  for (size_t k = 0; k < lab.robot_t.size(); ++k) events.push_back({lab.robot_t[k], 1, k});
-  for (size_t k = 0; k < lab.incl_t.size(); ++k) events.push_back({lab.incl_t[k], 2, k});
-  std::stable_sort(events.begin(), events.end(), [](const Event& a, const Event& b) { return a.t < b.t; });
+  // The fused rows: one per dwell and method.
   double nis_sum[3] = {0, 0, 0};
   int nis_dof[3] = {0, 0, 0};
-  size_t e0 = 0;
-  for (int i = 0; i < np; ++i) {
-    const double t0 = lab.dwell_start_s[i], t1 = lab.dwell_end_s[i];
-    while (e0 < events.size() && events[e0].t < t0) ++e0;
-    PoseKalmanOptions ko;
-    ko.angular_acceleration_psd = options.kf_angular_psd;
-    ko.linear_acceleration_psd = options.kf_linear_psd;
-    ko.initial_angular_velocity_sigma = 1e-10;
-    ko.initial_linear_velocity_sigma = 1e-10;
-    PoseKalmanFilter kf(ko);
-    int robot_samples = 0;
-    for (size_t k = e0; k < events.size() && events[k].t < t1; ++k) robot_samples += events[k].kind == 1;
-    const Mat6 robot_model_cov =
-        lab.robot_accuracy_cov * (options.inflate_robot_for_correlation ? std::max(1, robot_samples) : 1);
-    for (size_t k = e0; k < events.size() && events[k].t < t1; ++k) {
-      const Event& e = events[k];
-      PoseKalmanFilter::UpdateResult u;
-      if (e.kind == 0) {
-        Pose T;
-        Mat6 C;
-        camera_flange(tracked[e.index], &T, &C);
-        if (!kf.Initialized()) {
-          kf.Initialize(e.t, T, C);
-          continue;
+  const char* const order[3] = {"camera", "robot", "inclinometer"};
+  for (const FusedSample& f : fused) {
+    if (f.frame < 0 || f.frame >= np) continue;
+    PointEstimate& e = r.estimates[f.method == FusionMethod::kMoifa ? 2 : 3][f.frame];
+    e = {true, f.T_base_flange, f.covariance};
+    Score(&e, r.truth[f.frame]);
+    if (f.method != FusionMethod::kKalman) continue;
+    for (const SensorStatistic& st : f.statistics)
+      for (int k = 0; k < 3; ++k)
+        if (st.name == order[k]) {
+          nis_sum[k] += st.chi2;
+          nis_dof[k] += st.dof;
         }
-        u = kf.UpdatePose(e.t, T, C);
-      } else if (!kf.Initialized()) {
-        continue;  // waits for the dwell's first camera frame
-      } else if (e.kind == 1) {
-        u = kf.UpdateRobot(e.t, lab.nominal, lab.robot_q[e.index], robot_model_cov);
-      } else {
-        u = kf.UpdateInclinometer(e.t, lab.incl_reading[e.index], lab.options.inclinometer);
-      }
-      nis_sum[e.kind] += u.nis;
-      nis_dof[e.kind] += u.dof;
-    }
-    if (kf.Initialized()) {
-      const auto pred = kf.Predict(std::max(kf.Time(), t1));
-      PointEstimate& ke = r.estimates[3][i];
-      ke = {true, pred.T, pred.covariance};
-      Score(&ke, r.truth[i]);
-    }
   }
   for (int k = 0; k < 3; ++k) r.kf_nis_mean.push_back(nis_dof[k] ? nis_sum[k] / nis_dof[k] : 0.0);
   for (size_t m = 0; m < r.methods.size(); ++m) r.summary.push_back(Summarize(r.methods[m], r.estimates[m], true));
   return r;
+}
+
+LabResult RunLabExperiment(const LabScenario& lab, const std::vector<FrameResult>& tracked,
+                           const LabExperimentOptions& options) {
+  const SensorLogs logs = LabSensorLogs(lab, tracked);
+  const FusionSetup setup = LabFusionSetup(lab, options);
+  StreamFusionOptions so;
+  so.windows = LabWindows(lab);
+  return EvaluateLabExperiment(lab, logs, setup, FuseStream(logs, setup, so));
 }
 
 std::string FormatLabTable(const LabResult& r) {

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "fusion/stream_fusion.h"
 #include "synthetic/lab_scenario.h"
 #include "tracking/tracker.h"
 
@@ -47,13 +48,23 @@ struct LabExperimentOptions {
   // 0.1 um, a robot standing still; 1e-12 would already be 10 um, as large as the camera's
   // error, and the filter would discount its own past measurements accordingly.
   double kf_angular_psd = 1e-16, kf_linear_psd = 1e-16;
-  // The robot's kinematic error is the same at every controller sample of a dwell; fed to
-  // the KF at controller rate it must not be counted as independent each time, so its
-  // covariance is inflated by the number of samples it stays correlated over (a dwell).
-  bool inflate_robot_for_correlation = true;
 };
 
-// `tracked[k]` is the tracker's result for camera frame k of lab.vision.
+// The experiment runs the one fusion path (fusion/stream_fusion.h) that `mcms fuse` runs:
+// the lab's streams as sensor logs, its frames and robot as a fusion setup, and its dwells as
+// the fusion windows (the robot stands still in each; the KF restarts in each, in its static
+// mode: process noise from the options, velocity prior 1e-10).
+SensorLogs LabSensorLogs(const LabScenario& lab, const std::vector<FrameResult>& tracked);
+FusionSetup LabFusionSetup(const LabScenario& lab, const LabExperimentOptions& options = {});
+std::vector<FusionWindow> LabWindows(const LabScenario& lab);
+
+// Scores against the truth: each sensor alone over each dwell (MeasureWindow), the fused rows
+// (FuseStream over LabWindows: MOIFA and KF, `frame` = point) and the inclinometer's tilt.
+LabResult EvaluateLabExperiment(const LabScenario& lab, const SensorLogs& logs, const FusionSetup& setup,
+                                const std::vector<FusedSample>& fused);
+
+// `tracked[k]` is the tracker's result for camera frame k of lab.vision: the logs, setup and
+// windows above fused in memory and evaluated.
 LabResult RunLabExperiment(const LabScenario& lab, const std::vector<FrameResult>& tracked,
                            const LabExperimentOptions& options = {});
 

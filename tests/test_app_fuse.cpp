@@ -184,6 +184,40 @@ TEST(AppFuse, FusesCleanLogs) {
   EXPECT_EQ(k.rows[5][k.Column("sensors")], "camera;robot");
 }
 
+// The demo fuses the logs it writes by the path `mcms fuse` runs: fusing those files again
+// with `mcms fuse --windows` gives the demo's fused file byte for byte, and the demo reports
+// the number of points it was asked for.
+TEST(AppFuse, TheDemosLogsReproduceItsFusion) {
+  const fs::path d = test::ScratchDir("app_fuse_demo");
+  const fs::path demo = d / "demo";
+  const std::string run_demo = std::string(MCMS_CLI) + " demo -q --no-iso9283 --points 3 --threads 2 -o " +
+                               demo.string() + " > " + (d / "demo.txt").string();
+  ASSERT_EQ(std::system(run_demo.c_str()), 0) << ReadTextFile(d / "demo.txt");
+  const std::string text = ReadTextFile(d / "demo.txt");
+  EXPECT_NE(text.find("Flange pose at the 3 points"), std::string::npos) << text;
+  EXPECT_EQ(text.find("76 points"), std::string::npos) << text;
+  const std::string fuse = "cd " + demo.string() + " && " + std::string(MCMS_CLI) +
+                           " fuse -q --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer "
+                           "inclinometer.csv --setup fusion_setup.yaml --windows dwells.csv -o " +
+                           (d / "refused.csv").string();
+  ASSERT_EQ(std::system(fuse.c_str()), 0);
+  const std::string demo_fused = ReadTextFile(demo / "fused_poses.csv");
+  EXPECT_EQ(ReadTextFile(d / "refused.csv"), demo_fused);
+  const CsvTable t = ReadCsv(demo / "fused_poses.csv");
+  ASSERT_EQ(t.rows.size(), 6u);  // 3 dwells, MOIFA and KF
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    EXPECT_EQ(t.rows[i][t.Column("frame")], std::to_string(i / 2));
+    EXPECT_EQ(t.rows[i][t.Column("method")], i % 2 ? "kf" : "moifa");
+    EXPECT_EQ(t.rows[i][t.Column("sensors")], "camera;robot;inclinometer");
+  }
+  // Per frame (no windows) the same logs fuse too, one MOIFA and one KF row per tracked frame.
+  const std::string per_frame = "cd " + demo.string() + " && " + std::string(MCMS_CLI) +
+                                " fuse -q --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer "
+                                "inclinometer.csv --setup fusion_setup.yaml -o " + (d / "frames.csv").string();
+  ASSERT_EQ(std::system(per_frame.c_str()), 0);
+  EXPECT_GT(ReadCsv(d / "frames.csv").rows.size(), t.rows.size());
+}
+
 TEST(AppFuse, BadTrackerLogsAreRefused) {
   const Logs clean = CleanLogs();
   {

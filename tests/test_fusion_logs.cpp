@@ -261,8 +261,8 @@ TEST(FusionLogs, SyntheticRoundTripIsConsistentAndBeatsEverySensor) {
   const Scenario s = MakeScenario("roundtrip", 3, Vec2(1.0e-3, -5e-4));
   const FusionSetup setup = ReadFusionSetup(s.dir / "setup.yaml");
   const SensorLogs logs = ReadAll(s, setup);
-  const auto moifa = FuseLogsMoifa(logs, setup);
-  const auto kf = FuseLogsKalman(logs, setup);
+  const auto moifa = FuseMoifa(logs, setup);
+  const auto kf = FuseKalman(logs, setup);
   ASSERT_EQ(moifa.size(), logs.tracker.samples.size());
   ASSERT_EQ(kf.size(), logs.tracker.samples.size());
   WriteFusedPoseCsv(s.dir / "fused.csv", moifa);
@@ -333,7 +333,7 @@ TEST(FusionLogs, AWrongInclinometerBiasIsFlagged) {
   const Scenario s = MakeScenario("bias", 4, Vec2(4.0e-3, -5e-4));
   const FusionSetup setup = ReadFusionSetup(s.dir / "setup.yaml");
   const SensorLogs logs = ReadAll(s, setup);
-  const auto moifa = FuseLogsMoifa(logs, setup);
+  const auto moifa = FuseMoifa(logs, setup);
   int incl_flagged = 0;
   for (const auto& r : moifa)
     for (const auto& f : r.flagged) incl_flagged += f == "inclinometer" ? 1 : 0;
@@ -347,7 +347,7 @@ TEST(FusionLogs, LogsWithoutTimeOverlapAreRefused) {
   SensorLogs logs = ReadAll(s, setup);
   for (auto& r : logs.robot->samples) r.time_s += 1000.0;
   try {
-    FuseLogsMoifa(logs, setup);
+    FuseMoifa(logs, setup);
     FAIL() << "expected InputError";
   } catch (const InputError& e) {
     const std::string m = e.what();

@@ -1,0 +1,388 @@
+#include "fusion/stream_fusion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include <Eigen/Cholesky>
+
+#include "core/error.h"
+#include "fusion/chi_square.h"
+
+namespace mcms {
+
+namespace {
+
+std::string Range(const std::filesystem::path& file, double first, double last) {
+  char b[96];
+  std::snprintf(b, sizeof b, " covers [%.6g, %.6g] s", first, last);
+  return file.string() + b;
+}
+
+// Index range [first, last) of the samples with lo <= time_s < hi (hi_inclusive: <= hi).
+template <typename Sample>
+std::pair<size_t, size_t> InTime(const std::vector<Sample>& v, double lo, double hi, bool hi_inclusive) {
+  const auto a = std::lower_bound(v.begin(), v.end(), lo, [](const Sample& s, double x) { return s.time_s < x; });
+  auto b = a;
+  while (b != v.end() && (b->time_s < hi || (hi_inclusive && b->time_s == hi))) ++b;
+  return {static_cast<size_t>(a - v.begin()), static_cast<size_t>(b - v.begin())};
+}
+
+// The mean of the inclinometer readings in [lo, hi] (or [lo, hi)) and the model with the
+// noise of that mean (sigma / sqrt(n)). nullopt when there is none.
+std::optional<TiltReading> MeanTilt(const InclinometerLog& log, double lo, double hi, bool hi_inclusive,
+                                    const Inclinometer& model, int* count) {
+  const auto [a, b] = InTime(log.samples, lo, hi, hi_inclusive);
+  *count = static_cast<int>(b - a);
+  if (a == b) return std::nullopt;
+  Vec2 sum = Vec2::Zero();
+  for (size_t i = a; i < b; ++i) sum += log.samples[i].reading;
+  TiltReading r;
+  r.reading = sum / static_cast<double>(b - a);
+  r.model = model;
+  r.model.sigma = model.sigma / std::sqrt(static_cast<double>(b - a));
+  return r;
+}
+
+FusedSample MoifaSample(int frame, double time_s, const EpochFusion& e) {
+  FusedSample r;
+  r.frame = frame;
+  r.time_s = time_s;
+  r.method = FusionMethod::kMoifa;
+  r.T_base_flange = e.fused.T;
+  r.covariance = e.fused.covariance;
+  for (const auto& m : e.measurements) r.sensors.push_back(m.name);
+  r.dof = e.consistency.dof;
+  r.p_value = e.consistency.p_value;
+  for (const auto& sc : e.consistency.sensors) {
+    if (sc.flagged) r.flagged.push_back(sc.name);
+    r.statistics.push_back({sc.name, sc.nis, sc.dof});
+  }
+  return r;
+}
+
+// The time-merged sample stream: robot, inclinometer, camera at equal stamps.
+struct Event {
+  double t;
+  SensorKind kind;
+  size_t index;
+};
+
+std::vector<Event> MergedEvents(const SensorLogs& logs, double t_end) {
+  std::vector<Event> events;
+  for (size_t i = 0; i < logs.tracker.samples.size(); ++i)
+    events.push_back({logs.tracker.samples[i].time_s, SensorKind::kCamera, i});
+  if (logs.robot)
+    for (size_t i = 0; i < logs.robot->samples.size(); ++i)
+      if (logs.robot->samples[i].time_s <= t_end)
+        events.push_back({logs.robot->samples[i].time_s, SensorKind::kRobot, i});
+  if (logs.inclinometer)
+    for (size_t i = 0; i < logs.inclinometer->samples.size(); ++i)
+      if (logs.inclinometer->samples[i].time_s <= t_end)
+        events.push_back({logs.inclinometer->samples[i].time_s, SensorKind::kInclinometer, i});
+  std::stable_sort(events.begin(), events.end(),
+                   [](const Event& a, const Event& b) { return a.t < b.t || (a.t == b.t && a.kind < b.kind); });
+  return events;
+}
+
+// One Kalman filter over a run of events, with the per-sensor innovation statistics since
+// the last reported sample.
+class KalmanRun {
+ public:
+  KalmanRun(const SensorLogs& logs, const FusionSetup& setup, double robot_accuracy_scale)
+      : logs_(logs), setup_(setup), kf_(setup.kalman), accuracy_scale_(robot_accuracy_scale) {}
+
+  void Process(const Event& e) {
+    const int k = static_cast<int>(e.kind);
+    if (e.kind == SensorKind::kInclinometer) {
+      // Needs an orientation to linearize at, and one the sensor can read.
+      if (!kf_.Initialized() || !setup_.inclinometer.InRange(kf_.Predict(e.t).T.R)) return;
+      Note(k, kf_.UpdateInclinometer(e.t, logs_.inclinometer->samples[e.index].reading, setup_.inclinometer));
+      return;
+    }
+    PoseWithCovariance m;
+    if (e.kind == SensorKind::kRobot) {
+      m = RobotFlangePose(logs_.robot->samples[e.index].q, setup_, 1.0, accuracy_scale_);
+    } else {
+      const TrackerSample& s = logs_.tracker.samples[e.index];
+      m = CameraFlangePose(s.T_rig_target, s.covariance, setup_);
+    }
+    if (!kf_.Initialized()) {
+      kf_.Initialize(e.t, m.T, m.covariance);
+      used_[k] = true;
+    } else {
+      Note(k, kf_.UpdatePose(e.t, m.T, m.covariance));
+    }
+  }
+
+  bool Initialized() const { return kf_.Initialized(); }
+  const PoseKalmanFilter& Filter() const { return kf_; }
+
+  // A sample with the given estimate and the statistics since the last one (then reset).
+  FusedSample Report(int frame, double time_s, const Pose& T, const Mat6& covariance) {
+    FusedSample r;
+    r.frame = frame;
+    r.time_s = time_s;
+    r.method = FusionMethod::kKalman;
+    r.T_base_flange = T;
+    r.covariance = covariance;
+    double total = 0.0;
+    // Camera first, as in the MOIFA rows.
+    for (const SensorKind kind : {SensorKind::kCamera, SensorKind::kRobot, SensorKind::kInclinometer}) {
+      const int k = static_cast<int>(kind);
+      if (used_[k]) {
+        r.sensors.push_back(ToString(kind));
+        r.statistics.push_back({ToString(kind), nis_[k], dof_[k]});
+      }
+    }
+    for (const SensorKind kind : {SensorKind::kRobot, SensorKind::kInclinometer, SensorKind::kCamera}) {
+      const int k = static_cast<int>(kind);
+      total += nis_[k];
+      r.dof += dof_[k];
+      if (dof_[k] > 0 && ChiSquareSurvival(nis_[k], dof_[k]) < setup_.consistency_significance)
+        r.flagged.push_back(ToString(kind));
+    }
+    r.p_value = r.dof > 0 ? ChiSquareSurvival(total, r.dof) : 1.0;
+    for (int k = 0; k < 3; ++k) {
+      nis_[k] = 0;
+      dof_[k] = 0;
+      used_[k] = false;
+    }
+    return r;
+  }
+
+ private:
+  void Note(int k, const PoseKalmanFilter::UpdateResult& u) {
+    used_[k] = true;
+    if (u.accepted) {
+      nis_[k] += u.nis;
+      dof_[k] += u.dof;
+    }
+  }
+
+  const SensorLogs& logs_;
+  const FusionSetup& setup_;
+  PoseKalmanFilter kf_;
+  double accuracy_scale_;
+  double nis_[3] = {0, 0, 0};
+  int dof_[3] = {0, 0, 0};
+  bool used_[3] = {false, false, false};
+};
+
+void CheckInputs(const SensorLogs& logs, const std::vector<FusionWindow>& windows) {
+  CheckTimeOverlap(logs);
+  CheckWindows(windows);
+}
+
+}  // namespace
+
+const char* ToString(SensorKind k) {
+  switch (k) {
+    case SensorKind::kRobot:
+      return "robot";
+    case SensorKind::kInclinometer:
+      return "inclinometer";
+    case SensorKind::kCamera:
+      return "camera";
+  }
+  return "?";
+}
+
+const char* ToString(FusionMethod m) { return m == FusionMethod::kMoifa ? "moifa" : "kf"; }
+
+void CheckTimeOverlap(const SensorLogs& logs) {
+  if (!logs.robot && !logs.inclinometer)
+    Throw("fusion needs the tracker log and at least one other sensor log (robot joints or inclinometer)");
+  const TrackerLog& tr = logs.tracker;
+  if (tr.samples.empty()) Throw("fusion: the tracker log ", tr.source.string(), " has no tracked frame");
+  const double a0 = tr.samples.front().time_s, a1 = tr.samples.back().time_s;
+  const auto check = [&](const std::filesystem::path& file, double b0, double b1) {
+    if (std::max(a0, b0) > std::min(a1, b1))
+      Throw("no time overlap between the sensors: ", Range(tr.source, a0, a1), " (tracked frames), ",
+            Range(file, b0, b1));
+  };
+  if (logs.robot) {
+    if (logs.robot->samples.empty()) Throw("fusion: the joint log ", logs.robot->source.string(), " is empty");
+    check(logs.robot->source, logs.robot->samples.front().time_s, logs.robot->samples.back().time_s);
+  }
+  if (logs.inclinometer) {
+    if (logs.inclinometer->samples.empty())
+      Throw("fusion: the inclinometer log ", logs.inclinometer->source.string(), " is empty");
+    check(logs.inclinometer->source, logs.inclinometer->samples.front().time_s,
+          logs.inclinometer->samples.back().time_s);
+  }
+}
+
+void CheckWindows(const std::vector<FusionWindow>& windows) {
+  for (size_t i = 0; i < windows.size(); ++i) {
+    const FusionWindow& w = windows[i];
+    if (!std::isfinite(w.start_s) || !std::isfinite(w.end_s) || !(w.end_s > w.start_s))
+      Throw("fusion window ", i, ": expected finite start_s < end_s, got [", w.start_s, ", ", w.end_s, ")");
+    if (i > 0 && w.start_s < windows[i - 1].end_s)
+      Throw("fusion window ", i, " [", w.start_s, ", ", w.end_s, ") starts before window ", i - 1,
+            " ends (", windows[i - 1].end_s, " s); windows must be in time order and must not overlap");
+  }
+}
+
+PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covariance_rig, const FusionSetup& setup) {
+  return CameraFlangePose(CellGeometry{setup.T_base_rig, setup.T_base_rig_covariance, setup.T_flange_target},
+                          T_rig_target, covariance_rig);
+}
+
+PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& setup, double encoder_scale,
+                                   double accuracy_scale) {
+  const PoseWithCovariance out = RobotFlangePose(setup.robot, q, encoder_scale * setup.robot.EncoderCovariance(),
+                                                 accuracy_scale * setup.robot_accuracy_covariance);
+  if (out.covariance.llt().info() != Eigen::Success || !(out.covariance.diagonal().minCoeff() > 0))
+    Throw("robot '", setup.robot.Name(), "': its pose covariance is singular; give encoder sigmas in the robot file or ",
+          "robot_accuracy in the setup file ", setup.source.string());
+  return out;
+}
+
+EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
+                      const ConsistencyOptions& options) {
+  if (poses.empty()) Throw("FuseEpoch: expected at least one full-pose measurement (camera or robot), got none");
+  EpochFusion e;
+  e.measurements = poses;
+  e.fused = FusePoses(poses);
+  if (tilt) {
+    // Linearize at the other sensors' fused orientation, then once more at the result:
+    // the constraint is first order in the orientation error.
+    for (int pass = 0; pass < 2; ++pass) {
+      if (!tilt->model.InRange(e.fused.T.R)) break;
+      e.measurements = poses;
+      e.measurements.push_back(
+          PoseMeasurement::FromOrientation("inclinometer", tilt->model.Constraint(tilt->reading, e.fused.T.R)));
+      e.fused = FusePoses(e.measurements);
+    }
+  }
+  e.consistency = CheckConsistency(e.measurements, options);
+  return e;
+}
+
+WindowMeasurements MeasureWindow(const SensorLogs& logs, const FusionSetup& setup, const FusionWindow& window) {
+  WindowMeasurements m;
+  const auto [c0, c1] = InTime(logs.tracker.samples, window.start_s, window.end_s, false);
+  m.camera_frames = static_cast<int>(c1 - c0);
+  if (c1 > c0) {
+    std::vector<PoseMeasurement> frames;
+    for (size_t i = c0; i < c1; ++i) {
+      const TrackerSample& s = logs.tracker.samples[i];
+      const PoseWithCovariance c = CameraFlangePose(s.T_rig_target, s.covariance, setup);
+      frames.push_back(PoseMeasurement::FromCovariance("camera frame " + std::to_string(s.frame), c.T, c.covariance));
+    }
+    const FusedPose f = FusePoses(frames);
+    m.camera = PoseWithCovariance{f.T, f.covariance};
+  }
+  if (logs.robot) {
+    const auto [r0, r1] = InTime(logs.robot->samples, window.start_s, window.end_s, false);
+    m.robot_readings = static_cast<int>(r1 - r0);
+    if (r1 > r0) {
+      Eigen::VectorXd sum = Eigen::VectorXd::Zero(setup.robot.NumJoints());
+      for (size_t i = r0; i < r1; ++i) sum += logs.robot->samples[i].q;
+      const double n = static_cast<double>(r1 - r0);
+      m.robot = RobotFlangePose(Eigen::VectorXd(sum / n), setup, 1.0 / n, 1.0);
+    }
+  }
+  if (logs.inclinometer)
+    m.inclinometer =
+        MeanTilt(*logs.inclinometer, window.start_s, window.end_s, false, setup.inclinometer, &m.inclinometer_readings);
+  return m;
+}
+
+std::vector<FusedSample> FuseMoifa(const SensorLogs& logs, const FusionSetup& setup,
+                                   const std::vector<FusionWindow>& windows) {
+  CheckInputs(logs, windows);
+  ConsistencyOptions copt;
+  copt.significance = setup.consistency_significance;
+  std::vector<FusedSample> out;
+  if (!windows.empty()) {
+    for (size_t w = 0; w < windows.size(); ++w) {
+      const WindowMeasurements m = MeasureWindow(logs, setup, windows[w]);
+      std::vector<PoseMeasurement> poses;
+      if (m.camera) poses.push_back(PoseMeasurement::FromCovariance("camera", m.camera->T, m.camera->covariance));
+      if (m.robot) poses.push_back(PoseMeasurement::FromCovariance("robot", m.robot->T, m.robot->covariance));
+      if (poses.empty()) continue;
+      out.push_back(MoifaSample(static_cast<int>(w), windows[w].end_s, FuseEpoch(poses, m.inclinometer, copt)));
+    }
+    return out;
+  }
+  for (const TrackerSample& s : logs.tracker.samples) {
+    std::vector<PoseMeasurement> poses;
+    const PoseWithCovariance cam = CameraFlangePose(s.T_rig_target, s.covariance, setup);
+    poses.push_back(PoseMeasurement::FromCovariance("camera", cam.T, cam.covariance));
+    Eigen::VectorXd q;
+    if (logs.robot && logs.robot->Interpolate(s.time_s, &q)) {
+      const PoseWithCovariance rob = RobotFlangePose(q, setup);
+      poses.push_back(PoseMeasurement::FromCovariance("robot", rob.T, rob.covariance));
+    }
+    std::optional<TiltReading> tilt;
+    if (logs.inclinometer) {
+      const double half = 0.5 * setup.inclinometer.period;
+      int n = 0;
+      tilt = MeanTilt(*logs.inclinometer, s.time_s - half, s.time_s + half, true, setup.inclinometer, &n);
+    }
+    out.push_back(MoifaSample(s.frame, s.time_s, FuseEpoch(poses, tilt, copt)));
+  }
+  return out;
+}
+
+std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& setup,
+                                    const std::vector<FusionWindow>& windows) {
+  CheckInputs(logs, windows);
+  std::vector<FusedSample> out;
+  if (windows.empty()) {
+    KalmanRun run(logs, setup, 1.0);
+    for (const Event& e : MergedEvents(logs, logs.tracker.samples.back().time_s)) {
+      run.Process(e);
+      if (e.kind != SensorKind::kCamera) continue;
+      const TrackerSample& s = logs.tracker.samples[e.index];
+      out.push_back(run.Report(s.frame, s.time_s, run.Filter().PoseEstimate(), run.Filter().PoseCovariance()));
+    }
+    return out;
+  }
+  const std::vector<Event> events = MergedEvents(logs, std::numeric_limits<double>::infinity());
+  size_t e0 = 0;
+  for (size_t w = 0; w < windows.size(); ++w) {
+    const double t0 = windows[w].start_s, t1 = windows[w].end_s;
+    while (e0 < events.size() && events[e0].t < t0) ++e0;
+    size_t e1 = e0;
+    int robot_readings = 0;
+    for (; e1 < events.size() && events[e1].t < t1; ++e1) robot_readings += events[e1].kind == SensorKind::kRobot;
+    // The filter starts at the window's first camera frame: a single joint reading, whose
+    // covariance carries the window's systematic error inflated, is no prior on its own.
+    // Samples before that frame are dropped; those at its time stamp follow it.
+    size_t first = e0;
+    while (first < e1 && events[first].kind != SensorKind::kCamera) ++first;
+    if (first == e1) {
+      e0 = e1;
+      continue;
+    }
+    KalmanRun run(logs, setup, std::max(1, robot_readings));
+    run.Process(events[first]);
+    for (size_t k = e0; k < e1; ++k)
+      if (k != first && events[k].t >= events[first].t) run.Process(events[k]);
+    e0 = e1;
+    const auto pred = run.Filter().Predict(std::max(run.Filter().Time(), t1));
+    out.push_back(run.Report(static_cast<int>(w), t1, pred.T, pred.covariance));
+  }
+  return out;
+}
+
+std::vector<FusedSample> FuseStream(const SensorLogs& logs, const FusionSetup& setup,
+                                    const StreamFusionOptions& options) {
+  std::vector<FusedSample> rows;
+  if (options.moifa) rows = FuseMoifa(logs, setup, options.windows);
+  if (options.kalman) {
+    const auto kf = FuseKalman(logs, setup, options.windows);
+    rows.insert(rows.end(), kf.begin(), kf.end());
+  }
+  // Time order; MOIFA before KF at equal times.
+  std::stable_sort(rows.begin(), rows.end(), [](const FusedSample& x, const FusedSample& y) {
+    return x.time_s < y.time_s || (x.time_s == y.time_s && x.method < y.method);
+  });
+  return rows;
+}
+
+}  // namespace mcms
