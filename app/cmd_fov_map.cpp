@@ -18,6 +18,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "synthetic/fov_map.h"
+#include "synthetic/fov_map_measured.h"
 #include "synthetic/scenario.h"
 
 namespace mcms::app {
@@ -40,7 +41,7 @@ struct FovArgs {
   // Measured data.
   std::string measured, lines, json, reference;
   int measured_repeats = 5;
-  double measured_plane_first_m = 2.0, measured_plane_last_m = 1.0;
+  std::string plane_distances = "2.0,1.0";
 };
 
 const char* kDefaultGrid = "-0.5:0.5:11,-0.4:0.4:9,0:1:11";
@@ -144,6 +145,15 @@ int RunFovMap(const FovArgs& a) {
   std::string why;
   if (!mo.IsValid(&why)) Throw("fov-map: ", why);
 
+  // Measured data are read (and refused) before any long computation.
+  std::optional<MeasuredPoints> measured;
+  std::optional<MeasuredLines> lines;
+  if (!a.measured.empty()) {
+    measured = ReadMeasuredPoints(a.measured, a.measured_repeats);
+    if (!a.reference.empty()) ApplyReference(&*measured, a.reference);
+    if (!a.lines.empty()) lines = ReadMeasuredLines(a.lines);
+  }
+
   std::printf("mcms fov-map: %zu cameras, target '%s' (%zu balls, radius %.1f mm), grid %s (%zu points), %d threads\n",
               sc.rig.size(), sc.target.name.c_str(), sc.target.balls_target.size(), 1e3 * sc.target.ball_radius,
               mo.grid.ToString().c_str(), mo.grid.size(), mo.threads);
@@ -181,11 +191,33 @@ int RunFovMap(const FovArgs& a) {
     std::printf("  %d of %zu points consistent on all six axes\n", consistent, sim.size());
   }
 
+  std::optional<MeasuredReport> report;
+  if (measured) {
+    MeasuredAnalysisOptions mao;
+    {
+      std::stringstream ps(a.plane_distances);
+      std::string c1, c2, extra;
+      char* e1 = nullptr;
+      char* e2 = nullptr;
+      if (!std::getline(ps, c1, ',') || !std::getline(ps, c2, ',') || std::getline(ps, extra, ','))
+        Throw("--plane-distances: expected FIRST,LAST in metres, found '", a.plane_distances, "'");
+      mao.plane_first_distance_m = std::strtod(c1.c_str(), &e1);
+      mao.plane_last_distance_m = std::strtod(c2.c_str(), &e2);
+      if (*e1 || *e2 || c1.empty() || c2.empty() || !(mao.plane_first_distance_m > 0) || !(mao.plane_last_distance_m > 0))
+        Throw("--plane-distances: expected two positive distances in metres, found '", a.plane_distances, "'");
+    }
+    if (!a.quiet) std::fprintf(stderr, "fov-map: fitting the measured data (with leave-one-out and layout variants)\n");
+    report = AnalyseMeasured(*measured, lines ? &*lines : nullptr, sc.rig, sc.target, mo, mao);
+    std::printf("%s", report->text.c_str());
+  }
+
   WriteFolder(out, [&](const fs::path& dir) {
     WriteFovMap(map, dir, sim);
+    if (report) WriteMeasuredReport(*report, dir);
   });
+  if (report && !a.json.empty()) WriteMeasuredJson(*report, a.json);
   std::printf("wrote %s/map.csv, heat maps per z plane, sigma_vs_distance.svg, region.txt%s%s\n", out.string().c_str(),
-              sim.empty() ? "" : ", simulated.csv", "");
+              sim.empty() ? "" : ", simulated.csv", report ? ", measured.csv, measured_fit.txt" : "");
   return 0;
 }
 
@@ -240,8 +272,8 @@ const McmsCommand kFovMap([](CLI::App& app) {
   sub->add_option("--lines", a->lines, "line lengths (Table 2 CSV: plane,line,d_laser_mm,d_camera_mm[,delta_mm])")
       ->check(CLI::ExistingFile);
   sub->add_option("--json", a->json, "write the measured fit as JSON (effects, held-out gain, Table 2 prediction)");
-  sub->add_option("--plane-distances", a->measured_plane_first_m,
-                  "assumed distance of the measured Table's plane 1 from the cameras, m (default 2.0; plane 5 at 1.0)");
+  sub->add_option("--plane-distances", a->plane_distances,
+                  "Table 1 layout: distances of the first and last plane below the cameras, m (default 2.0,1.0)");
   sub->add_flag("--quiet", a->quiet, "no progress on stderr");
   return std::make_pair(sub, Runner([a] { return RunFovMap(*a); }));
 });

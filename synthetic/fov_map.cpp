@@ -220,19 +220,12 @@ double FovMapPoint::mean_ball_sigma_d() const {
   return n ? s / n : kNaN;
 }
 
-FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOptions& options,
-                     const std::function<void(size_t, size_t)>& progress) {
-  std::string why;
-  if (!options.IsValid(&why)) Throw("fov-map options: ", why);
-  if (rig.size() < 2) Throw("the rig needs at least 2 cameras to triangulate, it has ", rig.size());
-  target.MinDistanceGap();
-  FovMap map;
-  map.rig = rig;
-  map.target = target;
-  map.options = options;
-
-  // The range of ball-image sizes over the grid: from the nearest and farthest depth of
-  // the grid's corners (the volume is convex), padded, for every camera.
+namespace {
+// The centre-noise table for the ball-image sizes that occur in the box [lo, hi].
+CentroidCovarianceTable TableForBox(const CameraRig& rig, const Target& target, const FovMapOptions& options,
+                                    const Vec3& lo, const Vec3& hi) {
+  // The range of ball-image sizes over the box: from the nearest and farthest depth of
+  // the box's corners (the volume is convex), padded, for every camera.
   double b_min = INFINITY, b_max = 0;
   const double reach = target.balls_target.empty() ? 0.0 : [&] {
     double r = 0;
@@ -243,8 +236,7 @@ FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOpt
     const double fmax = cam.FocalLengths().maxCoeff(), fmin = cam.FocalLengths().minCoeff();
     double dmin = INFINITY, dmax = 0;
     for (int c = 0; c < 8; ++c) {
-      const Vec3 p((c & 1) ? options.grid.hi.x() : options.grid.lo.x(), (c & 2) ? options.grid.hi.y() : options.grid.lo.y(),
-                   (c & 4) ? options.grid.hi.z() : options.grid.lo.z());
+      const Vec3 p((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
       const double d = (cam.T_cam_rig() * p).norm();
       dmin = std::min(dmin, d);
       dmax = std::max(dmax, d);
@@ -256,7 +248,30 @@ FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOpt
   }
   b_min = std::max(b_min, 0.5);
   b_max = std::min(std::max(b_max, b_min), 400.0);
-  map.centre_table = BuildCentroidCovarianceTable(options.noise, b_min, b_max, 1.8, options.threads);
+  return BuildCentroidCovarianceTable(options.noise, b_min, b_max, 1.8, options.threads);
+}
+
+void FillDistance(const CameraRig& rig, FovMapPoint* pt) {
+  double s = 0;
+  int n = 0;
+  for (size_t c = 0; c < rig.size(); ++c)
+    if (pt->prediction.balls_in_camera[c] > 0) s += (CameraCentre(rig.cameras[c]) - pt->p_rig).norm(), ++n;
+  pt->mean_distance_m = n ? s / n : kNaN;
+}
+}  // namespace
+
+FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOptions& options,
+                     const std::function<void(size_t, size_t)>& progress) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("fov-map options: ", why);
+  if (rig.size() < 2) Throw("the rig needs at least 2 cameras to triangulate, it has ", rig.size());
+  target.MinDistanceGap();
+  FovMap map;
+  map.rig = rig;
+  map.target = target;
+  map.options = options;
+
+  map.centre_table = TableForBox(rig, target, options, options.grid.lo, options.grid.hi);
   const CentroidCovarianceTable& table = map.centre_table;
   const CentroidCovarianceFn centre_cov = [&table](const Ellipse& e) { return table(e); };
 
@@ -270,14 +285,36 @@ FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOpt
         T.R = options.R_rig_target;
         T.t = pt.p_rig;
         pt.prediction = PredictFovPoint(rig, target, T, centre_cov, options.prediction);
-        double s = 0;
-        int n = 0;
-        for (size_t c = 0; c < rig.size(); ++c)
-          if (pt.prediction.balls_in_camera[c] > 0) s += (CameraCentre(rig.cameras[c]) - pt.p_rig).norm(), ++n;
-        pt.mean_distance_m = n ? s / n : kNaN;
+        FillDistance(rig, &pt);
       },
       progress);
   return map;
+}
+
+std::vector<FovMapPoint> PredictFovPoints(const CameraRig& rig, const Target& target, const FovMapOptions& options,
+                                          const std::vector<Vec3>& positions) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("fov-map options: ", why);
+  if (rig.size() < 2) Throw("the rig needs at least 2 cameras to triangulate, it has ", rig.size());
+  std::vector<FovMapPoint> out(positions.size());
+  if (positions.empty()) return out;
+  Vec3 lo = positions.front(), hi = positions.front();
+  for (const Vec3& p : positions) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+  const CentroidCovarianceTable table = TableForBox(rig, target, options, lo, hi);
+  const CentroidCovarianceFn centre_cov = [&table](const Ellipse& e) { return table(e); };
+  ParallelFor(
+      positions.size(), options.threads,
+      [&](size_t i) {
+        FovMapPoint& pt = out[i];
+        pt.p_rig = positions[i];
+        Pose T;
+        T.R = options.R_rig_target;
+        T.t = pt.p_rig;
+        pt.prediction = PredictFovPoint(rig, target, T, centre_cov, options.prediction);
+        FillDistance(rig, &pt);
+      },
+      {});
+  return out;
 }
 
 // ---------------------------------------------------------------------------------------

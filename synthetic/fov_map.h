@@ -94,6 +94,11 @@ struct FovMap {
 FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOptions& options,
                      const std::function<void(size_t, size_t)>& progress = {});
 
+// Predictions at arbitrary positions (orientation options.R_rig_target; the grid of the
+// options is not used), with a centre-noise table built for their bounding box.
+std::vector<FovMapPoint> PredictFovPoints(const CameraRig& rig, const Target& target, const FovMapOptions& options,
+                                          const std::vector<Vec3>& positions);
+
 // Monte Carlo at a few grid points: `repeats` rendered frames of the target at each pose,
 // each tracked independently (frames 10 s apart: no prediction), the sample standard
 // deviations of the tracked pose about its mean beside the predicted ones.
