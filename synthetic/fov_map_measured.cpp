@@ -402,14 +402,21 @@ ThetaFit FitTheta(const VarianceData& d, const std::vector<std::string>& effects
   return best;
 }
 
-NoiseModelFit Finish(const VarianceData& d, const std::vector<std::string>& effects, const ThetaFit& t) {
+// ln C(n, k)
+double LogChoose(int n, int k) { return std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0); }
+
+NoiseModelFit Finish(const VarianceData& d, const std::vector<std::string>& effects, const ThetaFit& t,
+                     int num_candidates = static_cast<int>(CandidateEffects().size())) {
   NoiseModelFit f;
   f.effects = effects;
   Apply(effects, t.theta, &f);
   f.loglik = TotalLogLik(d, f);
   f.num_parameters = NumParams(effects);
   f.num_variances = 3 * d.size();
-  f.bic = -2 * f.loglik + f.num_parameters * std::log(static_cast<double>(f.num_variances));
+  // Extended BIC (Chen & Chen 2008, gamma = 1): the plain BIC plus 2 ln C(K, k) for k of K
+  // candidate effects, so that searching K candidates does not raise the false alarms.
+  f.bic = -2 * f.loglik + f.num_parameters * std::log(static_cast<double>(f.num_variances)) +
+          2 * LogChoose(std::max<int>(num_candidates, static_cast<int>(effects.size())), static_cast<int>(effects.size()));
   // Standard errors: the observed information in theta by central differences, then the
   // delta method to the natural parameters.
   const size_t n = t.theta.size();
@@ -492,11 +499,12 @@ NoiseModelFit SelectNoiseModel(const VarianceData& d, const std::vector<std::str
   CheckData(d);
   const std::vector<std::string>& candidates = candidates_in.empty() ? CandidateEffects() : candidates_in;
   std::vector<std::string> chosen;
+  const int K = static_cast<int>(candidates.size());
   ThetaFit current = FitTheta(d, chosen, {{}});
-  NoiseModelFit best = Finish(d, chosen, current);
+  NoiseModelFit best = Finish(d, chosen, current, K);
   std::ostringstream log;
   char buf[256];
-  std::snprintf(buf, sizeof(buf), "  nominal: log L = %.2f, BIC = %.2f\n", best.loglik, best.bic);
+  std::snprintf(buf, sizeof(buf), "  nominal: log L = %.2f, EBIC = %.2f\n", best.loglik, best.bic);
   log << buf;
   for (;;) {
     NoiseModelFit step_best;
@@ -514,16 +522,16 @@ NoiseModelFit SelectNoiseModel(const VarianceData& d, const std::vector<std::str
       for (size_t k = current.theta.size(); k < small.size(); ++k)
         if (!(c == "misidentification" && k == current.theta.size())) small[k] -= 2.0;
       const ThetaFit t = FitTheta(d, trial, {warm, small, fresh});
-      const NoiseModelFit f = Finish(d, trial, t);
-      std::snprintf(buf, sizeof(buf), "    + %-18s log L = %10.2f, BIC = %10.2f\n", c.c_str(), f.loglik, f.bic);
+      const NoiseModelFit f = Finish(d, trial, t, K);
+      std::snprintf(buf, sizeof(buf), "    + %-18s log L = %10.2f, EBIC = %10.2f\n", c.c_str(), f.loglik, f.bic);
       log << buf;
       if (!any || f.bic < step_best.bic) step_best = f, step_theta = t, any = true;
     }
     if (!any || !(step_best.bic < best.bic)) {
-      log << "  stop: no candidate lowers the BIC\n";
+      log << "  stop: no candidate lowers the EBIC\n";
       break;
     }
-    std::snprintf(buf, sizeof(buf), "  add %s: BIC %.2f -> %.2f\n", step_best.effects.back().c_str(), best.bic, step_best.bic);
+    std::snprintf(buf, sizeof(buf), "  add %s: EBIC %.2f -> %.2f\n", step_best.effects.back().c_str(), best.bic, step_best.bic);
     log << buf;
     best = step_best;
     current = step_theta;
@@ -859,7 +867,7 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
     o << b;
   }
   o << "  (sigmas in mm; nom = the nominal prediction, fit = the extended model's inlier sigma)\n";
-  o << "greedy selection by BIC (N = " << R.fit.num_variances << " sample variances):\n" << R.fit.selection_log;
+  o << "greedy selection by the extended BIC (BIC + 2 ln C(candidates, effects); N = " << R.fit.num_variances << " sample variances):\n" << R.fit.selection_log;
   o << "selected: " << Join(R.fit.effects) << "\n  " << ParamLine(R.fit) << "\n";
   std::snprintf(b, sizeof(b),
                 "log likelihood: nominal %.1f, paper's isotropic %.3f mm %.1f, extended %.1f (in sample)\n"

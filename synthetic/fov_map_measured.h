@@ -16,8 +16,9 @@
 //     anisotropy_x|y|z    g_a (m)    extra noise along one rig axis
 //     misidentification   pi, o (m)  a point whose repeats mix misidentified balls (the edge
 //                                    of the view): a two-component mixture per point
-// Effects are added greedily while the BIC (-2 log L + p ln N, N = number of sample
-// variances) falls; the held-out gain is the leave-one-point-out log likelihood of the
+// Effects are added greedily while the extended BIC falls (Chen & Chen 2008: -2 log L +
+// p ln N + 2 ln C(K, k), N = number of sample variances, k of K candidate effects; the last
+// term keeps the search over K candidates from raising the false alarms); the held-out gain is the leave-one-point-out log likelihood of the
 // selected model (refitted without the point) minus that of the nominal model, natural
 // log, summed over points.
 //
@@ -97,7 +98,7 @@ struct NoiseModelFit {
   std::vector<std::string> effects;  // selected, in the order added
   double scale = 1, floor = 0, outlier_probability = 0, outlier_sigma = 0;
   Vec3 anisotropy = Vec3::Zero();    // g_x, g_y, g_z (m)
-  double loglik = 0, bic = 0;
+  double loglik = 0, bic = 0;       // bic: the extended BIC above
   int num_parameters = 0;
   size_t num_variances = 0;
   // Standard errors (observed information) of the named parameters.
@@ -114,7 +115,7 @@ double SampleVarianceLogLik(const Vec3& measured, const Vec3& s2, int repeats);
 
 // Fits the given effects (all others at their nominal values) by maximum likelihood.
 NoiseModelFit FitNoiseModel(const VarianceData& data, const std::vector<std::string>& effects);
-// Greedy forward selection by BIC from the nominal model over `candidates` (default all).
+// Greedy forward selection by the extended BIC from the nominal model over `candidates` (default all).
 NoiseModelFit SelectNoiseModel(const VarianceData& data, const std::vector<std::string>& candidates = {});
 // Leave-one-point-out: per point, the log density under the effects refitted without it.
 std::vector<double> HeldOutLogLik(const VarianceData& data, const std::vector<std::string>& effects);
