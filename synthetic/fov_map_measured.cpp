@@ -867,6 +867,29 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
     o << b;
   }
   o << "  (sigmas in mm; nom = the nominal prediction, fit = the extended model's inlier sigma)\n";
+  {
+    // Accuracy against the reference (raw measurements with --reference).
+    Vec3 sq = Vec3::Zero();
+    int n = 0;
+    double chi2 = 0;
+    for (size_t i = 0; i < measured.points.size(); ++i) {
+      const auto& p = measured.points[i];
+      if (!p.reference || !p.mean_rig) continue;
+      const Vec3 e = *p.mean_rig - *p.reference;
+      sq += e.cwiseAbs2();
+      // The mean of n repeats against the fitted inlier variance / n.
+      chi2 += (e.cwiseAbs2().cwiseQuotient(R.fit.InlierVariance(R.data.nominal[i]) / p.repeats)).sum();
+      ++n;
+    }
+    if (n > 0) {
+      const Vec3 rms = (sq / n).cwiseSqrt() * 1e3;
+      std::snprintf(b, sizeof(b),
+                    "accuracy against the reference (%d points): RMS error of the mean x %.4f, y %.4f, z %.4f, d %.4f mm; "
+                    "chi-square against the fitted repeatability %.1f for %d dof (above: errors beyond repeatability)\n",
+                    n, rms.x(), rms.y(), rms.z(), rms.norm(), chi2, 3 * n);
+      o << b;
+    }
+  }
   o << "greedy selection by the extended BIC (BIC + 2 ln C(candidates, effects); N = " << R.fit.num_variances << " sample variances):\n" << R.fit.selection_log;
   o << "selected: " << Join(R.fit.effects) << "\n  " << ParamLine(R.fit) << "\n";
   std::snprintf(b, sizeof(b),
@@ -934,7 +957,7 @@ void WriteMeasuredReport(const MeasuredReport& R, const fs::path& dir) {
   WriteFileAtomically(dir / "measured.csv", [&](std::ostream& o) {
     o << "plane,point,x_m,y_m,z_m,repeats,sigma_x_mm,sigma_y_mm,sigma_z_mm,sigma_d_mm,nominal_sigma_x_mm,nominal_sigma_y_mm,"
          "nominal_sigma_z_mm,nominal_trackable,fit_sigma_x_mm,fit_sigma_y_mm,fit_sigma_z_mm,outlier_probability,"
-         "heldout_loglik_extended,heldout_loglik_nominal\n";
+         "heldout_loglik_extended,heldout_loglik_nominal,err_x_mm,err_y_mm,err_z_mm\n";
     for (size_t i = 0; i < R.measured.points.size(); ++i) {
       const auto& p = R.measured.points[i];
       const Vec3 ms = p.variance.cwiseSqrt() * 1e3, ns = R.data.nominal[i].cwiseSqrt() * 1e3,
@@ -944,7 +967,13 @@ void WriteMeasuredReport(const MeasuredReport& R, const fs::path& dir) {
         << f(ms.norm()) << "," << f(ns.x()) << "," << f(ns.y()) << "," << f(ns.z()) << "," << (R.nominal_trackable[i] ? 1 : 0)
         << "," << f(fs.x()) << "," << f(fs.y()) << "," << f(fs.z()) << ","
         << f(R.fit.outlier_posterior.empty() ? 0.0 : R.fit.outlier_posterior[i]) << "," << f(R.heldout_extended[i]) << ","
-        << f(R.heldout_nominal[i]) << "\n";
+        << f(R.heldout_nominal[i]);
+      if (p.reference && p.mean_rig) {
+        const Vec3 e = (*p.mean_rig - *p.reference) * 1e3;
+        o << "," << f(e.x()) << "," << f(e.y()) << "," << f(e.z()) << "\n";
+      } else {
+        o << ",,,\n";
+      }
     }
   });
   WriteFileAtomically(dir / "measured_fit.txt", [&](std::ostream& o) { o << R.text; });
