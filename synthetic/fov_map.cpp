@@ -28,6 +28,15 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // thread a few times a second. The first exception is rethrown after all threads stop.
 void ParallelFor(size_t n, int threads, const std::function<void(size_t)>& work,
                  const std::function<void(size_t, size_t)>& progress) {
+  if (threads <= 1) {
+    // On the calling thread (its CPU time is then the work's).
+    for (size_t i = 0; i < n; ++i) {
+      work(i);
+      if (progress && (i % 64 == 0 || i + 1 == n)) progress(i + 1, n);
+    }
+    if (progress && n == 0) progress(0, 0);
+    return;
+  }
   std::atomic<size_t> next{0}, done{0};
   std::atomic<bool> failed{false};
   std::exception_ptr error;
