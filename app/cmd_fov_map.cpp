@@ -262,7 +262,7 @@ const McmsCommand kFovMap([](CLI::App& app) {
   sub->add_option("--seed", a->seed, "random seed of the Monte Carlo (default 1)");
   sub->add_option("--measured", a->measured,
                   "repeated measurements: Table 1 CSV (plane,point,sigma_x_mm,sigma_y_mm,sigma_z_mm[,sigma_d_mm]) or raw "
-                  "CSV (point,repeat,x_m,y_m,z_m)")
+                  "CSV (point,repeat,x_m,y_m,z_m[,plane]) or an mcms track poses.csv with a point column")
       ->check(CLI::ExistingFile);
   sub->add_option("--measured-repeats", a->measured_repeats,
                   "repeats behind each sigma of a Table 1 CSV (default 5, the paper's)")

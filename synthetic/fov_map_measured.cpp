@@ -104,14 +104,19 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
       m.points.push_back(p);
     }
   } else {
-    const int ci = t.Column("point"), cr = t.Column("repeat"), cx = t.Column("x_m"), cy = t.Column("y_m"),
-              cz = t.Column("z_m");
+    // A raw CSV (point,repeat,x_m,y_m,z_m) or mcms track's poses.csv with a point column:
+    // the repeat is then the frame, and lost frames (status lost, empty pose) are skipped.
+    const int ci = t.Column("point"), cx = t.Column("x_m"), cy = t.Column("y_m"), cz = t.Column("z_m");
+    const int cr = t.HasColumn("repeat") ? t.Column("repeat") : t.HasColumn("frame") ? t.Column("frame") : -1;
+    if (cr < 0) Throw(path.string(), ": missing column 'repeat' (or 'frame', as in a poses.csv) in the header");
+    const int cs = t.HasColumn("status") ? t.Column("status") : -1;
     const int cp = t.HasColumn("plane") ? t.Column("plane") : -1;
     std::map<std::string, std::vector<Vec3>> samples;
     std::map<std::string, int> plane_of;
     std::set<std::pair<std::string, std::string>> repeats;
     std::vector<std::string> order;
     for (size_t r = 0; r < t.rows.size(); ++r) {
+      if (cs >= 0 && Cell(t, r, cs) == "lost") continue;
       const std::string id = Cell(t, r, ci);
       if (id.empty()) Throw(path.string(), " line ", t.line_of_row[r], ", column 'point': empty point label");
       if (!repeats.insert({id, Cell(t, r, cr)}).second)

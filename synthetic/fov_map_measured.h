@@ -58,7 +58,8 @@ struct MeasuredPoints {
 };
 
 // Table 1 (plane,point,sigma_x_mm,sigma_y_mm,sigma_z_mm[,sigma_d_mm]; every sigma from
-// `table_repeats` repeats) or raw (point,repeat,x_m,y_m,z_m[,plane]). InputError naming the
+// `table_repeats` repeats) or raw (point,repeat,x_m,y_m,z_m[,plane]), or a poses.csv of
+// mcms track with a point column added (the frame is the repeat; lost frames are skipped). InputError naming the
 // file, line and column for: a missing column, a non-finite or negative number, a duplicate
 // point or repeat, a point with fewer than 2 repeats, a plane with one point, sigma_d that
 // is not the compound of the three, fewer than 3 points.

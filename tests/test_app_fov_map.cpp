@@ -132,6 +132,23 @@ TEST(FovMapCli, BadInputRefusedNothingWritten) {
                              " --reference " + (s / "reference.csv").string() + " -o " + (s / "good").string(),
                          s);
   EXPECT_EQ(ok.code, 0) << ok.err;
+  // A poses.csv of mcms track with a point column: the frame is the repeat, lost frames skipped.
+  std::string poses = "frame,time_s,status,reason,x_m,y_m,z_m,point\n";
+  int frame = 0;
+  for (int p = 1; p <= 3; ++p)
+    for (int k = 1; k <= 4; ++k, ++frame)
+      poses += std::to_string(frame) + ",0," + (k == 2 ? "lost,no target,,,," : "ok,,") +
+               (k == 2 ? "" : std::to_string(0.1 * p + 1e-4 * k) + "," + std::to_string(2e-5 * k * k) + "," +
+                                  std::to_string(0.5 + 3e-5 * k) + ",") +
+               std::to_string(p) + "\n";
+  Write(s / "poses.csv", poses);
+  const CliRun pr = Mcms("fov-map --quiet --grid=0:0:1,0:0:1,0.5:0.5:1 --measured " + (s / "poses.csv").string() + " -o " +
+                             (s / "from_poses").string(),
+                         s);
+  EXPECT_EQ(pr.code, 0) << pr.err;
+  const CsvTable m = ReadCsv(s / "from_poses" / "measured.csv");
+  ASSERT_EQ(m.rows.size(), 3u);
+  EXPECT_EQ(m.Number(0, m.Column("repeats")), 3);
 }
 
 }  // namespace
