@@ -139,6 +139,7 @@ struct MeasuredAnalysisOptions {
   double laser_sigma_m = 0.01e-3;            // FARO Xi ADM 10 um (+ 1.1 um/m)
   int repeats_per_line_end = 5;              // a line's measured length uses the mean of its ends' repeats
   bool sensitivity = true;                   // refit under layout variants
+  int lab_seeds = 5;                         // the lab experiment with the fitted camera (0 = skip)
 };
 
 struct LayoutResult {
@@ -168,6 +169,13 @@ struct Table2Prediction {
   double loglik_extended = 0, loglik_nominal = 0, loglik_isotropic = 0;                     // over all lines
 };
 
+struct LabReductionResult {
+  std::string camera_model;
+  int seeds = 0;
+  double camera_3sigma_m = 0, robot_3sigma_m = 0, moifa_3sigma_m = 0, kf_3sigma_m = 0;
+  double moifa_reduction = 0, moifa_reduction_sd = 0, kf_reduction = 0, kf_reduction_sd = 0;
+};
+
 struct MeasuredReport {
   MeasuredPoints measured;
   std::vector<Vec3> positions_rig;   // assumed (Table 1) or measured means (raw)
@@ -181,6 +189,7 @@ struct MeasuredReport {
   std::vector<LayoutResult> sensitivity;
   Table2Prediction table2;                      // under the assumed layout
   std::vector<Table2Prediction> table2_variants;  // other line directions and averaging
+  std::vector<LabReductionResult> lab;  // nominal and fitted camera (empty when skipped)
   std::string layout_text;
   std::string text;  // the human-readable report
 };

@@ -186,6 +186,13 @@ TEST(FovNoiseFit, PaperTables) {
   EXPECT_GT(r.table2.predicted_mean_abs_sd_m, 0);
   EXPECT_GT(r.table2.loglik_extended, r.table2.loglik_isotropic);
   EXPECT_GT(r.table2.loglik_extended, r.table2.loglik_nominal);
+  // The lab experiment with the fitted camera: its three-sigma error is of the paper's
+  // order (3.94 mm), not the nominal rig's hundredths of a millimetre.
+  ASSERT_EQ(r.lab.size(), 3u);
+  EXPECT_LT(r.lab[0].camera_3sigma_m, 0.1e-3);
+  EXPECT_GT(r.lab[1].camera_3sigma_m, 1.0e-3);
+  EXPECT_LT(r.lab[1].camera_3sigma_m, 6.0e-3);
+  EXPECT_NEAR(r.lab[2].robot_3sigma_m, 3.379e-3, 0.5e-3);
 }
 
 }  // namespace
