@@ -486,7 +486,7 @@ void WriteFovMap(const FovMap& map, const fs::path& dir, const std::vector<FovSi
     o << "x_m,y_m,z_m,sigma_x_mm,sigma_y_mm,sigma_z_mm,sigma_d_mm,sigma_rx_mdeg,sigma_ry_mdeg,sigma_rz_mdeg,"
          "ball_sigma_d_mm,trackable,below_threshold,cameras,observations,balls_triangulated";
     for (size_t c = 0; c < nc; ++c) o << ",balls_" << map.rig.names[c];
-    o << ",centre_sigma_px,ball_minor_axis_px,mean_distance_m\n";
+    o << ",centre_sigma_px,ball_minor_axis_px,min_border_px,mean_distance_m\n";
     for (const auto& p : map.points) {
       const Vec3 sp = p.sigma_p() * 1e3, sr = p.sigma_r() * kMdegPerRad;
       int tri = 0;
@@ -498,7 +498,7 @@ void WriteFovMap(const FovMap& map, const fs::path& dir, const std::vector<FovSi
         << p.prediction.observations << "," << tri;
       for (size_t c = 0; c < nc; ++c) o << "," << p.prediction.balls_in_camera[c];
       o << "," << Fmt(p.prediction.mean_centre_sigma_px) << "," << Fmt(p.prediction.mean_ball_px) << ","
-        << Fmt(p.mean_distance_m) << "\n";
+        << Fmt(p.prediction.min_border_px, 4) << "," << Fmt(p.mean_distance_m) << "\n";
     }
   });
 

@@ -605,6 +605,7 @@ std::vector<Vec3> LayoutPositions(const MeasuredPoints& m, const PaperLayout& L,
 struct NominalAt {
   std::vector<Vec3> sigma_rig;  // m
   std::vector<bool> trackable;
+  std::vector<double> border_px;
   int untrackable = 0;
 };
 
@@ -615,6 +616,7 @@ NominalAt Nominal(const CameraRig& rig, const Target& target, const FovMapOption
   n.sigma_rig.resize(pos.size());
   n.trackable.resize(pos.size());
   for (size_t i = 0; i < pos.size(); ++i) {
+    n.border_px.push_back(pr[i].prediction.min_border_px);
     n.trackable[i] = pr[i].prediction.trackable;
     n.sigma_rig[i] = pr[i].sigma_p();
   }
@@ -785,6 +787,7 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
   const NominalAt nominal = Nominal(rig, target, mo, R.positions_rig, measured.points);
   R.nominal_sigma = nominal.sigma_rig;
   R.nominal_trackable = nominal.trackable;
+  R.nominal_border_px = nominal.border_px;
   R.data = MakeData(measured, nominal, layout.axis_of_paper);
   R.fit = SelectNoiseModel(R.data);
 
@@ -879,6 +882,23 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
     o << b;
   }
   o << "  (sigmas in mm; nom = the nominal prediction, fit = the extended model's inlier sigma)\n";
+  {
+    // Are the misidentified points at the edge of the view (under the nominal rig)?
+    double out_sum = 0, in_sum = 0;
+    int n_out = 0, n_in = 0;
+    for (size_t i = 0; i < measured.points.size(); ++i) {
+      if (!std::isfinite(R.nominal_border_px[i])) continue;
+      if (!R.fit.outlier_posterior.empty() && R.fit.outlier_posterior[i] > 0.5) out_sum += R.nominal_border_px[i], ++n_out;
+      else in_sum += R.nominal_border_px[i], ++n_in;
+    }
+    if (n_out > 0 && n_in > 0) {
+      std::snprintf(b, sizeof(b),
+                    "edge of the view (nominal rig, assumed positions): nearest approach of a ball image to an image border, "
+                    "mean %.0f px at the %d misidentified points, %.0f px at the other %d\n",
+                    out_sum / n_out, n_out, in_sum / n_in, n_in);
+      o << b;
+    }
+  }
   {
     // Accuracy against the reference (raw measurements with --reference).
     Vec3 sq = Vec3::Zero();
@@ -991,7 +1011,7 @@ void WriteMeasuredReport(const MeasuredReport& R, const fs::path& dir) {
   WriteFileAtomically(dir / "measured.csv", [&](std::ostream& o) {
     o << "plane,point,x_m,y_m,z_m,repeats,sigma_x_mm,sigma_y_mm,sigma_z_mm,sigma_d_mm,nominal_sigma_x_mm,nominal_sigma_y_mm,"
          "nominal_sigma_z_mm,nominal_trackable,fit_sigma_x_mm,fit_sigma_y_mm,fit_sigma_z_mm,outlier_probability,"
-         "heldout_loglik_extended,heldout_loglik_nominal,err_x_mm,err_y_mm,err_z_mm\n";
+         "heldout_loglik_extended,heldout_loglik_nominal,err_x_mm,err_y_mm,err_z_mm,nominal_border_px\n";
     for (size_t i = 0; i < R.measured.points.size(); ++i) {
       const auto& p = R.measured.points[i];
       const Vec3 ms = p.variance.cwiseSqrt() * 1e3, ns = R.data.nominal[i].cwiseSqrt() * 1e3,
@@ -1004,10 +1024,11 @@ void WriteMeasuredReport(const MeasuredReport& R, const fs::path& dir) {
         << f(R.heldout_nominal[i]);
       if (p.reference && p.mean_rig) {
         const Vec3 e = (*p.mean_rig - *p.reference) * 1e3;
-        o << "," << f(e.x()) << "," << f(e.y()) << "," << f(e.z()) << "\n";
+        o << "," << f(e.x()) << "," << f(e.y()) << "," << f(e.z());
       } else {
-        o << ",,,\n";
+        o << ",,,";
       }
+      o << "," << f(R.nominal_border_px[i]) << "\n";
     }
   });
   WriteFileAtomically(dir / "measured_fit.txt", [&](std::ostream& o) { o << R.text; });

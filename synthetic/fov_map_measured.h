@@ -181,6 +181,7 @@ struct MeasuredReport {
   std::vector<Vec3> positions_rig;   // assumed (Table 1) or measured means (raw)
   std::vector<Vec3> nominal_sigma;   // m, per axis; the nominal model's prediction
   std::vector<bool> nominal_trackable;
+  std::vector<double> nominal_border_px;  // nearest approach of a ball image to an image border (nominal rig)
   VarianceData data;
   NoiseModelFit fit;
   std::vector<double> heldout_extended, heldout_nominal, heldout_isotropic;

@@ -87,9 +87,13 @@ BallImage PredictBallImage(const CameraModel& cam, const Vec3& centre_rig, doubl
   const std::vector<Vec2> outline = SphereOutline(cam, c, radius, options.outline_points);
   if (outline.empty()) return out;
   const double W = cam.Width(), H = cam.Height();
-  for (const Vec2& q : outline)
+  double border = INFINITY;
+  for (const Vec2& q : outline) {
     if (!(q.x() >= -0.5 && q.x() <= W - 0.5 && q.y() >= -0.5 && q.y() <= H - 0.5)) return out;
+    border = std::min({border, q.x() + 0.5, W - 0.5 - q.x(), q.y() + 0.5, H - 0.5 - q.y()});
+  }
   out.in_front = true;
+  out.border_px = border;
   out.ellipse = EllipseFromOutline(outline);
   out.centroid = SphereImageCentroid(cam, c, radius, options.outline_points);
   // The detector's window: the ellipse widened by the margin, cut by the border = dropped.
@@ -144,6 +148,7 @@ FovPointPrediction PredictFovPoint(const CameraRig& rig, const Target& target, c
       sum_px2 += 0.5 * p.cov.trace();
       sum_b += img[b].ellipse.b;
       ++n_obs;
+      if (!(out.min_border_px <= img[b].border_px)) out.min_border_px = img[b].border_px;
     }
   }
   if (n_obs > 0) {

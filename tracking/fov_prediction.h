@@ -82,6 +82,9 @@ struct FovPointPrediction {
   Mat6 cov = Mat6::Constant(std::numeric_limits<double>::quiet_NaN());  // [dtheta; dp], rig frame; NaN when not trackable
   double mean_centre_sigma_px = 0;         // RMS over the observations of sqrt(trace(cov)/2)
   double mean_ball_px = 0;                 // mean minor semi-axis of the ball images, px
+  // Smallest distance (px) from a ball image's outline to the border of its image, over the
+  // usable images of the cameras that see the target: how near the edge of the view.
+  double min_border_px = std::numeric_limits<double>::quiet_NaN();
   int CamerasSeeing() const;               // cameras with at least one usable ball image
 };
 
@@ -97,6 +100,7 @@ struct BallImage {
   bool usable = false;     // and the detection window is not cut by the border
   Ellipse ellipse;
   Vec2 centroid = Vec2::Zero();
+  double border_px = 0;    // distance from the outline's bounding box to the image border
 };
 BallImage PredictBallImage(const CameraModel& cam, const Vec3& centre_rig, double radius,
                            const FovPredictionOptions& options = {});
