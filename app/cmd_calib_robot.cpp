@@ -10,7 +10,7 @@
 //      measuring system's frame `meas`; q within the robot's joint limits)
 //   ROS-Industrial industrial_calibration kinematic measurements
 //     <id>: {camera_joints: [], target_joints: [q1, ..], pose: {x, y, z, qw, qx, qy, qz}}
-// and a robot description (calib/robots/*.yaml format; default: the built-in KUKA KR 5
+// and a robot description (model/robots/*.yaml format; default: the built-in KUKA KR 5
 // arc) whose `tool` is the starting target offset T_flange_tool.
 // Outputs (each written only after the whole calibration succeeded, atomically):
 //   -o ROBOT.yaml    the calibrated robot (DH table, tool and, with --error-motion, the
@@ -29,11 +29,9 @@
 #include <vector>
 
 #include "app/commands.h"
-#include "calib/registration.h"
-#include "calib/robot_calibration.h"
+#include "calib/robot_calibration_job.h"
 #include "core/error.h"
 #include "core/io.h"
-#include "core/svg_plot.h"
 
 namespace mcms::app {
 namespace {
@@ -58,141 +56,24 @@ Pose PoseFromArgs(const std::vector<double>& v, const char* option) {
   return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
 }
 
-std::string PoseText(const Pose& T) {
-  const Eigen::Quaterniond q = T.Quaternion();
-  std::ostringstream s;
-  s.precision(9);
-  s << "translation_m [" << T.t.x() << ", " << T.t.y() << ", " << T.t.z() << "], quaternion_wxyz [" << q.w() << ", "
-    << q.x() << ", " << q.y() << ", " << q.z() << "]";
-  return s.str();
-}
-
-std::string StatsText(const ErrorStats& s) {
-  char buf[256];
-  std::snprintf(buf, sizeof buf, "position mean %.4f mm, RMS %.4f mm, max %.4f mm", s.mean_position_m * 1e3,
-                s.rms_position_m * 1e3, s.max_position_m * 1e3);
-  std::string out = buf;
-  if (s.mean_rotation_rad) {
-    std::snprintf(buf, sizeof buf, "; rotation mean %.5f deg, RMS %.5f deg, max %.5f deg", *s.mean_rotation_rad / kDeg,
-                  *s.rms_rotation_rad / kDeg, *s.max_rotation_rad / kDeg);
-    out += buf;
-  }
-  return out;
-}
-
-// A parameter in report units: mm for lengths, deg for angles.
-std::string ValueText(const std::string& name, double v) {
-  const bool angle = name.find("theta") != std::string::npos || name.find("alpha") != std::string::npos ||
-                     name.find(".r") != std::string::npos;
-  char buf[64];
-  std::snprintf(buf, sizeof buf, angle ? "%+.5f deg" : "%+.4f mm", angle ? v / kDeg : v * 1e3);
-  return buf;
-}
-
 int RunCalibRobot(const CalibRobotArgs& a) {
-  if (a.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml");
-  RobotModel robot = a.robot.empty() ? RobotModel::Default() : RobotModel::Read(a.robot);
-  if (!a.tool_guess.empty()) robot.SetT_flange_tool(PoseFromArgs(a.tool_guess, "--tool-guess"));
-  // Refuse unwritable outputs before the solve, not after it.
-  RequireWritableFile(a.output, "-o");
-  if (!a.report.empty()) RequireWritableFile(a.report, "--report");
-  if (!a.plot.empty()) RequireWritableFile(a.plot, "--plot");
-  const std::vector<RobotMeasurement> ms = ReadRobotMeasurements(a.measurements);
-
-  RobotCalibrationOptions opt;
-  opt.position_sigma_m = a.position_sigma_mm * 1e-3;
-  opt.rotation_sigma_rad = a.rotation_sigma_deg * kDeg;
-  opt.fixed = a.fixed;
-  opt.max_iterations = a.max_iterations;
-  opt.estimate_dh = !a.registration_only;
-  opt.error_motion_harmonics = a.error_motion;
-  // Progress: the iteration count is not known in advance, so a line at most every half
-  // second (long solves only) instead of a percentage.
-  using Clock = std::chrono::steady_clock;
-  auto last = Clock::now();
-  if (!a.quiet)
-    opt.progress = [&](int iteration, double cost) {
-      if (Clock::now() - last < std::chrono::milliseconds(500)) return;
-      last = Clock::now();
-      std::fprintf(stderr, "calib-robot: iteration %d, cost %.6g\n", iteration, cost);
-    };
-
-  const Pose guess = a.base_guess.empty() ? InitialBaseGuess(robot, ms) : PoseFromArgs(a.base_guess, "--base-guess");
-  const RobotCalibrationResult r = CalibrateRobot(robot, guess, ms, opt);
-  if (!a.quiet)
-    std::fprintf(stderr, "calib-robot: %s after %d iterations\n", r.converged ? "converged" : "stopped", r.iterations);
-
-  // The fair baseline: the nominal DH table with base and tool fitted.
-  RobotCalibrationOptions reg = opt;
-  reg.estimate_dh = false;
-  reg.error_motion_harmonics.clear();
-  reg.progress = nullptr;
-  const RobotCalibrationResult nominal = CalibrateRobot(robot, guess, ms, reg);
-
-  std::optional<CrossValidation> cv;
-  if (a.folds >= 2) {
-    if (a.folds > static_cast<int>(ms.size()))
-      Throw("calib-robot: --folds ", a.folds, " exceeds the ", ms.size(), " measurements; use fewer folds or 0");
-    if (!a.quiet) std::fprintf(stderr, "calib-robot: %d-fold cross-validation\n", a.folds);
-    RobotCalibrationOptions cv_opt = opt;
-    cv_opt.progress = nullptr;
-    cv = CrossValidateRobot(robot, guess, ms, cv_opt, a.folds);
-  }
-
-  std::ostringstream rep;
-  rep << "# mcms calib-robot report\n";
-  rep << "robot: " << robot.Name() << " (" << robot.NumJoints() << " joints)\n";
-  rep << "measurements: " << ms.size() << " (" << (ms[0].R_meas_tool ? "6-D poses" : "3-D positions") << ") from "
-      << a.measurements << "\n";
-  rep << "solver: " << (r.converged ? "converged" : "did NOT converge") << " after " << r.iterations
-      << " iterations; variance factor " << r.variance_factor << "; observability index " << r.observability << "\n";
-  rep << "T_meas_base: " << PoseText(r.T_meas_base) << "\n";
-  rep << "T_flange_tool: " << PoseText(r.robot.T_flange_tool()) << "\n";
-  rep << "residuals, starting model:            " << StatsText(Summarize(r.errors_before)) << "\n";
-  rep << "residuals, nominal DH registered:     " << StatsText(Summarize(nominal.errors_after)) << "\n";
-  rep << "residuals, calibrated:                " << StatsText(Summarize(r.errors_after)) << "\n";
-  if (cv) {
-    rep << "held out (" << a.folds << "-fold), nominal DH: " << StatsText(Summarize(cv->nominal)) << "\n";
-    rep << "held out (" << a.folds << "-fold), calibrated: " << StatsText(Summarize(cv->calibrated)) << "\n";
-  }
-  rep << "parameters (identified error, 1 sigma):\n";
-  for (const auto& p : r.parameters) {
-    if (p.fixed) continue;
-    rep << "  " << p.name << ": " << ValueText(p.name, p.estimate) << " +- " << ValueText(p.name, p.sigma).substr(1)
-        << "\n";
-  }
-  rep << "fixed parameters:\n";
-  for (const auto* p : r.Fixed()) rep << "  " << p->name << ": " << p->reason << "\n";
-  rep << "correlated pairs (|rho| > " << opt.correlation_threshold << "):" << (r.correlated.empty() ? " none" : "")
-      << "\n";
-  for (const auto& c : r.correlated) rep << "  " << c.a << " ~ " << c.b << ": rho " << c.rho << "\n";
-  const std::string report = rep.str();
-
-  // Everything computed: write the outputs, the robot model last, so that a failed
-  // report or plot leaves no model behind (each file is written atomically).
-  if (!a.report.empty()) WriteFileAtomically(a.report, [&](std::ostream& o) { o << report; });
-  if (!a.plot.empty()) {
-    Plot plot;
-    plot.title = "Position error per measurement";
-    plot.x_label = "measurement";
-    plot.y_label = "position error (mm)";
-    auto series = [&](const std::string& label, const std::vector<PoseError>& e, const std::string& color) {
-      PlotSeries s;
-      s.label = label;
-      s.color = color;
-      s.points = true;
-      for (size_t i = 0; i < e.size(); ++i) {
-        s.x.push_back(static_cast<double>(i + 1));
-        s.y.push_back(e[i].position() * 1e3);
-      }
-      plot.series.push_back(s);
-    };
-    series("nominal DH, registered", nominal.errors_after, "#d62728");
-    series("calibrated", r.errors_after, "#1f77b4");
-    if (cv) series("calibrated, held out", cv->calibrated, "#2ca02c");
-    plot.WriteSvg(a.plot);
-  }
-  r.robot.Write(a.output);
+  RobotCalibrationJob job;
+  job.measurements = a.measurements;
+  job.robot = a.robot;
+  job.output = a.output;
+  job.report = a.report;
+  job.plot = a.plot;
+  if (!a.base_guess.empty()) job.base_guess = PoseFromArgs(a.base_guess, "--base-guess");
+  if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "--tool-guess");
+  job.fixed = a.fixed;
+  job.error_motion_harmonics = a.error_motion;
+  job.position_sigma_m = a.position_sigma_mm * 1e-3;
+  job.rotation_sigma_rad = a.rotation_sigma_deg * kDeg;
+  job.folds = a.folds;
+  job.max_iterations = a.max_iterations;
+  job.registration_only = a.registration_only;
+  if (!a.quiet) job.progress = [](const std::string& line) { std::fprintf(stderr, "calib-robot: %s\n", line.c_str()); };
+  const std::string report = RunRobotCalibrationJob(job);
   std::fputs(report.c_str(), stdout);
   return 0;
 }
@@ -235,7 +116,7 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
       ->check(CLI::PositiveNumber);
   sub->add_option("--error-motion", args->error_motion,
                   "Error-motion harmonics to estimate per joint, one count each (e.g. 0 3: joint 2's angle-dependent\n"
-                  "tilt, radial, axial and angular errors to the 3rd harmonic; calib/robot_model.h)")
+                  "tilt, radial, axial and angular errors to the 3rd harmonic; model/robot_model.h)")
       ->delimiter(',')
       ->type_name("H1 H2 ..");
   sub->add_flag("--registration-only", args->registration_only, "Fit only base and tool, DH held nominal");

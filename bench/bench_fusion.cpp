@@ -5,8 +5,8 @@
 #include <cmath>
 #include <vector>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
 #include "core/random.h"
 #include "fusion/kalman.h"
 #include "fusion/moifa.h"

@@ -17,7 +17,7 @@
 #include <Eigen/Core>
 
 #include "calib/robot_calibration.h"
-#include "calib/robot_model.h"
+#include "model/robot_model.h"
 #include "core/pose_math.h"
 
 namespace mcms {

@@ -19,15 +19,16 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/random.h"
+#include "model/kinematics.h"
 
 namespace mcms {
 
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr int kParamsPerJoint = 4;
+constexpr int kParamsPerJoint = kDhParamsPerJoint;
 constexpr int kBaseAndTool = 12;
-constexpr int kPerHarmonic = 12;  // sin [rx ry rz x y z], cos [rx ry rz x y z]
+constexpr int kPerHarmonic = kErrorMotionParamsPerHarmonic;  // sin [rx ry rz x y z], cos [..]
 
 int BaseOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints(); }
 int ToolOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints() + 6; }
@@ -35,6 +36,13 @@ int ErrorMotionOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoint
 // Harmonics of error motion estimated for joint i (options.error_motion_harmonics).
 int HarmonicsOf(const RobotCalibrationOptions& o, int i) {
   return o.error_motion_harmonics.empty() ? 0 : o.error_motion_harmonics[i];
+}
+// Whether parameter k of the layout is an angle (rad) rather than a length (m): DH theta
+// and alpha, the rotation parts of base and tool, the rotation parts of error motion.
+bool IsAngle(const RobotModel& r, int k) {
+  if (k < BaseOffset(r)) return k % kParamsPerJoint == 0 || k % kParamsPerJoint == 3;
+  if (k < ErrorMotionOffset(r)) return (k - BaseOffset(r)) % 6 < 3;
+  return (k - ErrorMotionOffset(r)) % 6 < 3;
 }
 int NumParameters(const RobotModel& r, const RobotCalibrationOptions& o) {
   int n = ErrorMotionOffset(r);
@@ -59,63 +67,14 @@ struct MeasurementCost {
     using M3 = Eigen::Matrix<T, 3, 3>;
     using V3 = Eigen::Matrix<T, 3, 1>;
     const T* x = params[0];
+    ChainCorrections<T> c;
+    c.dh = x;
+    c.error_motion = x + ErrorMotionOffset(*robot);
+    c.error_motion_harmonics = harmonics;
+    const PoseT<T> F = ForwardKinematicsT(*robot, q, c);
+    const M3& R = F.R;
+    const V3& t = F.t;
     const auto& joints = robot->Joints();
-    const bool standard = robot->Convention() == DhConvention::kStandard;
-    M3 R = M3::Identity();
-    V3 t = V3::Zero();
-    const T* em = x + ErrorMotionOffset(*robot);
-    for (size_t i = 0; i < joints.size(); ++i) {
-      const Joint& j = joints[i];
-      const T* e = x + kParamsPerJoint * i;
-      const bool rev = j.type == JointType::kRevolute;
-      const T theta = T(j.theta_offset + (rev ? q[i] : 0.0)) + e[0];
-      const T d = T(j.d + (rev ? 0.0 : q[i])) + e[1];
-      const T a = T(j.a) + e[2];
-      const T alpha = T(j.alpha) + e[3];
-      const T ct = cos(theta), st = sin(theta), ca = cos(alpha), sa = sin(alpha);
-      M3 Rl;
-      V3 tl;
-      if (standard) {
-        Rl << ct, -st * ca, st * sa, st, ct * ca, -ct * sa, T(0), sa, ca;
-        tl << a * ct, a * st, d;
-      } else {
-        Rl << ct, -st, T(0), ca * st, ca * ct, -sa, sa * st, sa * ct, ca;
-        tl << a, -sa * d, ca * d;
-      }
-      // Error motion (robot_model.h): the model's harmonics plus the estimated corrections.
-      const int h_est = i < harmonics.size() ? harmonics[i] : 0;
-      const int h_all = std::max(j.Harmonics(), h_est);
-      if (h_all > 0) {
-        T xi[6] = {T(0), T(0), T(0), T(0), T(0), T(0)};
-        for (int h = 0; h < h_all; ++h) {
-          const double sh = std::sin((h + 1) * q[i]), chh = std::cos((h + 1) * q[i]);
-          for (int k = 0; k < 6; ++k) {
-            if (h < j.Harmonics()) xi[k] += T(sh * j.error_motion_sin[h][k] + chh * j.error_motion_cos[h][k]);
-            if (h < h_est) xi[k] += sh * em[kPerHarmonic * h + k] + chh * em[kPerHarmonic * h + 6 + k];
-          }
-        }
-        M3 Re;
-        ceres::AngleAxisToRotationMatrix(xi, Re.data());
-        const V3 te(xi[3], xi[4], xi[5]);
-        if (standard) {
-          // E * [Rl, tl]
-          tl = Re * tl + te;
-          Rl = Re * Rl;
-        } else {
-          // A E A^-1 [Rl, tl] with A = [Rx(alpha), (a, 0, 0)]
-          M3 Ra;
-          Ra << T(1), T(0), T(0), T(0), ca, -sa, T(0), sa, ca;
-          const V3 ta(a, T(0), T(0));
-          const M3 Rc = Ra * Re * Ra.transpose();
-          const V3 tc = Ra * te + ta - Rc * ta;
-          tl = Rc * tl + tc;
-          Rl = Rc * Rl;
-        }
-      }
-      em += kPerHarmonic * h_est;
-      t = t + R * tl;
-      R = R * Rl;
-    }
     const T* b = x + kParamsPerJoint * joints.size();
     const T* u = b + 6;
     M3 dRb, dRu;
@@ -150,6 +109,20 @@ std::unique_ptr<CostFunction> MakeCost(const RobotModel& robot, const Pose& base
   c->SetNumResiduals(m.R_meas_tool ? 6 : 3);
   return c;
 }
+
+}  // namespace
+
+std::unique_ptr<ceres::CostFunction> MakeRobotMeasurementCost(const RobotModel& robot, const Pose& base0,
+                                                               const RobotMeasurement& m,
+                                                               const RobotCalibrationOptions& options) {
+  return MakeCost(robot, base0, m, options);
+}
+
+int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOptions& options) {
+  return NumParameters(robot, options);
+}
+
+namespace {
 
 // Whitened residuals and the dense Jacobian (rows: residuals, columns: all parameters).
 void Evaluate(const std::vector<std::unique_ptr<CostFunction>>& costs, const Eigen::VectorXd& x,
@@ -279,22 +252,17 @@ std::vector<double> ReadList(const YAML::Node& n, const std::string& where) {
   return v;
 }
 
-// Identifiability at 60 poses drawn uniformly within the joint limits (open or very wide
-// limits clamped to +-pi rad or +-1 m), with the requests already applied in `requested`:
-// the redundancies that hold for any pose set.
-std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& robot, const Pose& T_meas_base,
-                                                           bool six_dof, const RobotCalibrationOptions& options,
-                                                           const RobotCalibrationResult& requested) {
-  Rng rng(20260101);
+// Whitened Jacobian rows of hypothetical measurements at the given poses (measured values
+// are the model's own predictions: only the Jacobian matters), over all parameters.
+Eigen::MatrixXd PoseJacobian(const RobotModel& robot, const Pose& T_meas_base,
+                             const std::vector<Eigen::VectorXd>& poses, bool six_dof,
+                             const RobotCalibrationOptions& options) {
   std::vector<std::unique_ptr<CostFunction>> costs;
-  for (int k = 0; k < 60; ++k) {
+  for (size_t i = 0; i < poses.size(); ++i) {
+    std::string why;
+    if (!robot.WithinLimits(poses[i], &why)) Throw("pose ", i + 1, ": ", why);
     RobotMeasurement m;
-    m.q.resize(robot.NumJoints());
-    for (int i = 0; i < robot.NumJoints(); ++i) {
-      const Joint& j = robot.Joints()[i];
-      const double wide = j.type == JointType::kRevolute ? kPi : 1.0;
-      m.q[i] = rng.Uniform(std::max(j.lower, -wide), std::min(j.upper, wide));
-    }
+    m.q = poses[i];
     const Pose T = T_meas_base * robot.T_base_tool(m.q);
     m.p_meas = T.t;
     if (six_dof) m.R_meas_tool = T.R;
@@ -303,6 +271,27 @@ std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& rob
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
   Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot, options)), &r, &J);
+  return J;
+}
+
+// Identifiability at 60 poses drawn uniformly within the joint limits (open or very wide
+// limits clamped to +-pi rad or +-1 m), with the requests already applied in `requested`:
+// the redundancies that hold for any pose set.
+std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& robot, const Pose& T_meas_base,
+                                                           bool six_dof, const RobotCalibrationOptions& options,
+                                                           const RobotCalibrationResult& requested) {
+  Rng rng(20260101);
+  std::vector<Eigen::VectorXd> poses;
+  for (int k = 0; k < 60; ++k) {
+    Eigen::VectorXd q(robot.NumJoints());
+    for (int i = 0; i < robot.NumJoints(); ++i) {
+      const Joint& j = robot.Joints()[i];
+      const double wide = j.type == JointType::kRevolute ? kPi : 1.0;
+      q[i] = rng.Uniform(std::max(j.lower, -wide), std::min(j.upper, wide));
+    }
+    poses.push_back(q);
+  }
+  const Eigen::MatrixXd J = PoseJacobian(robot, T_meas_base, poses, six_dof, options);
   std::vector<CalibrationParameter> params = requested.parameters;
   for (auto& p : params)
     if (p.reason != "fixed by request" && p.reason.rfind("DH parameters not estimated", 0) != 0) {
@@ -485,7 +474,10 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
 
   RobotCalibrationResult result;
   result.parameters.resize(np);
-  for (int k = 0; k < np; ++k) result.parameters[k].name = names[k];
+  for (int k = 0; k < np; ++k) {
+    result.parameters[k].name = names[k];
+    result.parameters[k].angle = IsAngle(robot, k);
+  }
   for (const std::string& f : options.fixed) {
     const auto it = std::find(names.begin(), names.end(), f);
     if (it == names.end())
@@ -664,32 +656,13 @@ CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_b
 
 namespace {
 
-// Whitened Jacobian rows of hypothetical measurements at the given poses (measured values
-// are the model's own predictions: only the Jacobian matters), over all parameters.
-Eigen::MatrixXd PoseJacobian(const RobotModel& robot, const Pose& T_meas_base,
-                             const std::vector<Eigen::VectorXd>& poses, bool six_dof,
-                             const RobotCalibrationOptions& options) {
-  std::vector<std::unique_ptr<CostFunction>> costs;
-  for (size_t i = 0; i < poses.size(); ++i) {
-    std::string why;
-    if (!robot.WithinLimits(poses[i], &why)) Throw("pose ", i + 1, ": ", why);
-    RobotMeasurement m;
-    m.q = poses[i];
-    const Pose T = T_meas_base * robot.T_base_tool(m.q);
-    m.p_meas = T.t;
-    if (six_dof) m.R_meas_tool = T.R;
-    costs.push_back(MakeCost(robot, T_meas_base, m, options));
-  }
-  Eigen::VectorXd r;
-  Eigen::MatrixXd J;
-  Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot, options)), &r, &J);
-  return J;
-}
-
 std::vector<int> KeptColumns(const RobotModel& robot, const Eigen::MatrixXd& J, const RobotCalibrationOptions& o) {
   std::vector<CalibrationParameter> params(J.cols());
   const auto names = CalibrationParameterNames(robot, o);
-  for (size_t k = 0; k < params.size(); ++k) params[k].name = names[k];
+  for (size_t k = 0; k < params.size(); ++k) {
+    params[k].name = names[k];
+    params[k].angle = IsAngle(robot, static_cast<int>(k));
+  }
   for (const auto& f : o.fixed)
     for (auto& p : params)
       if (p.name == f) p.fixed = true;

@@ -19,7 +19,7 @@
 //   tool:  tool.rx, tool.ry, tool.rz (R = Exp(r) R_hat in the flange frame), tool.x, tool.y, tool.z
 //   then, for each joint i with RobotCalibrationOptions::error_motion_harmonics[i] = H > 0,
 //   for h = 1..H: J.em<h>.sin.{rx,ry,rz,x,y,z}, J.em<h>.cos.{rx,ry,rz,x,y,z}
-//          (errors added to the joint's error motion, calib/robot_model.h: a model
+//          (errors added to the joint's error motion, model/robot_model.h: a model
 //          extension beyond DH for rotary axes whose motion is not a perfect rotation)
 // This is the project's [dtheta; dp] layout for both transforms (docs/conventions.md).
 //
@@ -36,14 +36,19 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
-#include "calib/robot_model.h"
+#include "model/robot_model.h"
 #include "core/pose_math.h"
+
+namespace ceres {
+class CostFunction;
+}
 
 namespace mcms {
 
@@ -108,6 +113,7 @@ struct CalibrationParameter {
   double estimate = 0.0;  // identified value (= initial when fixed)
   double sigma = 0.0;     // standard deviation (0 when fixed)
   bool fixed = false;
+  bool angle = false;     // rad (an angle) or m (a length): how reports print it
   std::string reason;     // why it was fixed; empty when estimated
 };
 
@@ -150,6 +156,15 @@ struct RobotCalibrationResult {
 
 // Names of the parameters in the layout order (4n + 12, plus the error-motion terms that
 // `options` asks for).
+// The calibration's cost of one measurement: one parameter block of the layout above (all
+// parameters, errors relative to the starting values), 3 or 6 residuals whitened by the
+// options' sigmas; base0 is the starting T_meas_base, the tool starts at the robot's.
+// Exposed so that its derivatives can be checked against numeric ones.
+std::unique_ptr<ceres::CostFunction> MakeRobotMeasurementCost(const RobotModel& robot, const Pose& base0,
+                                                               const RobotMeasurement& m,
+                                                               const RobotCalibrationOptions& options);
+int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOptions& options);
+
 std::vector<std::string> CalibrationParameterNames(const RobotModel& robot,
                                                    const RobotCalibrationOptions& options = {});
 // The model with error-motion errors added: `harmonics` as in the options, delta with

@@ -22,8 +22,8 @@
 
 #include <Eigen/Core>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
 #include "core/pose_math.h"
 #include "fusion/moifa.h"
 

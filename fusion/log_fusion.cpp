@@ -64,22 +64,13 @@ void CheckTimeOverlap(const SensorLogs& logs) {
 }
 
 PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covariance_rig, const FusionSetup& setup) {
-  const Pose T_target_flange = setup.T_flange_target.Inverse();
-  PoseWithCovariance out;
-  out.T = setup.T_base_rig * T_rig_target * T_target_flange;
-  out.covariance = TransformPoseCovariance(covariance_rig, setup.T_base_rig, T_rig_target, T_target_flange);
-  Mat6 K = Mat6::Identity();
-  K.bottomLeftCorner<3, 3>() = -Skew(out.T.t - setup.T_base_rig.t);
-  out.covariance += K * setup.T_base_rig_covariance * K.transpose();
-  out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
-  return out;
+  return CameraFlangePose(CellGeometry{setup.T_base_rig, setup.T_base_rig_covariance, setup.T_flange_target},
+                          T_rig_target, covariance_rig);
 }
 
 PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& setup) {
-  PoseWithCovariance out;
-  out.T = setup.robot.T_base_flange(q);
-  out.covariance = setup.robot.PoseCovariance(q, RobotModel::EndFrame::kFlange) + setup.robot_accuracy_covariance;
-  out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
+  PoseWithCovariance out =
+      RobotFlangePose(setup.robot, q, setup.robot.EncoderCovariance(), setup.robot_accuracy_covariance);
   if (out.covariance.llt().info() != Eigen::Success || !(out.covariance.diagonal().minCoeff() > 0))
     Throw("robot '", setup.robot.Name(), "': its pose covariance is singular; give encoder sigmas in the robot file or ",
           "robot_accuracy in the setup file ", setup.source.string());

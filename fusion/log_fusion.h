@@ -13,7 +13,7 @@
 //                right for one frame's uncertainty but optimistic for averages over frames.
 //  robot         FK of the joint readings linearly interpolated at the frame time (absent
 //                when the time lies outside the joint log), covariance J Q_enc J^T (encoder
-//                noise, calib/robot_model.h) plus the setup's absolute-accuracy covariance.
+//                noise, model/robot_model.h) plus the setup's absolute-accuracy covariance.
 //  inclinometer  the readings within +-period/2 of the frame time, averaged; n readings
 //                carry n times the information of one (independent noise). A rank-2
 //                orientation constraint (no yaw), linearized at the fused orientation of the
@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include "model/flange_pose.h"
 #include "fusion/sensor_logs.h"
 
 namespace mcms {
@@ -50,12 +51,8 @@ struct SensorLogs {
 // range does not overlap the tracker's; the message names both files and their ranges.
 void CheckTimeOverlap(const SensorLogs& logs);
 
-struct PoseWithCovariance {
-  Pose T;
-  Mat6 covariance = Mat6::Zero();  // [dtheta; dp], base frame
-};
-
-// The camera's measurement of T_base_flange with its covariance (see the header comment).
+// The camera's measurement of T_base_flange with its covariance: model/flange_pose.h with
+// the setup's cell geometry.
 PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covariance_rig, const FusionSetup& setup);
 // FK at q with encoder and absolute-accuracy covariance. InputError when that covariance is
 // singular (a robot file without encoder sigmas and no robot_accuracy in the setup).

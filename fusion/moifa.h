@@ -8,7 +8,7 @@
 // any P_i in the positive semi-definite sense. Everything is computed in information form
 // (Lambda_i = P_i^-1, eta_i = Lambda_i x_i), so a measurement that constrains only some
 // directions (singular Lambda_i, e.g. the inclinometer's rank-2 orientation information,
-// calib/inclinometer.h) enters the same sum; only the total information must be invertible.
+// model/inclinometer.h) enters the same sum; only the total information must be invertible.
 //
 // The paper's misprint. Equations (13) and (16) print the weight as
 //     W_i = { sum_j P_j }^-1 P_i^-1          (inverse OUTSIDE the sum)
@@ -31,7 +31,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/inclinometer.h"
+#include "model/inclinometer.h"
 #include "core/pose_math.h"
 
 namespace mcms {

@@ -20,7 +20,7 @@
 //    joints and m for prismatic ones. Every reading must lie within the joint limits.
 //
 //  Inclinometer:  time_s,tilt_x_<unit>,tilt_y_<unit>   (unit rad or deg)
-//    The two readings of calib/inclinometer.h: the angle of the sensor's x (y) axis above
+//    The two readings of model/inclinometer.h: the angle of the sensor's x (y) axis above
 //    the horizontal plane, bias included (the setup's bias is subtracted by the model).
 //
 //  Setup (YAML; every key carries its unit; unknown keys are errors):
@@ -35,7 +35,7 @@
 //    T_flange_target:                 # the five-ball target on the flange
 //      translation_m: [x, y, z]
 //      quaternion_wxyz: [w, x, y, z]
-//    inclinometer:                    # optional block; defaults of calib/inclinometer.h
+//    inclinometer:                    # optional block; defaults of model/inclinometer.h
 //      quaternion_wxyz: [w, x, y, z]  # R_flange_incl, sensor frame to flange frame
 //      bias_rad: [bx, by]             # or bias_deg
 //      sigma_rad: 1.7e-4              # or sigma_deg: per-axis reading noise
@@ -56,8 +56,8 @@
 
 #include <Eigen/Core>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
 #include "core/pose_math.h"
 #include "fusion/kalman.h"
 

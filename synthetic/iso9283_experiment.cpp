@@ -9,7 +9,7 @@
 #include <Eigen/QR>
 
 #include "calib/robot_calibration.h"
-#include "calib/robot_model.h"
+#include "model/robot_model.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/random.h"
@@ -53,15 +53,9 @@ struct Kinematics {
   }
   Pose Tool(const Eigen::VectorXd& q) const { return T_rig_base * robot.T_base_tool(Effective(q)); }
   Pose Flange(const Eigen::VectorXd& q) const { return T_rig_base * robot.T_base_flange(Effective(q)); }
-  // nullopt when out of reach. SolveIk's iterations evaluate the kinematics outside the
-  // joint limits when the goal is unreachable, which the model refuses (InputError): that
-  // is an unreachable goal too.
+  // nullopt when out of reach.
   std::optional<Eigen::VectorXd> Ik(const Pose& T_rig_target, const Eigen::VectorXd& seed) const {
-    try {
-      return SolveIk(robot, T_rig_base.Inverse() * T_rig_target * robot.T_flange_tool().Inverse(), seed);
-    } catch (const InputError&) {
-      return std::nullopt;
-    }
+    return SolveIk(robot, T_rig_base.Inverse() * T_rig_target * robot.T_flange_tool().Inverse(), seed);
   }
   // The geometric Jacobian of the tool pose in the rig frame's [dtheta; dp] layout.
   Eigen::Matrix<double, 6, Eigen::Dynamic> Jacobian(const Eigen::VectorXd& q) const {

@@ -10,7 +10,7 @@
 //    controller maps a command into joints through what it believes: T_rig_base, its DH
 //    table and T_flange_tool. The simulation's truth plays the ISO reference instrument:
 //    attained poses are the TRUE robot's forward kinematics of the attained joints.
-//  - The true robot: the nominal KR 5 arc (calib/robots/kuka_kr5_arc.yaml) plus the DH
+//  - The true robot: the nominal KR 5 arc (model/robots/kuka_kr5_arc.yaml) plus the DH
 //    errors of an uncalibrated robot, each of magnitude uniform in [0.1, 0.3] mm (a, d)
 //    or [0.01, 0.03] deg (alpha, theta offset) with a random sign, plus a base error
 //    (T_rig_base, 0.5 mm and 0.02 deg) and a tool error (T_flange_target, 0.2 mm and
@@ -51,7 +51,7 @@
 //    J Q_enc J^T + J_par C_par J_par^T + U: the second term the calibration's parameter
 //    covariance propagated to the pose, U the fit's residual per axis (what the model
 //    cannot explain; camera noise included, so on the safe side).
-//    Inclinometer: calib/inclinometer.h, the mean of inclinometer_readings readings taken
+//    Inclinometer: model/inclinometer.h, the mean of inclinometer_readings readings taken
 //    while the robot stands at the pose (pitch/roll only). It sits on the target plate:
 //    its R_flange_incl is taken as the rotation from its frame to the TARGET's, known
 //    (leveled against the camera beforehand). Referenced through the robot's calibrated
@@ -83,7 +83,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/inclinometer.h"
+#include "model/inclinometer.h"
 #include "calib/iso9283.h"
 #include "core/pose_math.h"
 

@@ -17,21 +17,6 @@ bool LabOptions::IsValid(std::string* why) const {
   return inclinometer.IsValid(why);
 }
 
-std::optional<Eigen::VectorXd> SolveIk(const RobotModel& robot, const Pose& T_goal, const Eigen::VectorXd& seed) {
-  Eigen::VectorXd q = seed;
-  for (int it = 0; it < 200; ++it) {
-    const Vec6 e = BoxMinus(T_goal, robot.T_base_flange(q));
-    if (e.head<3>().norm() < 1e-12 && e.tail<3>().norm() < 1e-12) break;
-    const Eigen::MatrixXd J = robot.Jacobian(q, RobotModel::EndFrame::kFlange);
-    const double lambda = 1e-3;
-    const Eigen::MatrixXd JJt = J * J.transpose() + lambda * lambda * Eigen::MatrixXd::Identity(6, 6);
-    q += J.transpose() * JJt.ldlt().solve(e);
-  }
-  const Vec6 e = BoxMinus(T_goal, robot.T_base_flange(q));
-  if (e.norm() > 1e-9 || !robot.WithinLimits(q)) return std::nullopt;
-  return q;
-}
-
 namespace {
 RobotModel Perturbed(const RobotModel& nominal, const LabOptions& o, Rng& rng) {
   std::vector<Joint> joints = nominal.Joints();
@@ -87,8 +72,9 @@ LabScenario MakeLabScenario(const LabOptions& o) {
     const Vec3 dir(r * std::cos(golden * i), r * std::sin(golden * i), z);
     const Vec3 rot(rng.Uniform(-1, 1), rng.Uniform(-1, 1), rng.Uniform(-1, 1));
     const Pose goal{ExpSO3(rot * spread / std::sqrt(3.0)) * R_down, centre_base + o.sphere_radius_m * dir};
-    const auto q = SolveIk(lab.nominal, goal, i == 0 ? seed : lab.q_points.back());
-    if (!q) Throw("lab scenario: point ", i, " at ", goal.t.transpose(), " m is out of the robot's reach");
+    std::string why;
+    const auto q = SolveIk(lab.nominal, goal, i == 0 ? seed : lab.q_points.back(), &why);
+    if (!q) Throw("lab scenario: point ", i, " at ", goal.t.transpose(), " m is out of the robot's reach: ", why);
     // The robot is commanded with its nominal model; it really goes where the true
     // kinematics take those joints.
     lab.q_points.push_back(*q);

@@ -16,8 +16,9 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/inverse_kinematics.h"
+#include "model/robot_model.h"
 #include "core/pose_math.h"
 #include "synthetic/scenario.h"
 
@@ -63,9 +64,5 @@ struct LabScenario {
 // the three sensor streams and the camera frames (not rendered). InputError when the
 // options are invalid or a point is out of reach.
 LabScenario MakeLabScenario(const LabOptions& options = {});
-
-// Damped least-squares inverse kinematics of `robot`'s flange; nullopt when it does not
-// converge within the joint limits.
-std::optional<Eigen::VectorXd> SolveIk(const RobotModel& robot, const Pose& T_base_flange, const Eigen::VectorXd& seed);
 
 }  // namespace mcms

@@ -21,7 +21,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "calib/robot_model.h"
+#include "model/robot_model.h"
 #include "core/io.h"
 #include "core/pose_math.h"
 #include "vision/camera_model.h"
@@ -115,7 +115,7 @@ double Figure(const std::string& text, const std::string& line_key, const std::s
 // ---------------------------------------------------------------------------------------
 // calib-robot
 
-// The two-axis positioner of the data set as a robot file (calib/robots/*.yaml format):
+// The two-axis positioner of the data set as a robot file (model/robots/*.yaml format):
 // the upstream nominal DH table (standard DH rows, see tests/test_calib_positioner.cpp)
 // and the upstream target-mount guess (pose_initial_guesses.yaml) as the starting tool.
 constexpr const char* kPositionerYaml = R"(name: two-axis positioner

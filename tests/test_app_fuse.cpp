@@ -10,8 +10,8 @@
 #include <map>
 #include <sstream>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
 #include "core/io.h"
 #include "tests/test_util.h"
 

@@ -142,7 +142,7 @@ TEST(Positioner, RealDataCalibrationBeatsNominalModel) {
 // The model extension. The DH calibration above leaves a residual that depends on the
 // turntable angle q2, which no DH table can represent; a rotary axis that is not a
 // perfect rotation has "error motion" (ISO 230-7: tilt, radial, axial and angular
-// positioning error as functions of the angle), modelled in calib/robot_model.h as a
+// positioning error as functions of the angle), modelled in model/robot_model.h as a
 // harmonic series of q2 and estimated with the rest. The number of harmonics is chosen
 // by held-out (5-fold) error, and the gain is measured held out, never on the fitting set.
 // Measured (position mean / rotation mean, held out):

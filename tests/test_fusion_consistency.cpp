@@ -5,8 +5,8 @@
 
 #include <cmath>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
 #include "core/error.h"
 #include "core/random.h"
 #include "fusion/chi_square.h"

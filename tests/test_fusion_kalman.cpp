@@ -6,8 +6,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "calib/inclinometer.h"
-#include "calib/robot_model.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
 #include "core/error.h"
 #include "core/random.h"
 #include "fusion/chi_square.h"

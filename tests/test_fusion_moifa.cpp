@@ -7,7 +7,7 @@
 
 #include <Eigen/Eigenvalues>
 
-#include "calib/inclinometer.h"
+#include "model/inclinometer.h"
 #include "core/error.h"
 #include "core/random.h"
 #include "fusion/chi_square.h"

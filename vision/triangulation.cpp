@@ -94,18 +94,21 @@ std::optional<TriangulatedPoint> TriangulateNView(const CameraRig& rig,
   std::vector<Mat2> W(obs.size());
   for (size_t k = 0; k < obs.size(); ++k) W[k] = WhiteningOf(points[obs[k].camera][obs[k].index].cov);
 
+  // Normal equations at p: H = sum Jw^T Jw, g = sum Jw^T rw, whitened chi-square and the
+  // sum of squared pixel residuals; false when p is behind a camera.
   Mat3 H = Mat3::Zero();
+  Vec3 g = Vec3::Zero();
   double chi2 = 0, sq = 0;
-  for (int it = 0; it < options.max_iterations; ++it) {
+  const auto normal_equations = [&](const Vec3& at) {
     H.setZero();
-    Vec3 g = Vec3::Zero();
+    g.setZero();
     chi2 = sq = 0;
     for (size_t k = 0; k < obs.size(); ++k) {
       const CameraModel& cam = rig.cameras[obs[k].camera];
-      if (!InFront(cam, p, 1e-3)) return std::nullopt;
+      if (!InFront(cam, at, 1e-3)) return false;
       Eigen::Matrix<double, 2, 3> J;
       const Vec2 e = points[obs[k].camera][obs[k].index].q -
-                     Predict(cam, p, options.sphere_radius_m, options.bias_outline_points, &J);
+                     Predict(cam, at, options.sphere_radius_m, options.bias_outline_points, &J);
       const Vec2 r = W[k] * e;
       const Eigen::Matrix<double, 2, 3> Jw = W[k] * J;
       H += Jw.transpose() * Jw;
@@ -113,25 +116,17 @@ std::optional<TriangulatedPoint> TriangulateNView(const CameraRig& rig,
       chi2 += r.squaredNorm();
       sq += e.squaredNorm();
     }
+    return true;
+  };
+  for (int it = 0; it < options.max_iterations; ++it) {
+    if (!normal_equations(p)) return std::nullopt;
     const Vec3 step = H.ldlt().solve(g);
     if (!step.allFinite()) return std::nullopt;
     p += step;
     if (step.norm() < 1e-10) break;
   }
   // Final residuals and covariance at the solution.
-  H.setZero();
-  chi2 = sq = 0;
-  for (size_t k = 0; k < obs.size(); ++k) {
-    const CameraModel& cam = rig.cameras[obs[k].camera];
-    if (!InFront(cam, p, 1e-3)) return std::nullopt;
-    Eigen::Matrix<double, 2, 3> J;
-    const Vec2 e = points[obs[k].camera][obs[k].index].q -
-                   Predict(cam, p, options.sphere_radius_m, options.bias_outline_points, &J);
-    const Eigen::Matrix<double, 2, 3> Jw = W[k] * J;
-    H += Jw.transpose() * Jw;
-    chi2 += (W[k] * e).squaredNorm();
-    sq += e.squaredNorm();
-  }
+  if (!normal_equations(p)) return std::nullopt;
   TriangulatedPoint t;
   t.p_rig = p;
   t.cov = H.inverse();

@@ -7,7 +7,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
-#include "calib/inclinometer.h"
+#include "model/inclinometer.h"
 #include "core/error.h"
 #include "core/random.h"
 #include "tests/test_util.h"

@@ -7,7 +7,7 @@
 // R = Exp(dtheta) * R_hat and p = p_hat + dp, both expressed in the BASE frame.
 //
 // A robot is data, not code: RobotModel::Read parses a YAML description (format in
-// calib/robots/kuka_kr5_arc.yaml, the default robot, whose text is embedded into the
+// model/robots/kuka_kr5_arc.yaml, the default robot, whose text is embedded into the
 // library at build time so RobotModel::Default() needs no source tree).
 #pragma once
 
@@ -75,7 +75,7 @@ class RobotModel {
   RobotModel(std::string name, DhConvention convention, std::vector<Joint> joints,
              const Pose& T_flange_tool = Pose::Identity());
 
-  // The KUKA KR 5 arc of the paper, from the embedded calib/robots/kuka_kr5_arc.yaml.
+  // The KUKA KR 5 arc of the paper, from the embedded model/robots/kuka_kr5_arc.yaml.
   static RobotModel Default();
   // YAML description; InputError naming the file, the joint and the field on bad input.
   static RobotModel Read(const std::filesystem::path& path);

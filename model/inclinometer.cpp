@@ -1,4 +1,4 @@
-#include "calib/inclinometer.h"
+#include "model/inclinometer.h"
 
 #include <algorithm>
 #include <cmath>

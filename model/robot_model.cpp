@@ -1,4 +1,4 @@
-#include "calib/robot_model.h"
+#include "model/robot_model.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -12,11 +12,12 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "model/kinematics.h"
 
 namespace mcms {
 
 namespace internal {
-// Text of calib/robots/kuka_kr5_arc.yaml, generated into the build tree by
+// Text of model/robots/kuka_kr5_arc.yaml, generated into the build tree by
 // calib/CMakeLists.txt from calib/default_robot.cpp.in.
 extern const char* const kDefaultRobotYaml;
 extern const char* const kDefaultRobotSource;
@@ -388,29 +389,15 @@ void RobotModel::CheckJoints(const Eigen::VectorXd& q) const {
 
 Pose RobotModel::LinkTransform(int i, double qi) const {
   const Joint& j = joints_[i];
-  const double theta = j.theta_offset + (j.type == JointType::kRevolute ? qi : 0.0);
-  const double d = j.d + (j.type == JointType::kPrismatic ? qi : 0.0);
-  const double ct = std::cos(theta), st = std::sin(theta);
-  const double ca = std::cos(j.alpha), sa = std::sin(j.alpha);
-  Pose T;
-  if (convention_ == DhConvention::kStandard) {
-    // Rz(theta) Tz(d) Tx(a) Rx(alpha)
-    T.R << ct, -st * ca, st * sa, st, ct * ca, -ct * sa, 0.0, sa, ca;
-    T.t = Vec3(j.a * ct, j.a * st, d);
+  PoseT<double> L;
+  if (j.Harmonics() == 0) {
+    L = LinkTransformT<double>(convention_, j, qi, nullptr, nullptr);
   } else {
-    // Rx(alpha) Tx(a) Rz(theta) Tz(d)
-    T.R << ct, -st, 0.0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca;
-    T.t = Vec3(j.a, -sa * d, ca * d);
+    double xi[6];
+    ErrorMotionT<double>(j, qi, 0, nullptr, xi);
+    L = LinkTransformT<double>(convention_, j, qi, nullptr, xi);
   }
-  if (j.Harmonics() == 0) return T;
-  Vec6 xi = Vec6::Zero();
-  for (int h = 0; h < j.Harmonics(); ++h)
-    xi += std::sin((h + 1) * qi) * j.error_motion_sin[h] + std::cos((h + 1) * qi) * j.error_motion_cos[h];
-  const Pose E{ExpSO3(xi.head<3>()), xi.tail<3>()};
-  if (convention_ == DhConvention::kStandard) return E * T;
-  // Rx(alpha) Tx(a) E Rz(theta) Tz(d): split T at the joint's axis frame.
-  const Pose A{Eigen::AngleAxisd(j.alpha, Vec3::UnitX()).toRotationMatrix(), Vec3(j.a, 0.0, 0.0)};
-  return A * E * A.Inverse() * T;
+  return Pose{L.R, L.t};
 }
 
 std::vector<Pose> RobotModel::LinkFrames(const Eigen::VectorXd& q) const {

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <fstream>
 
-#include "calib/robot_model.h"
+#include "model/robot_model.h"
 #include "core/error.h"
 #include "core/random.h"
 #include "tests/test_util.h"
@@ -215,7 +215,7 @@ TEST(RobotModel, WriteReadRoundTrip) {
   ExpectSameRobot(scara, RobotModel::Read(dir / "scara.yaml"));
 
   // The shipped file and the embedded copy are the same robot.
-  ExpectSameRobot(kr5, RobotModel::Read(std::filesystem::path(MCMS_SOURCE_DIR) / "calib/robots/kuka_kr5_arc.yaml"));
+  ExpectSameRobot(kr5, RobotModel::Read(std::filesystem::path(MCMS_SOURCE_DIR) / "model/robots/kuka_kr5_arc.yaml"));
 }
 
 TEST(RobotModel, DegreesAndRadiansAgree) {

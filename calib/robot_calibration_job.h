@@ -1,0 +1,45 @@
+// The whole `mcms calib-robot` job as a library function: read the measurements, calibrate,
+// compare with the registered nominal model and by k-fold held-out errors, write the
+// report, the plot and the calibrated robot (the robot last; each file atomically; nothing
+// when the calibration fails). The command only parses options and prints.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "calib/robot_calibration.h"
+#include "core/pose_math.h"
+
+namespace mcms {
+
+struct RobotCalibrationJob {
+  std::filesystem::path measurements;   // YAML (calib/robot_calibration.h ReadRobotMeasurements)
+  std::filesystem::path robot;          // robot description; empty = the built-in default
+  std::filesystem::path output;         // calibrated robot YAML (required)
+  std::filesystem::path report, plot;   // optional
+  std::optional<Pose> base_guess;       // T_meas_base; default: rigid fit of nominal tool positions
+  std::optional<Pose> tool_guess;       // T_flange_tool; default: the robot file's tool
+  std::vector<std::string> fixed;
+  std::vector<int> error_motion_harmonics;
+  double position_sigma_m = 0.05e-3;
+  double rotation_sigma_rad = 0.05 * 3.14159265358979323846 / 180.0;
+  int folds = 5;                        // 0 = no held-out validation
+  int max_iterations = 200;
+  bool registration_only = false;
+  // Progress lines (may be empty).
+  std::function<void(const std::string&)> progress;
+};
+
+// Runs the job; returns the report text (also written to `report` when given). InputError
+// naming the input when anything is wrong; outputs are checked writable before the solve.
+std::string RunRobotCalibrationJob(const RobotCalibrationJob& job);
+
+// "translation_m [x, y, z], quaternion_wxyz [w, x, y, z]".
+std::string PoseText(const Pose& T);
+// Position (mm) and, when present, rotation (deg) mean, RMS and max.
+std::string ErrorStatsText(const ErrorStats& s);
+
+}  // namespace mcms

@@ -1,0 +1,176 @@
+#include "model/extensions.h"
+
+#include <sstream>
+
+#include "core/error.h"
+
+namespace mcms {
+
+const std::vector<EffectInfo>& EffectCatalog() {
+  static const std::vector<EffectInfo> catalog = {
+      {Effect::kJointOffset, "joint_offset", SensorKind::kRobot, "a constant offset of one joint's zero (rad or m)"},
+      {Effect::kLinkLength, "link_length", SensorKind::kRobot, "one DH length a or d off (m)"},
+      {Effect::kJointScale, "joint_scale", SensorKind::kRobot, "a gear-ratio error: the joint moves (1 + s) q"},
+      {Effect::kGravityCompliance, "gravity_compliance", SensorKind::kRobot,
+       "joint deflection proportional to its gravity torque (rad per N m)"},
+      {Effect::kThermalDrift, "thermal_drift", SensorKind::kRobot,
+       "every link length grows by a relative amount: exponential warm-up in time, or linear in temperature"},
+      {Effect::kBacklash, "backlash", SensorKind::kRobot, "a joint lags by half its backlash against the last move"},
+      {Effect::kErrorMotion, "error_motion", SensorKind::kRobot, "harmonic error motion of a rotary joint (ISO 230-7)"},
+      {Effect::kCameraMoved, "camera_moved", SensorKind::kCamera, "the camera's pose in the rig moved (6 dof)"},
+      {Effect::kFocalLength, "focal_length", SensorKind::kCamera, "both focal lengths scaled by 1 + s"},
+      {Effect::kPrincipalPoint, "principal_point", SensorKind::kCamera, "the principal point shifted (px)"},
+      {Effect::kRadialDistortion, "radial_distortion", SensorKind::kCamera, "k1 changed"},
+      {Effect::kCameraTimeOffset, "camera_time_offset", SensorKind::kCamera, "the camera's images are late (s)"},
+      {Effect::kPixelNoiseScale, "pixel_noise_scale", SensorKind::kCamera,
+       "the pixel noise is a factor larger than the noise model says"},
+      {Effect::kTargetGeometry, "target_geometry", SensorKind::kCamera,
+       "a ball of the target is not where the target file says (m)"},
+      {Effect::kInclinometerBias, "inclinometer_bias", SensorKind::kInclinometer, "a constant bias per axis (rad)"},
+      {Effect::kInclinometerMisalignment, "inclinometer_misalignment", SensorKind::kInclinometer,
+       "the sensor's mounting rotation on the flange is off (rad)"},
+      {Effect::kClockOffset, "clock_offset", SensorKind::kClock, "a sensor's clock is offset (s)"},
+      {Effect::kClockDrift, "clock_drift", SensorKind::kClock, "a sensor's clock is offset and runs at a rate 1 + r"},
+  };
+  return catalog;
+}
+
+const EffectInfo& Info(Effect e) {
+  for (const EffectInfo& i : EffectCatalog())
+    if (i.effect == e) return i;
+  Throw("unknown effect ", static_cast<int>(e));
+}
+
+const char* Name(Effect e) { return Info(e).name; }
+
+std::optional<Effect> EffectFromName(std::string_view name) {
+  for (const EffectInfo& i : EffectCatalog())
+    if (name == i.name) return i.effect;
+  return std::nullopt;
+}
+
+int Extension::NumParameters() const {
+  switch (effect) {
+    case Effect::kThermalDrift: return variant == 0 ? 2 : 1;
+    case Effect::kErrorMotion: return kErrorMotionParamsPerHarmonic * variant;
+    case Effect::kCameraMoved: return 6;
+    case Effect::kPrincipalPoint:
+    case Effect::kInclinometerBias:
+    case Effect::kClockDrift: return 2;
+    case Effect::kTargetGeometry:
+    case Effect::kInclinometerMisalignment: return 3;
+    default: return 1;
+  }
+}
+
+std::vector<std::string> Extension::ParameterNames() const {
+  switch (effect) {
+    case Effect::kJointOffset: return {"offset_rad"};
+    case Effect::kLinkLength: return {"delta_m"};
+    case Effect::kJointScale: return {"scale"};
+    case Effect::kGravityCompliance: return {"compliance_rad_per_Nm"};
+    case Effect::kThermalDrift:
+      return variant == 0 ? std::vector<std::string>{"growth", "time_constant_s"}
+                          : std::vector<std::string>{"growth_per_K"};
+    case Effect::kBacklash: return {"backlash_rad"};
+    case Effect::kErrorMotion: {
+      std::vector<std::string> names;
+      const char* axes[6] = {"rx", "ry", "rz", "x", "y", "z"};
+      for (int h = 1; h <= variant; ++h)
+        for (const char* f : {"sin", "cos"})
+          for (const char* a : axes) names.push_back(std::string(f) + std::to_string(h) + "_" + a);
+      return names;
+    }
+    case Effect::kCameraMoved: return {"rx_rad", "ry_rad", "rz_rad", "x_m", "y_m", "z_m"};
+    case Effect::kFocalLength: return {"relative_change"};
+    case Effect::kPrincipalPoint: return {"dcx_px", "dcy_px"};
+    case Effect::kRadialDistortion: return {"dk1"};
+    case Effect::kCameraTimeOffset: return {"offset_s"};
+    case Effect::kPixelNoiseScale: return {"scale"};
+    case Effect::kTargetGeometry: return {"dx_m", "dy_m", "dz_m"};
+    case Effect::kInclinometerBias: return {"bias_x_rad", "bias_y_rad"};
+    case Effect::kInclinometerMisalignment: return {"rx_rad", "ry_rad", "rz_rad"};
+    case Effect::kClockOffset: return {"offset_s"};
+    case Effect::kClockDrift: return {"offset_s", "rate"};
+  }
+  return {};
+}
+
+std::vector<double> Extension::InitialParameters() const {
+  std::vector<double> p(NumParameters(), 0.0);
+  if (effect == Effect::kThermalDrift && variant == 0) p[1] = 1800.0;
+  if (effect == Effect::kPixelNoiseScale) p[0] = 1.0;
+  return p;
+}
+
+std::string Extension::Where(const std::vector<std::string>& camera_names) const {
+  switch (Info(effect).sensor) {
+    case SensorKind::kRobot:
+      if (effect == Effect::kThermalDrift) return "robot";
+      if (effect == Effect::kLinkLength) return std::string(variant == 0 ? "a" : "d") + std::to_string(index + 1);
+      return "joint " + std::to_string(index + 1);
+    case SensorKind::kCamera:
+      if (effect == Effect::kTargetGeometry) return "ball " + std::to_string(index + 1);
+      if (index >= 0 && index < static_cast<int>(camera_names.size())) return camera_names[index];
+      return index >= 0 ? "camera " + std::to_string(index + 1) : "cameras";
+    case SensorKind::kInclinometer: return "inclinometer";
+    case SensorKind::kClock: return index >= 0 ? "sensor " + std::to_string(index + 1) : "clock";
+  }
+  return "";
+}
+
+std::string Extension::Label(const std::vector<std::string>& camera_names) const {
+  return std::string(Name(effect)) + " at " + Where(camera_names);
+}
+
+void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) const {
+  const EffectInfo& info = Info(effect);
+  const auto bad = [&](const std::string& what) { Throw("extension ", info.name, ": ", what); };
+  switch (effect) {
+    case Effect::kJointOffset:
+    case Effect::kJointScale:
+    case Effect::kGravityCompliance:
+    case Effect::kBacklash:
+    case Effect::kErrorMotion:
+    case Effect::kLinkLength:
+      if (!robot) bad("needs a robot");
+      if (index < 0 || index >= robot->NumJoints())
+        bad("joint index " + std::to_string(index) + " is outside the robot's " +
+            std::to_string(robot->NumJoints()) + " joints");
+      if (effect == Effect::kLinkLength && variant != 0 && variant != 1) bad("variant must be 0 (a) or 1 (d)");
+      if (effect == Effect::kErrorMotion && variant < 1) bad("needs at least one harmonic");
+      if (effect == Effect::kErrorMotion && robot->Joints()[index].type != JointType::kRevolute)
+        bad("error motion is for revolute joints");
+      break;
+    case Effect::kThermalDrift:
+      if (variant != 0 && variant != 1) bad("variant must be 0 (warm-up in time) or 1 (linear in temperature)");
+      break;
+    case Effect::kTargetGeometry:
+      if (index < 0 || (num_balls > 0 && index >= num_balls))
+        bad("ball index " + std::to_string(index) + " is outside the target's " + std::to_string(num_balls) + " balls");
+      break;
+    default:
+      if (info.sensor == SensorKind::kCamera && num_cameras > 0 && (index < 0 || index >= num_cameras))
+        bad("camera index " + std::to_string(index) + " is outside the rig's " + std::to_string(num_cameras) +
+            " cameras");
+      break;
+  }
+}
+
+Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorXd& q) {
+  constexpr double kG = 9.80665;
+  const std::vector<Pose> frames = robot.LinkFrames(q);
+  const Vec3 p = frames.back().t;
+  const Vec3 force(0.0, 0.0, -kG);
+  const bool standard = robot.Convention() == DhConvention::kStandard;
+  Eigen::VectorXd tau(robot.NumJoints());
+  for (int i = 0; i < robot.NumJoints(); ++i) {
+    // Joint i turns about z of frame i-1 (standard) or of frame i (modified).
+    const Pose& F = standard ? frames[i] : frames[i + 1];
+    const Vec3 z = F.R.col(2);
+    tau[i] = robot.Joints()[i].type == JointType::kRevolute ? z.cross(p - F.t).dot(force) : z.dot(force);
+  }
+  return tau;
+}
+
+}  // namespace mcms

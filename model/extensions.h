@@ -1,0 +1,259 @@
+// The catalog of model extensions: named, optional terms that plug into the nominal forward
+// model of a sensor, each with its own parameters. The audit (issue 11) fits them one at a
+// time and keeps those that earn their parameters; the calibrations and the simulation use
+// the same terms, so "what the model can be wrong about" is written once, here.
+//
+// Each extension is one small templated unit (scalar T = double or ceres::Jet): it takes
+// its parameter block and what the measurement knows (MeasurementContext) and changes one
+// quantity of the nominal model:
+//   robot          joint values (dq) and DH table (dh): joint_offset, joint_scale,
+//                  gravity_compliance, backlash, link_length, thermal_drift; error_motion
+//                  is the joint's harmonic error motion (model/kinematics.h, 12 / harmonic);
+//   cameras        camera_moved (T_rig_cam), focal_length, principal_point,
+//                  radial_distortion (intrinsics), camera_time_offset (the target's pose at
+//                  a shifted time), pixel_noise_scale (the noise model), target_geometry
+//                  (one ball's position on the target);
+//   inclinometer   inclinometer_bias, inclinometer_misalignment;
+//   clocks         clock_offset, clock_drift (a sensor's time stamps).
+// Parameter units are SI (rad, m, s); relative factors (scale, focal) are dimensionless.
+#pragma once
+
+#include <cmath>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+#include <ceres/rotation.h>
+
+#include "core/pose_math.h"
+#include "model/kinematics.h"
+#include "model/robot_model.h"
+
+namespace mcms {
+
+enum class Effect {
+  // robot
+  kJointOffset, kLinkLength, kJointScale, kGravityCompliance, kThermalDrift, kBacklash, kErrorMotion,
+  // cameras
+  kCameraMoved, kFocalLength, kPrincipalPoint, kRadialDistortion, kCameraTimeOffset, kPixelNoiseScale,
+  kTargetGeometry,
+  // inclinometer and clocks
+  kInclinometerBias, kInclinometerMisalignment, kClockOffset, kClockDrift,
+};
+
+enum class SensorKind { kRobot, kCamera, kInclinometer, kClock };
+
+struct EffectInfo {
+  Effect effect;
+  const char* name;         // the catalog name reports and tests use, e.g. "joint_offset"
+  SensorKind sensor;
+  const char* description;  // one line
+};
+
+// Every effect, in the order above.
+const std::vector<EffectInfo>& EffectCatalog();
+const EffectInfo& Info(Effect e);
+const char* Name(Effect e);
+// nullopt for a name not in the catalog.
+std::optional<Effect> EffectFromName(std::string_view name);
+
+// One extension: an effect at one place.
+//  index:   the joint (0-based) for joint_offset, joint_scale, gravity_compliance, backlash,
+//           error_motion; the link (0-based) for link_length; the camera for camera effects;
+//           the ball for target_geometry; unused (-1) otherwise.
+//  variant: link_length 0 = a, 1 = d; thermal_drift 0 = exponential warm-up in time,
+//           1 = linear in temperature; error_motion = the number of harmonics (>= 1).
+struct Extension {
+  Effect effect = Effect::kJointOffset;
+  int index = -1;
+  int variant = 0;
+
+  int NumParameters() const;
+  std::vector<std::string> ParameterNames() const;
+  // Parameter values of the nominal model (no effect): zeros, except the warm-up time
+  // constant of thermal_drift (a starting value, 1800 s) and the relative factors of
+  // pixel_noise_scale (1).
+  std::vector<double> InitialParameters() const;
+  // Where it acts, as reports name it: "joint 2", "a2"/"d4", "cam1" (camera_names given),
+  // "ball 3", the sensor's name.
+  std::string Where(const std::vector<std::string>& camera_names = {}) const;
+  // "joint_offset at joint 2".
+  std::string Label(const std::vector<std::string>& camera_names = {}) const;
+  // InputError when the index does not fit the robot (joints, links) or the variant is
+  // unknown; num_cameras / num_balls bound the camera and ball indices (0 = unchecked).
+  void Check(const RobotModel* robot, int num_cameras = 0, int num_balls = 0) const;
+};
+
+// What one measurement knows besides the joint values: the covariates an effect depends on.
+struct MeasurementContext {
+  double time_s = 0.0;
+  double temperature_c = std::nan("");   // NaN when the log has no temperature
+  double reference_temperature_c = 20.0; // temperature at which the DH table holds
+  // Per joint: the sign (+1, -1, 0) of the last move's direction (backlash), and the
+  // gravity torque of the flange load (GravityTorquePerKg times the load, N m).
+  Eigen::VectorXd move_direction;
+  Eigen::VectorXd gravity_torque;
+};
+
+// Torque (N m) that 1 kg at the flange origin puts on each joint by gravity (base z up,
+// g = 9.80665): tau_i = (z_i x (p_flange - o_i)) . (0, 0, -g) for a revolute joint i with
+// axis z_i through o_i; (z_i . (0, 0, -g)) for a prismatic one. Compliance deflects each
+// joint in proportion to it (the parameter carries the sign and the stiffness).
+Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorXd& q);
+
+// ---- robot units ------------------------------------------------------------------
+// Adds the effect of `e` with parameters p to the joint corrections dq (n) and the DH
+// corrections dh (4 n: [dtheta, dd, da, dalpha] per joint). error_motion is not handled
+// here (ChainCorrections::error_motion carries it).
+template <typename T>
+void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p, const Eigen::VectorXd& q,
+                         const MeasurementContext& c, T* dq, T* dh) {
+  const int i = e.index;
+  switch (e.effect) {
+    case Effect::kJointOffset: dq[i] += p[0]; break;
+    case Effect::kJointScale: dq[i] += p[0] * q[i]; break;
+    case Effect::kGravityCompliance:
+      if (c.gravity_torque.size() > i) dq[i] += p[0] * c.gravity_torque[i];
+      break;
+    case Effect::kBacklash:
+      if (c.move_direction.size() > i) dq[i] += 0.5 * p[0] * c.move_direction[i];
+      break;
+    case Effect::kLinkLength: dh[kDhParamsPerJoint * i + (e.variant == 0 ? 2 : 1)] += p[0]; break;
+    case Effect::kThermalDrift: {
+      // Every link length grows by the same relative amount s.
+      T s;
+      if (e.variant == 0) {
+        using std::exp;
+        s = p[0] * (1.0 - exp(-c.time_s / p[1]));
+      } else {
+        s = p[0] * (std::isfinite(c.temperature_c) ? c.temperature_c - c.reference_temperature_c : 0.0);
+      }
+      for (int k = 0; k < robot.NumJoints(); ++k) {
+        const Joint& j = robot.Joints()[k];
+        dh[kDhParamsPerJoint * k + 1] += s * j.d;
+        dh[kDhParamsPerJoint * k + 2] += s * j.a;
+      }
+      break;
+    }
+    default: break;
+  }
+}
+
+// T_base_flange of `robot` at q with the robot extensions `ext` (params[k] is the block of
+// ext[k]) applied: joint and DH corrections, and error motion.
+template <typename T>
+PoseT<T> ExtendedFlangeT(const RobotModel& robot, const std::vector<Extension>& ext, T const* const* params,
+                         const Eigen::VectorXd& q, const MeasurementContext& c) {
+  const int n = robot.NumJoints();
+  std::vector<T> dq(n, T(0)), dh(kDhParamsPerJoint * n, T(0));
+  std::vector<int> harmonics(n, 0);
+  std::vector<T> em;
+  // Error motion: the blocks of the error_motion extensions, joint by joint.
+  std::vector<const T*> em_of(n, nullptr);
+  for (size_t k = 0; k < ext.size(); ++k) {
+    if (ext[k].effect == Effect::kErrorMotion) {
+      harmonics[ext[k].index] = ext[k].variant;
+      em_of[ext[k].index] = params[k];
+    } else {
+      AddRobotCorrectionT(robot, ext[k], params[k], q, c, dq.data(), dh.data());
+    }
+  }
+  for (int i = 0; i < n; ++i)
+    for (int m = 0; m < kErrorMotionParamsPerHarmonic * harmonics[i]; ++m) em.push_back(em_of[i][m]);
+  ChainCorrections<T> cc;
+  cc.dh = dh.data();
+  cc.dq = dq.data();
+  cc.error_motion = em.empty() ? nullptr : em.data();
+  cc.error_motion_harmonics = harmonics;
+  return ForwardKinematicsT(robot, q, cc);
+}
+
+// ---- camera units -----------------------------------------------------------------
+// camera_moved: T_rig_cam' = Exp(p) T_rig_cam, p = [rotation vector; translation] in the
+// rig frame (the [dtheta; dp] layout).
+template <typename T>
+PoseT<T> MovedCameraT(const Pose& T_rig_cam, const T* p) {
+  PoseT<T> D;
+  ceres::AngleAxisToRotationMatrix(p, D.R.data());
+  D.t << p[3], p[4], p[5];
+  const PoseT<T> C = PoseT<T>::FromPose(T_rig_cam);
+  return PoseT<T>{D.R * C.R, D.R * C.t + D.t};
+}
+
+// Intrinsics [fx, fy, cx, cy, k1, ...] (mrcal's order for the OpenCV and pinhole models)
+// changed by focal_length (fx, fy scaled by 1 + p0), principal_point (cx += p0, cy += p1)
+// or radial_distortion (k1 += p0; a lens model without k1 is left unchanged, so the caller
+// must not offer it). Other effects leave them unchanged.
+template <typename T>
+void ExtendIntrinsicsT(const Extension& e, const T* p, T* intrinsics, int num_intrinsics) {
+  switch (e.effect) {
+    case Effect::kFocalLength:
+      intrinsics[0] *= 1.0 + p[0];
+      intrinsics[1] *= 1.0 + p[0];
+      break;
+    case Effect::kPrincipalPoint:
+      intrinsics[2] += p[0];
+      intrinsics[3] += p[1];
+      break;
+    case Effect::kRadialDistortion:
+      if (num_intrinsics > 4) intrinsics[4] += p[0];
+      break;
+    default: break;
+  }
+}
+
+// camera_time_offset: the camera's image shows the target at t + p0, so its pose is the
+// nominal T_rig_target moved along its velocity (twist [omega; v], rig frame, rad/s, m/s):
+// T' = Exp(p0 twist) T to first order in the motion.
+template <typename T>
+PoseT<T> TimeShiftedPoseT(const Pose& T_rig_target, const Vec6& twist, const T* p) {
+  T r[6];
+  for (int k = 0; k < 6; ++k) r[k] = p[0] * twist[k];
+  return MovedCameraT<T>(T_rig_target, r);
+}
+
+// pixel_noise_scale: the pixel noise model is off by a factor p0 on its standard deviation
+// (a wrong gain or read noise); returns the factor on the pixel covariance, p0^2.
+template <typename T>
+T PixelVarianceScaleT(const T* p) {
+  return p[0] * p[0];
+}
+
+// target_geometry: ball `e.index` at balls_target + p.
+template <typename T>
+Eigen::Matrix<T, 3, 1> MovedBallT(const Vec3& ball_target, const T* p) {
+  return ball_target.cast<T>() + Eigen::Matrix<T, 3, 1>(p[0], p[1], p[2]);
+}
+
+// ---- inclinometer and clocks --------------------------------------------------------
+// The inclinometer reading (tilts [x, y], rad; model/inclinometer.h) of a sensor mounted
+// at R_flange_incl, misaligned by Exp(misalignment) (3, flange frame; null = none), with
+// the bias (2; null = none), at flange orientation R_base_flange.
+template <typename T>
+Eigen::Matrix<T, 2, 1> InclinometerReadingT(const Mat3& R_base_flange, const Mat3& R_flange_incl,
+                                            const T* misalignment, const T* bias) {
+  Eigen::Matrix<T, 3, 3> M = Eigen::Matrix<T, 3, 3>::Identity();
+  if (misalignment) ceres::AngleAxisToRotationMatrix(misalignment, M.data());
+  const Eigen::Matrix<T, 3, 3> R_base_incl = R_base_flange.cast<T>() * M * R_flange_incl.cast<T>();
+  // up in the sensor frame = row 2 of R_base_incl; tilt_k = asin(e_k . up).
+  using std::asin;
+  Eigen::Matrix<T, 2, 1> tilt(asin(R_base_incl(2, 0)), asin(R_base_incl(2, 1)));
+  if (bias) {
+    tilt[0] += bias[0];
+    tilt[1] += bias[1];
+  }
+  return tilt;
+}
+
+// A sensor's time stamp on the reference clock: clock_offset t + p0; clock_drift
+// t + p0 + p1 (t - t0).
+template <typename T>
+T ReferenceTimeT(const Extension& e, const T* p, double t, double t0) {
+  if (e.effect == Effect::kClockOffset) return T(t) + p[0];
+  if (e.effect == Effect::kClockDrift) return T(t) + p[0] + p[1] * (t - t0);
+  return T(t);
+}
+
+}  // namespace mcms
