@@ -445,10 +445,21 @@ NoiseModelFit Finish(const VarianceData& d, const std::vector<std::string>& effe
         };
         H(i, j) = H(j, i) = (at(h, h) - at(h, -h) - at(-h, h) + at(-h, -h)) / (4 * h * h);
       }
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
-    if (es.eigenvalues().minCoeff() > 0) {
-      const Eigen::MatrixXd C = H.inverse();
-      for (size_t i = 0; i < n; ++i) se[i] = std::sqrt(C(i, i));
+    // A parameter driven to the edge of its range (a floor fitted to zero: its log runs
+    // off to -infinity) carries no information; the others' errors come from the rest.
+    std::vector<int> keep;
+    const double dmax = H.diagonal().cwiseAbs().maxCoeff();
+    for (size_t i = 0; i < n; ++i)
+      if (H(i, i) > 1e-9 * dmax) keep.push_back(static_cast<int>(i));
+    Eigen::MatrixXd Hk(keep.size(), keep.size());
+    for (size_t i = 0; i < keep.size(); ++i)
+      for (size_t j = 0; j < keep.size(); ++j) Hk(i, j) = H(keep[i], keep[j]);
+    if (!keep.empty()) {
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hk);
+      if (es.eigenvalues().minCoeff() > 0) {
+        const Eigen::MatrixXd C = Hk.inverse();
+        for (size_t i = 0; i < keep.size(); ++i) se[keep[i]] = std::sqrt(C(i, i));
+      }
     }
   }
   size_t k = 0;
@@ -542,6 +553,38 @@ NoiseModelFit SelectNoiseModel(const VarianceData& d, const std::vector<std::str
     best = step_best;
     current = step_theta;
     chosen = best.effects;
+  }
+  // Backward: an effect that a later one made redundant (a floor fitted to zero once the
+  // pixel-noise scale took its place) is removed while that lowers the EBIC.
+  for (bool removed = true; removed && !chosen.empty();) {
+    removed = false;
+    for (size_t k = 0; k < chosen.size(); ++k) {
+      std::vector<std::string> trial;
+      for (size_t j = 0; j < chosen.size(); ++j)
+        if (j != k) trial.push_back(chosen[j]);
+      std::vector<double> warm;
+      {
+        // The current optimum without the removed effect's parameters.
+        size_t at = 0;
+        for (size_t j = 0; j < chosen.size(); ++j) {
+          const size_t np = chosen[j] == "misidentification" ? 2 : 1;
+          if (j != k)
+            for (size_t q = 0; q < np; ++q) warm.push_back(current.theta[at + q]);
+          at += np;
+        }
+      }
+      const ThetaFit t = FitTheta(d, trial, {warm, InitialTheta(d, trial)});
+      const NoiseModelFit f = Finish(d, trial, t, K);
+      if (f.bic < best.bic) {
+        std::snprintf(buf, sizeof(buf), "  remove %s: EBIC %.2f -> %.2f\n", chosen[k].c_str(), best.bic, f.bic);
+        log << buf;
+        best = f;
+        current = t;
+        chosen = trial;
+        removed = true;
+        break;
+      }
+    }
   }
   best.selection_log = log.str();
   return best;
@@ -664,11 +707,18 @@ std::string ParamLine(const NoiseModelFit& f) {
     const auto& [name, v] = f.parameters[i];
     const double se = f.standard_errors[i].second;
     const bool metres = name.size() > 2 && name.compare(name.size() - 2, 2, "_m") == 0;
-    if (metres)
+    // A parameter at the edge of its range (a floor fitted to zero) has no finite standard
+    // error: the information matrix is singular there.
+    if (metres && std::isfinite(se))
       std::snprintf(b, sizeof(b), "%s%s = %.4g +- %.2g mm", i ? ", " : "", name.substr(0, name.size() - 2).c_str(), v * 1e3,
                     se * 1e3);
-    else
+    else if (metres)
+      std::snprintf(b, sizeof(b), "%s%s = %.4g mm (no standard error: at a bound)", i ? ", " : "",
+                    name.substr(0, name.size() - 2).c_str(), v * 1e3);
+    else if (std::isfinite(se))
       std::snprintf(b, sizeof(b), "%s%s = %.4g +- %.2g", i ? ", " : "", name.c_str(), v, se);
+    else
+      std::snprintf(b, sizeof(b), "%s%s = %.4g (no standard error: at a bound)", i ? ", " : "", name.c_str(), v);
     o << b;
   }
   return o.str();
@@ -954,6 +1004,22 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
       o << b;
     }
     o << "\n";
+    // A distance-independent floor against a scaled pixel noise (which grows with the
+    // distance as the nominal sigma does): with two planes only the nominal model's change
+    // between the assumed plane distances tells them apart.
+    const std::vector<std::string>& e = R.fit.effects;
+    const bool has_floor = std::find(e.begin(), e.end(), "noise_floor") != e.end();
+    const bool has_scale = std::find(e.begin(), e.end(), "pixel_noise_scale") != e.end();
+    if (has_floor != has_scale) {
+      std::vector<std::string> alt;
+      for (const auto& x : e) alt.push_back(x == "noise_floor" ? "pixel_noise_scale" : x == "pixel_noise_scale" ? "noise_floor" : x);
+      const NoiseModelFit fa = FitNoiseModel(R.data, alt);
+      std::snprintf(b, sizeof(b),
+                    "%s in place of %s: log L lower by %.1f (%s by these two planes)\n", has_floor ? "pixel_noise_scale" : "noise_floor",
+                    has_floor ? "noise_floor" : "pixel_noise_scale", R.fit.loglik - fa.loglik,
+                    R.fit.loglik - fa.loglik < 2 ? "not decided" : "decided");
+      o << b;
+    }
   }
   if (lines) {
     auto line2 = [&](const Table2Prediction& t) {
