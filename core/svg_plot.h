@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,20 @@ struct Plot {
   std::vector<PlotSeries> series;
   // Written atomically. Non-finite values are skipped.
   void WriteSvg(const std::filesystem::path& path, int width = 900, int height = 420) const;
+};
+
+// A heat map of values on a regular grid of cell centres, with a colour bar (viridis)
+// labelled with the value's name and unit. Cells without a value (NaN) are grey; with a
+// threshold, cells whose value is below it are outlined in red.
+struct HeatMap {
+  std::string title, x_label, y_label, value_label;
+  std::vector<double> x, y;     // cell centres, increasing
+  std::vector<double> values;   // values[iy * x.size() + ix]; non-finite = no value
+  std::optional<double> vmin, vmax;  // colour range; default: the finite values' range
+  bool log_scale = false;       // colours by log10 (positive values only)
+  std::optional<double> threshold;
+  // Written atomically. std::invalid_argument when the sizes do not match.
+  void WriteSvg(const std::filesystem::path& path, int width = 760, int height = 600) const;
 };
 
 }  // namespace mcms
