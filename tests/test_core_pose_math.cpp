@@ -16,14 +16,22 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-Vec3 RandomVec3(Rng& rng, double scale) { return Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * scale; }
+Vec3 RandomVec3(Rng& rng, double scale) {
+  return Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * scale;
+}
 
 // A rotation vector of the given angle about a random axis.
-Vec3 RandomRotationVector(Rng& rng, double angle) { return RandomVec3(rng, 1.0).normalized() * angle; }
+Vec3 RandomRotationVector(Rng& rng, double angle) {
+  return RandomVec3(rng, 1.0).normalized() * angle;
+}
 
-Pose RandomPose(Rng& rng) { return {ExpSO3(RandomRotationVector(rng, rng.Uniform(0, kPi - 0.1))), RandomVec3(rng, 0.5)}; }
+Pose RandomPose(Rng& rng) {
+  return {ExpSO3(RandomRotationVector(rng, rng.Uniform(0, kPi - 0.1))), RandomVec3(rng, 0.5)};
+}
 
-double MaxAbs(const Eigen::MatrixXd& m) { return m.cwiseAbs().maxCoeff(); }
+double MaxAbs(const Eigen::MatrixXd& m) {
+  return m.cwiseAbs().maxCoeff();
+}
 
 TEST(PoseMath, ExpIsAProperRotation) {
   Rng rng(1);

@@ -36,9 +36,10 @@ std::vector<CameraModel> Cameras(Rng& rng) {
   std::vector<CameraModel> cams;
   const Pose T = CameraPose();
   cams.emplace_back("LENSMODEL_PINHOLE", std::vector<double>{1200, 1180, 639.5, 511.5}, 1280, 1024, T);
-  cams.emplace_back("LENSMODEL_OPENCV8",
-                    std::vector<double>{900, 905, 641.2, 509.8, -0.12, 0.03, 0.0004, -0.0002, 0.002, 0.01, -0.003, 0.001},
-                    1280, 1024, T);
+  cams.emplace_back(
+      "LENSMODEL_OPENCV8",
+      std::vector<double>{900, 905, 641.2, 509.8, -0.12, 0.03, 0.0004, -0.0002, 0.002, 0.01, -0.003, 0.001}, 1280, 1024,
+      T);
   std::vector<double> splined = {700, 702, 640.3, 511.1};
   for (int i = 0; i < 2 * 8 * 6; ++i) splined.push_back(rng.Normal(0, 0.01));
   cams.emplace_back("LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=8_Ny=6_fov_x_deg=100", splined, 1280, 1024, T);
