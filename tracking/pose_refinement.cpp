@@ -77,6 +77,11 @@ Vec2 Bias(const CameraModel& cam, const Pose& T, const Vec3& ball, double radius
 
 }  // namespace
 
+ceres::CostFunction* NewBallReprojectionCost(const CameraModel& cam, const Pose& T0, const Vec3& ball_target,
+                                             const Vec2& q_minus_bias, const Mat2& W) {
+  return new BallReprojectionCost(&cam, T0, ball_target, q_minus_bias, W);
+}
+
 PoseRefinement RefinePose(const CameraRig& rig, const Target& target, const Pose& initial,
                           const std::vector<BallObservation>& observations, const PoseRefinementOptions& options) {
   std::set<int> balls;

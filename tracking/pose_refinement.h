@@ -10,6 +10,10 @@
 #include "tracking/target.h"
 #include "vision/camera_model.h"
 
+namespace ceres {
+class CostFunction;
+}
+
 namespace mcms {
 
 struct BallObservation {
@@ -44,5 +48,13 @@ struct PoseRefinement {
 PoseRefinement RefinePose(const CameraRig& rig, const Target& target, const Pose& initial,
                           const std::vector<BallObservation>& observations,
                           const PoseRefinementOptions& options = {});
+
+// The residual RefinePose minimizes for one observation, as a function of the pose
+// increment delta = [dtheta; dp] about T0 (its one 6-parameter block):
+//   r = W (q_minus_bias - Project(T_cam_rig (Exp(dtheta) R0 b + p0 + dp))),
+// with analytic derivatives. Exposed for tests (Ceres' GradientChecker); the caller owns
+// the result and `cam` must outlive it.
+ceres::CostFunction* NewBallReprojectionCost(const CameraModel& cam, const Pose& T0, const Vec3& ball_target,
+                                             const Vec2& q_minus_bias, const Mat2& W);
 
 }  // namespace mcms

@@ -1,0 +1,138 @@
+// File helpers (core/io.h): atomic output leaves no partial file, CSV reading names the
+// file, line and column of every problem, output paths are refused before any work.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+
+#include "core/error.h"
+#include "core/io.h"
+#include "tests/test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+
+void WriteText(const fs::path& p, const std::string& text) {
+  std::ofstream out(p, std::ios::binary);
+  out << text;
+}
+
+// The message of the InputError `f` throws; fails the test when it throws nothing.
+template <typename F>
+std::string InputErrorOf(F&& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "expected an InputError";
+  return {};
+}
+
+size_t FilesIn(const fs::path& dir) {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++n;
+  return n;
+}
+
+TEST(Io, WriteFileAtomicallyWritesAndCreatesTheFolder) {
+  const fs::path dir = test::ScratchDir("core_io_write");
+  const fs::path p = dir / "sub" / "out.txt";
+  WriteFileAtomically(p, [](std::ostream& o) { o << "a,b\n1,2\n"; });
+  EXPECT_EQ(ReadTextFile(p), "a,b\n1,2\n");
+  EXPECT_EQ(FilesIn(dir / "sub"), 1u) << "no temporary file left beside the output";
+}
+
+TEST(Io, AFailedWriteLeavesThePreviousFileAndNoPartialOne) {
+  const fs::path dir = test::ScratchDir("core_io_fail");
+  const fs::path p = dir / "out.txt";
+  WriteText(p, "old\n");
+  EXPECT_THROW(WriteFileAtomically(p,
+                                   [](std::ostream& o) {
+                                     o << "half of the new content";
+                                     throw std::runtime_error("writer failed");
+                                   }),
+               std::runtime_error);
+  EXPECT_EQ(ReadTextFile(p), "old\n");
+  EXPECT_EQ(FilesIn(dir), 1u);
+  // A fresh path stays absent.
+  EXPECT_THROW(WriteFileAtomically(dir / "new.txt", [](std::ostream&) { throw std::runtime_error("x"); }),
+               std::runtime_error);
+  EXPECT_FALSE(fs::exists(dir / "new.txt"));
+}
+
+TEST(Io, ReadTextFileNamesAMissingFile) {
+  const fs::path p = test::ScratchDir("core_io_missing") / "absent.csv";
+  const std::string msg = InputErrorOf([&] { ReadTextFile(p); });
+  EXPECT_NE(msg.find(p.string()), std::string::npos) << msg;
+}
+
+TEST(Io, ReadCsvSkipsCommentsAndBlankLinesTrimsCellsAndKeepsLineNumbers) {
+  const fs::path p = test::ScratchDir("core_io_csv") / "t.csv";
+  WriteText(p, "# a comment\n time_s , x_m,name,note\r\n\n0.5, 1e-3 ,a,\n   \n2,-4.25,b b,last\n");
+  const CsvTable t = ReadCsv(p);
+  ASSERT_EQ(t.header, (std::vector<std::string>{"time_s", "x_m", "name", "note"}));
+  ASSERT_EQ(t.rows.size(), 2u);
+  EXPECT_EQ(t.line_of_row, (std::vector<int>{4, 6}));
+  EXPECT_EQ(t.Column("x_m"), 1);
+  EXPECT_TRUE(t.HasColumn("note"));
+  EXPECT_FALSE(t.HasColumn("y_m"));
+  EXPECT_EQ(t.Number(0, 0), 0.5);
+  EXPECT_EQ(t.Number(0, 1), 1e-3);
+  EXPECT_EQ(t.Number(1, 1), -4.25);
+  EXPECT_EQ(t.rows[0][3], "") << "a trailing comma is an empty last cell";
+  EXPECT_EQ(t.rows[1][2], "b b");
+}
+
+TEST(Io, ReadCsvErrorsNameFileLineAndColumn) {
+  const fs::path dir = test::ScratchDir("core_io_csv_errors");
+  WriteText(dir / "short.csv", "a,b,c\n1,2,3\n4,5\n");
+  std::string msg = InputErrorOf([&] { ReadCsv(dir / "short.csv"); });
+  EXPECT_NE(msg.find("short.csv line 3"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("expected 3 columns"), std::string::npos) << msg;
+
+  WriteText(dir / "empty.csv", "# only a comment\n\n");
+  msg = InputErrorOf([&] { ReadCsv(dir / "empty.csv"); });
+  EXPECT_NE(msg.find("empty.csv"), std::string::npos) << msg;
+
+  WriteText(dir / "cells.csv", "a,b\n1,x\n2,nan\n3,\n4,5abc\n");
+  const CsvTable t = ReadCsv(dir / "cells.csv");
+  msg = InputErrorOf([&] { t.Column("z"); });
+  EXPECT_NE(msg.find("'z'"), std::string::npos) << msg;
+  for (size_t row = 0; row < t.rows.size(); ++row) {
+    msg = InputErrorOf([&] { t.Number(row, 1); });
+    EXPECT_NE(msg.find("line " + std::to_string(row + 2)), std::string::npos) << msg;
+    EXPECT_NE(msg.find("column 'b'"), std::string::npos) << msg;
+  }
+  EXPECT_EQ(t.Number(3, 0), 4.0);
+}
+
+TEST(Io, OutputPathsAreCheckedBeforeWork) {
+  const fs::path dir = test::ScratchDir("core_io_paths");
+  WriteText(dir / "file.txt", "x");
+  fs::create_directories(dir / "folder");
+  // A folder where a file is wanted, and the reverse, are refused with the option named.
+  std::string msg = InputErrorOf([&] { RequireWritableFile(dir / "folder", "-o"); });
+  EXPECT_NE(msg.find("-o"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("is a folder"), std::string::npos) << msg;
+  msg = InputErrorOf([&] { RequireWritableFolder(dir / "file.txt", "--out"); });
+  EXPECT_NE(msg.find("--out"), std::string::npos) << msg;
+  // A path under an existing file cannot be created.
+  msg = InputErrorOf([&] { RequireWritableFile(dir / "file.txt" / "x.csv", "-o"); });
+  EXPECT_NE(msg.find("not a folder"), std::string::npos) << msg;
+  EXPECT_THROW(RequireWritableFile("", "-o"), InputError);
+  EXPECT_THROW(RequireWritableFolder("", "-o"), InputError);
+  // Writable places pass, whether they exist yet or not.
+  EXPECT_NO_THROW(RequireWritableFile(dir / "file.txt", "-o"));
+  EXPECT_NO_THROW(RequireWritableFile(dir / "new" / "deeper" / "x.csv", "-o"));
+  EXPECT_NO_THROW(RequireWritableFolder(dir / "folder", "-o"));
+  EXPECT_NO_THROW(RequireWritableFolder(dir / "new_folder", "-o"));
+  EXPECT_FALSE(fs::exists(dir / "new")) << "checking creates nothing";
+}
+
+}  // namespace
+}  // namespace mcms
