@@ -1,6 +1,5 @@
 #include "synthetic/renderer.h"
 
-#include <unistd.h>
 
 #include <atomic>
 #include <cstdio>
@@ -17,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "synthetic/scenario.h"
 
 namespace mcms {
@@ -582,40 +582,18 @@ void WriteTruth(const Scenario& s, const std::vector<FrameTruth>& truths, const 
   WriteText(dir / "truth" / "dropouts.csv", drops.str());
 }
 
-// A folder we may replace: absent, empty, or holding an earlier render.
-void CheckReplaceable(const fs::path& out) {
-  std::error_code ec;
-  if (!fs::exists(out, ec)) return;
-  if (!fs::is_directory(out, ec)) Throw("output ", out.string(), " exists and is not a folder");
-  if (fs::is_empty(out, ec)) return;
-  if (fs::exists(out / "scenario.yaml") && fs::is_directory(out / "truth") && fs::is_directory(out / "images")) return;
-  Throw("output folder ", out.string(),
-        " exists and does not hold an earlier render; choose a new folder or remove it");
-}
-
 }  // namespace
 
 void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quiet, int threads) {
   std::string why;
   if (!scenario.IsValid(&why)) Throw("scenario: ", why);
   if (out_dir.empty()) Throw("render: no output folder given");
-  fs::path out = fs::absolute(out_dir).lexically_normal();
-  if (!out.has_filename()) out = out.parent_path();
-  CheckReplaceable(out);
-  const std::string stem = std::string(".").append(out.filename().string());
-  const std::string pid = std::to_string(::getpid());
-  const fs::path tmp = out.parent_path() / (stem + ".partial-" + pid);
-  std::error_code ec;
-  fs::remove_all(tmp, ec);
-  try {
+  // An earlier render (absent, empty, or holding these) may be replaced.
+  const std::vector<std::string> markers = {"scenario.yaml", "truth", "images"};
+  WriteFolderAtomically(out_dir, markers, "render", "render output", [&](const fs::path& tmp) {
     fs::create_directories(tmp / "truth");
     fs::create_directories(tmp / "cameras");
     for (const auto& name : scenario.rig.names) fs::create_directories(tmp / "images" / name);
-  } catch (const fs::filesystem_error& e) {
-    fs::remove_all(tmp, ec);
-    Throw("cannot create the output folder beside ", out.string(), ": ", e.code().message());
-  }
-  try {
     scenario.Write(tmp / "scenario.yaml");
     scenario.rig.Write(tmp / "rig.yaml");
     for (size_t c = 0; c < scenario.rig.size(); ++c)
@@ -670,26 +648,7 @@ void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quie
     if (error) std::rethrow_exception(error);
     progress.Finish();
     WriteTruth(scenario, truths, tmp);
-
-    // Into place: an earlier render moves aside first and goes only once the new one
-    // is there.
-    CheckReplaceable(out);
-    if (fs::exists(out)) {
-      const fs::path old = out.parent_path() / (stem + ".old-" + pid);
-      fs::remove_all(old, ec);
-      fs::rename(out, old);
-      fs::rename(tmp, out);
-      fs::remove_all(old, ec);
-    } else {
-      fs::rename(tmp, out);
-    }
-  } catch (const fs::filesystem_error& e) {
-    fs::remove_all(tmp, ec);
-    Throw("cannot write the render output ", out.string(), ": ", e.what());
-  } catch (...) {
-    fs::remove_all(tmp, ec);
-    throw;
-  }
+  });
 }
 
 }  // namespace mcms

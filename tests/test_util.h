@@ -1,6 +1,8 @@
 // Shared test helpers: where the real data lives, a central-difference Jacobian check.
 #pragma once
 
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -46,8 +48,11 @@ inline Eigen::MatrixXd NumericJacobian(const std::function<Eigen::VectorXd(const
 }
 
 // A fresh scratch folder under the build tree.
+// A fresh scratch folder of this process: ctest runs test cases as separate processes in
+// parallel, so the name carries the process id (two cases of one suite sharing a name
+// would otherwise remove each other's files).
 inline std::filesystem::path ScratchDir(const std::string& name) {
-  const auto p = std::filesystem::path(MCMS_BINARY_DIR) / "test-scratch" / name;
+  const auto p = std::filesystem::path(MCMS_BINARY_DIR) / "test-scratch" / (name + "-" + std::to_string(::getpid()));
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p;
