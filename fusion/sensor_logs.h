@@ -118,6 +118,10 @@ struct FusionSetup {
   Mat6 robot_accuracy_covariance = Mat6::Zero();  // [dtheta; dp], base frame, diagonal
   PoseKalmanOptions kalman;
   double consistency_significance = 0.01;
+  // Leave inconsistent sensors and samples out (fusion/stream_fusion.h, "Faults"). false
+  // fuses every sample as given and only flags (the behaviour before issue 14), for
+  // comparisons; not in the setup file.
+  bool exclude_faults = true;
 };
 
 // The readers. InputError naming the file and line on any problem listed above.

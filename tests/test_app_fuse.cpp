@@ -172,7 +172,8 @@ TEST(AppFuse, FusesCleanLogs) {
   ASSERT_EQ(r.code, 0) << r.err;
   const CsvTable t = ReadCsv(d / "fused.csv");
   ASSERT_EQ(t.rows.size(), 40u);  // 20 frames, moifa and kf
-  EXPECT_EQ(t.header.size(), 14u + 36u);
+  EXPECT_EQ(t.header.size(), 16u + 36u);
+  EXPECT_TRUE(t.HasColumn("excluded") && t.HasColumn("fault"));
   EXPECT_EQ(t.rows[0][t.Column("method")], "moifa");
   EXPECT_EQ(t.rows[1][t.Column("method")], "kf");
   EXPECT_EQ(t.rows[0][t.Column("sensors")], "camera;robot;inclinometer");
