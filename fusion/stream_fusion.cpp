@@ -103,9 +103,9 @@ void NoteRangeRejects(const RangeRejects& rejects, bool none_left, const Inclino
   r->fault = Joined(rejects.Text(model), r->fault);
 }
 
-std::string Num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.3g", v);
+std::string Num(double v, int digits = 3) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.*g", digits, v);
   return b;
 }
 
@@ -175,6 +175,7 @@ class KalmanRun {
     if (!kf_.Initialized()) {
       kf_.Initialize(e.t, m.T, m.covariance);
       used_[k] = true;
+      start_ = {k, e.t, true};
       return;
     }
     const PoseKalmanFilter::UpdateResult u = kf_.UpdatePose(e.t, m.T, m.covariance);
@@ -182,9 +183,20 @@ class KalmanRun {
     if (!u.accepted && setup_.exclude_faults && StateIsTheOutlier()) {
       // Two sensors keep disagreeing with the state, not necessarily with each other:
       // start again from this measurement.
+      std::string who;
+      for (int j = 0; j < 3; ++j)
+        if (streak_[j] >= 2) who += (who.empty() ? "" : " and ") + std::string(ToString(static_cast<SensorKind>(j)));
+      std::string text = "filter restarted at " + Num(e.t, 9) + " s: " + who + " kept contradicting its state";
+      if (start_.alone) {
+        // The state was that one sample and nothing since vouched for it: it was the fault.
+        const std::string name = ToString(static_cast<SensorKind>(start_.kind));
+        text += " (which came from one " + name + " sample at " + Num(start_.t, 9) + " s alone: left out)";
+        restart_culprits_.push_back(name);
+      }
+      restart_text_ = Joined(restart_text_, text);
       kf_.Initialize(e.t, m.T, m.covariance);
       used_[k] = true;
-      ++restarts_;
+      start_ = {k, e.t, true};
       for (int& c : streak_) c = 0;
     }
   }
@@ -234,9 +246,9 @@ class KalmanRun {
         r.excluded.push_back("inclinometer");
       r.fault = Joined(r.fault, range_.Text(setup_.inclinometer));
     }
-    if (restarts_ > 0)
-      r.fault = Joined(r.fault, "filter restarted " + std::to_string(restarts_) +
-                                    " time(s): two sensors kept contradicting its state");
+    for (const std::string& name : restart_culprits_)
+      if (std::find(r.excluded.begin(), r.excluded.end(), name) == r.excluded.end()) r.excluded.push_back(name);
+    r.fault = Joined(r.fault, restart_text_);
     for (int k = 0; k < 3; ++k) {
       nis_[k] = 0;
       dof_[k] = 0;
@@ -244,7 +256,8 @@ class KalmanRun {
       rejected_[k] = Rejected{};
     }
     range_ = RangeRejects{};
-    restarts_ = 0;
+    restart_text_.clear();
+    restart_culprits_.clear();
     return r;
   }
 
@@ -261,8 +274,10 @@ class KalmanRun {
       dof_[k] += u.dof;
       ++rejected_[k].accepted;
       // An accepted full pose vouches for the state; a tilt alone does not (no position).
-      if (k != static_cast<int>(SensorKind::kInclinometer))
+      if (k != static_cast<int>(SensorKind::kInclinometer)) {
         for (int& c : streak_) c = 0;
+        start_.alone = false;
+      }
     } else {
       Rejected& x = rejected_[k];
       ++x.count;
@@ -288,7 +303,13 @@ class KalmanRun {
   Rejected rejected_[3];
   int streak_[3] = {0, 0, 0};  // rejections per sensor since the last accepted update
   RangeRejects range_;
-  int restarts_ = 0;
+  struct Start {
+    int kind = 0;
+    double t = 0.0;
+    bool alone = false;  // no full-pose update accepted since
+  } start_;
+  std::string restart_text_;
+  std::vector<std::string> restart_culprits_;
 };
 
 void CheckInputs(const SensorLogs& logs, const std::vector<FusionWindow>& windows) {

@@ -170,6 +170,7 @@ TEST(StreamFusion, FaultsInAWindowAreLeftOutAndNamed) {
   EXPECT_TRUE(has(kf[5], "robot")) << kf[5].fault;
   EXPECT_TRUE(has(moifa[9], "camera")) << moifa[9].fault;
   EXPECT_NE(kf[9].fault.find("restarted"), std::string::npos) << kf[9].fault;
+  EXPECT_TRUE(has(kf[9], "camera")) << kf[9].fault;
   EXPECT_TRUE(has(moifa[12], "inclinometer")) << moifa[12].fault;
   EXPECT_TRUE(has(kf[12], "inclinometer")) << kf[12].fault;
   EXPECT_NE(moifa[12].fault.find("beyond its range"), std::string::npos) << moifa[12].fault;
