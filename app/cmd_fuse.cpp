@@ -31,13 +31,18 @@ int RunFuse(const FuseArgs& a) {
   r.output = a.output;
   const FuseFilesResult res = FuseLogFiles(r);
   if (!a.quiet) {
-    int flagged = 0;
-    for (const auto& row : res.rows) flagged += row.flagged.empty() ? 0 : 1;
+    int flagged = 0, excluded = 0;
+    for (const auto& row : res.rows) {
+      flagged += row.flagged.empty() ? 0 : 1;
+      excluded += row.excluded.empty() && row.fault.empty() ? 0 : 1;
+    }
     const std::string windows =
         res.windows.empty() ? std::string() : " over " + std::to_string(res.windows.size()) + " windows";
-    std::printf("fused %zu tracked frames (%d lost rows skipped)%s by %s: %zu rows, %d with a flagged sensor -> %s\n",
-                res.logs.tracker.samples.size(), res.logs.tracker.lost_rows, windows.c_str(), a.method.c_str(),
-                res.rows.size(), flagged, a.output.c_str());
+    std::printf(
+        "fused %zu tracked frames (%d lost rows skipped)%s by %s: %zu rows, %d with a flagged sensor, %d with a sensor "
+        "or samples left out as inconsistent (columns excluded, fault) -> %s\n",
+        res.logs.tracker.samples.size(), res.logs.tracker.lost_rows, windows.c_str(), a.method.c_str(), res.rows.size(),
+        flagged, excluded, a.output.c_str());
   }
   return 0;
 }
@@ -70,7 +75,9 @@ McmsCommand fuse_command([](CLI::App& app) {
       ->required();
   cmd->add_option("-o,--output", args->output,
                   "fused pose CSV, written atomically: frame,time_s,method (moifa|kf),x_m,y_m,z_m,qw,qx,qy,qz "
-                  "(T_base_flange),sensors,dof,p_value,flagged (';'-separated sensor names),cov_<a>_<b> (36, "
+                  "(T_base_flange),sensors,dof,p_value,flagged (';'-separated sensor names),excluded (sensors or "
+                  "samples left out as inconsistent: leave-one-out when a MOIFA row's test fails, gated KF "
+                  "updates, inclinometer readings beyond range),fault (why; quoted text),cov_<a>_<b> (36, "
                   "[dtheta; dp] in the base frame)")
       ->required();
   cmd->add_option("--windows", args->windows,

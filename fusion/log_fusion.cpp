@@ -16,6 +16,14 @@ std::string Joined(const std::vector<std::string>& v) {
   return s;
 }
 
+// A free-text CSV cell: quoted, without commas or quotes inside (core/io.h's reader splits
+// at every comma), so that it reads back as one cell.
+std::string Quoted(const std::string& text) {
+  std::string q = "\"";
+  for (const char c : text) q += c == ',' ? ';' : c == '"' ? '\'' : c;
+  return q + "\"";
+}
+
 // %.17g: a double written and read back is the same double.
 std::string Exact(double v) {
   char b[40];
@@ -137,7 +145,7 @@ FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
 void WriteFusedPoseCsv(const std::filesystem::path& path, const std::vector<FusedSample>& samples) {
   static const char* kAxes[6] = {"rx", "ry", "rz", "px", "py", "pz"};
   WriteFileAtomically(path, [&](std::ostream& o) {
-    o << "frame,time_s,method,x_m,y_m,z_m,qw,qx,qy,qz,sensors,dof,p_value,flagged";
+    o << "frame,time_s,method,x_m,y_m,z_m,qw,qx,qy,qz,sensors,dof,p_value,flagged,excluded,fault";
     for (int r = 0; r < 6; ++r)
       for (int c = 0; c < 6; ++c) o << ",cov_" << kAxes[r] << "_" << kAxes[c];
     o << "\n";
@@ -151,7 +159,8 @@ void WriteFusedPoseCsv(const std::filesystem::path& path, const std::vector<Fuse
       const Vec3& t = s.T_base_flange.t;
       o << s.frame << "," << num(s.time_s) << "," << ToString(s.method) << "," << num(t.x()) << "," << num(t.y())
         << "," << num(t.z()) << "," << num(q.w()) << "," << num(q.x()) << "," << num(q.y()) << "," << num(q.z())
-        << "," << Joined(s.sensors) << "," << s.dof << "," << num(s.p_value) << "," << Joined(s.flagged);
+        << "," << Joined(s.sensors) << "," << s.dof << "," << num(s.p_value) << "," << Joined(s.flagged) << ","
+        << Joined(s.excluded) << "," << Quoted(s.fault);
       for (int r = 0; r < 6; ++r)
         for (int c = 0; c < 6; ++c) o << "," << num(s.covariance(r, c));
       o << "\n";

@@ -47,10 +47,12 @@ struct FuseFilesResult {
 // fuses them (FuseStream) and writes `output` when given.
 FuseFilesResult FuseLogFiles(const FuseFilesRequest& request);
 
-// frame,time_s,method,x_m,y_m,z_m,qw,qx,qy,qz,sensors,dof,p_value,flagged, then the 36
-// covariance entries cov_<a>_<b>, a, b in rx,ry,rz,px,py,pz (as the tracker's CSV). The
-// pose is T_base_flange; sensors and flagged are ';'-separated names (flagged may be
-// empty). With windows, frame is the window's index and time_s its end. Written atomically.
+// frame,time_s,method,x_m,y_m,z_m,qw,qx,qy,qz,sensors,dof,p_value,flagged,excluded,fault,
+// then the 36 covariance entries cov_<a>_<b>, a, b in rx,ry,rz,px,py,pz (as the tracker's
+// CSV). The pose is T_base_flange; sensors (those fused), flagged and excluded (left out as
+// inconsistent, FusedSample) are ';'-separated names (may be empty); fault is a quoted text
+// saying what was excluded and why (empty when nothing was). dof and p_value are the
+// consistency test of every sensor before exclusion. With windows, frame is the window's index and time_s its end. Written atomically.
 void WriteFusedPoseCsv(const std::filesystem::path& path, const std::vector<FusedSample>& samples);
 
 }  // namespace mcms

@@ -51,7 +51,11 @@
 //      linear_acceleration_psd: 1e-2  # m^2/s^3
 //      initial_angular_velocity_sigma_rad_s: 0.5  # prior sigma of the velocities at the start
 //      initial_linear_velocity_sigma_m_s: 0.5
-//    consistency_significance: 0.01   # optional: flag a sensor when its p-value is below
+//      nis_gate_probability: 0        # per-update gate; 0 (default): 1 - significance / (updates
+//                                     # per row), fusion/stream_fusion.h "Faults"
+//    consistency_significance: 0.01   # optional: flag a sensor when its p-value is below; a
+//                                     # MOIFA row whose test fails leaves the odd sensor out
+//    Inclinometer readings beyond range_deg (+5 sigma) are rejected before fusion.
 #pragma once
 
 #include <filesystem>
@@ -118,6 +122,10 @@ struct FusionSetup {
   Mat6 robot_accuracy_covariance = Mat6::Zero();  // [dtheta; dp], base frame, diagonal
   PoseKalmanOptions kalman;
   double consistency_significance = 0.01;
+  // Leave inconsistent sensors and samples out (fusion/stream_fusion.h, "Faults"). false
+  // fuses every sample as given and only flags (the behaviour before issue 14), for
+  // comparisons; not in the setup file.
+  bool exclude_faults = true;
 };
 
 // The readers. InputError naming the file and line on any problem listed above.

@@ -6,6 +6,8 @@
 #include <limits>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 
 #include "core/error.h"
 #include "fusion/chi_square.h"
@@ -29,21 +31,49 @@ std::pair<size_t, size_t> InTime(const std::vector<Sample>& v, double lo, double
   return {static_cast<size_t>(a - v.begin()), static_cast<size_t>(b - v.begin())};
 }
 
-// The mean of the inclinometer readings in [lo, hi] (or [lo, hi)) and the model with the
-// noise of that mean (sigma / sqrt(n)). nullopt when there is none.
+// Rejected readings of one row: count and the largest |reading - bias| among them.
+struct RangeRejects {
+  int count = 0;
+  double worst_rad = 0.0;
+  void Add(const Vec2& reading, const Inclinometer& model) {
+    ++count;
+    worst_rad = std::max(worst_rad, (reading - model.bias).cwiseAbs().maxCoeff());
+  }
+  std::string Text(const Inclinometer& model) const {
+    char b[160];
+    std::snprintf(b, sizeof b, "inclinometer: %d reading%s beyond its range rejected (%.2f deg > %.2f deg)", count,
+                  count == 1 ? "" : "s", worst_rad * 180.0 / kPi, model.range * 180.0 / kPi);
+    return b;
+  }
+  static constexpr double kPi = 3.14159265358979323846;
+};
+
+// The mean of the inclinometer readings in [lo, hi] (or [lo, hi)) that are not beyond the
+// sensor's range, and the model with the noise of that mean (sigma / sqrt(n)). nullopt when
+// there is none.
 std::optional<TiltReading> MeanTilt(const InclinometerLog& log, double lo, double hi, bool hi_inclusive,
-                                    const Inclinometer& model, int* count) {
+                                    const Inclinometer& model, int* count, RangeRejects* rejects) {
   const auto [a, b] = InTime(log.samples, lo, hi, hi_inclusive);
-  *count = static_cast<int>(b - a);
-  if (a == b) return std::nullopt;
   Vec2 sum = Vec2::Zero();
-  for (size_t i = a; i < b; ++i) sum += log.samples[i].reading;
+  int n = 0;
+  for (size_t i = a; i < b; ++i) {
+    if (rejects && BeyondRange(log.samples[i].reading, model)) {
+      rejects->Add(log.samples[i].reading, model);
+      continue;
+    }
+    sum += log.samples[i].reading;
+    ++n;
+  }
+  *count = n;
+  if (n == 0) return std::nullopt;
   TiltReading r;
-  r.reading = sum / static_cast<double>(b - a);
+  r.reading = sum / static_cast<double>(n);
   r.model = model;
-  r.model.sigma = model.sigma / std::sqrt(static_cast<double>(b - a));
+  r.model.sigma = model.sigma / std::sqrt(static_cast<double>(n));
   return r;
 }
+
+std::string Joined(const std::string& a, const std::string& b) { return a.empty() ? b : b.empty() ? a : a + "; " + b; }
 
 FusedSample MoifaSample(int frame, double time_s, const EpochFusion& e) {
   FusedSample r;
@@ -57,9 +87,26 @@ FusedSample MoifaSample(int frame, double time_s, const EpochFusion& e) {
   r.p_value = e.consistency.p_value;
   for (const auto& sc : e.consistency.sensors) {
     if (sc.flagged) r.flagged.push_back(sc.name);
-    r.statistics.push_back({sc.name, sc.nis, sc.dof});
+    if (std::find(r.sensors.begin(), r.sensors.end(), sc.name) != r.sensors.end())
+      r.statistics.push_back({sc.name, sc.nis, sc.dof});
   }
+  r.excluded = e.excluded;
+  r.fault = e.fault;
   return r;
+}
+
+// Notes inclinometer readings rejected as beyond range in a MOIFA row.
+void NoteRangeRejects(const RangeRejects& rejects, bool none_left, const Inclinometer& model, FusedSample* r) {
+  if (rejects.count == 0) return;
+  if (none_left && std::find(r->excluded.begin(), r->excluded.end(), "inclinometer") == r->excluded.end())
+    r->excluded.push_back("inclinometer");
+  r->fault = Joined(rejects.Text(model), r->fault);
+}
+
+std::string Num(double v, int digits = 3) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.*g", digits, v);
+  return b;
 }
 
 // The time-merged sample stream: robot, inclinometer, camera at equal stamps.
@@ -86,19 +133,36 @@ std::vector<Event> MergedEvents(const SensorLogs& logs, double t_end) {
   return events;
 }
 
+// The KF's per-update gate probability: the setup's, or 1 - significance / updates_per_row.
+PoseKalmanOptions GatedOptions(const FusionSetup& setup, double updates_per_row) {
+  PoseKalmanOptions o = setup.kalman;
+  if (o.nis_gate_probability <= 0 && setup.exclude_faults)
+    o.nis_gate_probability = 1.0 - setup.consistency_significance / std::max(1.0, updates_per_row);
+  if (!(o.nis_gate_probability < 1.0)) o.nis_gate_probability = 0.0;  // a significance too small to gate
+  return o;
+}
+
 // One Kalman filter over a run of events, with the per-sensor innovation statistics since
-// the last reported sample.
+// the last reported sample, the gated (rejected) updates and the restarts.
 class KalmanRun {
  public:
-  KalmanRun(const SensorLogs& logs, const FusionSetup& setup, double robot_accuracy_scale)
-      : logs_(logs), setup_(setup), kf_(setup.kalman), accuracy_scale_(robot_accuracy_scale) {}
+  KalmanRun(const SensorLogs& logs, const FusionSetup& setup, double robot_accuracy_scale, double updates_per_row)
+      : logs_(logs),
+        setup_(setup),
+        kf_(GatedOptions(setup, updates_per_row)),
+        accuracy_scale_(robot_accuracy_scale) {}
 
   void Process(const Event& e) {
     const int k = static_cast<int>(e.kind);
     if (e.kind == SensorKind::kInclinometer) {
+      const Vec2& reading = logs_.inclinometer->samples[e.index].reading;
+      if (setup_.exclude_faults && BeyondRange(reading, setup_.inclinometer)) {
+        range_.Add(reading, setup_.inclinometer);
+        return;
+      }
       // Needs an orientation to linearize at, and one the sensor can read.
       if (!kf_.Initialized() || !setup_.inclinometer.InRange(kf_.Predict(e.t).T.R)) return;
-      Note(k, kf_.UpdateInclinometer(e.t, logs_.inclinometer->samples[e.index].reading, setup_.inclinometer));
+      Note(k, kf_.UpdateInclinometer(e.t, reading, setup_.inclinometer));
       return;
     }
     PoseWithCovariance m;
@@ -111,8 +175,29 @@ class KalmanRun {
     if (!kf_.Initialized()) {
       kf_.Initialize(e.t, m.T, m.covariance);
       used_[k] = true;
-    } else {
-      Note(k, kf_.UpdatePose(e.t, m.T, m.covariance));
+      start_ = {k, e.t, true};
+      return;
+    }
+    const PoseKalmanFilter::UpdateResult u = kf_.UpdatePose(e.t, m.T, m.covariance);
+    Note(k, u);
+    if (!u.accepted && setup_.exclude_faults && StateIsTheOutlier()) {
+      // Two sensors keep disagreeing with the state, not necessarily with each other:
+      // start again from this measurement.
+      std::string who;
+      for (int j = 0; j < 3; ++j)
+        if (streak_[j] >= 2) who += (who.empty() ? "" : " and ") + std::string(ToString(static_cast<SensorKind>(j)));
+      std::string text = "filter restarted at " + Num(e.t, 9) + " s: " + who + " kept contradicting its state";
+      if (start_.alone) {
+        // The state was that one sample and nothing since vouched for it: it was the fault.
+        const std::string name = ToString(static_cast<SensorKind>(start_.kind));
+        text += " (which came from one " + name + " sample at " + Num(start_.t, 9) + " s alone: left out)";
+        restart_culprits_.push_back(name);
+      }
+      restart_text_ = Joined(restart_text_, text);
+      kf_.Initialize(e.t, m.T, m.covariance);
+      used_[k] = true;
+      start_ = {k, e.t, true};
+      for (int& c : streak_) c = 0;
     }
   }
 
@@ -140,25 +225,72 @@ class KalmanRun {
       const int k = static_cast<int>(kind);
       total += nis_[k];
       r.dof += dof_[k];
-      if (dof_[k] > 0 && ChiSquareSurvival(nis_[k], dof_[k]) < setup_.consistency_significance)
+      if ((dof_[k] > 0 && ChiSquareSurvival(nis_[k], dof_[k]) < setup_.consistency_significance) ||
+          rejected_[k].count > 0)
         r.flagged.push_back(ToString(kind));
     }
     r.p_value = r.dof > 0 ? ChiSquareSurvival(total, r.dof) : 1.0;
+    for (const SensorKind kind : {SensorKind::kCamera, SensorKind::kRobot, SensorKind::kInclinometer}) {
+      const Rejected& x = rejected_[static_cast<int>(kind)];
+      if (x.count == 0) continue;
+      r.excluded.push_back(ToString(kind));
+      const double gate = ChiSquareQuantile(kf_.Options().nis_gate_probability, x.dof);
+      r.fault = Joined(r.fault, std::string(ToString(kind)) + ": " + std::to_string(x.count) + " of " +
+                                    std::to_string(x.count + x.accepted) + " update" +
+                                    (x.count + x.accepted == 1 ? "" : "s") + " rejected (NIS up to " +
+                                    Num(x.max_nis) + " > gate " + Num(gate) + " on " + std::to_string(x.dof) +
+                                    " dof)");
+    }
+    if (range_.count > 0) {
+      if (std::find(r.excluded.begin(), r.excluded.end(), "inclinometer") == r.excluded.end())
+        r.excluded.push_back("inclinometer");
+      r.fault = Joined(r.fault, range_.Text(setup_.inclinometer));
+    }
+    for (const std::string& name : restart_culprits_)
+      if (std::find(r.excluded.begin(), r.excluded.end(), name) == r.excluded.end()) r.excluded.push_back(name);
+    r.fault = Joined(r.fault, restart_text_);
     for (int k = 0; k < 3; ++k) {
       nis_[k] = 0;
       dof_[k] = 0;
       used_[k] = false;
+      rejected_[k] = Rejected{};
     }
+    range_ = RangeRejects{};
+    restart_text_.clear();
+    restart_culprits_.clear();
     return r;
   }
 
  private:
+  struct Rejected {
+    int count = 0, accepted = 0, dof = 0;
+    double max_nis = 0.0;
+  };
+
   void Note(int k, const PoseKalmanFilter::UpdateResult& u) {
-    used_[k] = true;
     if (u.accepted) {
+      used_[k] = true;
       nis_[k] += u.nis;
       dof_[k] += u.dof;
+      ++rejected_[k].accepted;
+      // An accepted full pose vouches for the state; a tilt alone does not (no position).
+      if (k != static_cast<int>(SensorKind::kInclinometer)) {
+        for (int& c : streak_) c = 0;
+        start_.alone = false;
+      }
+    } else {
+      Rejected& x = rejected_[k];
+      ++x.count;
+      x.dof = u.dof;
+      x.max_nis = std::max(x.max_nis, u.nis);
+      ++streak_[k];
     }
+  }
+
+  bool StateIsTheOutlier() const {
+    int sensors = 0;
+    for (const int c : streak_) sensors += c >= 2 ? 1 : 0;
+    return sensors >= 2;
   }
 
   const SensorLogs& logs_;
@@ -168,6 +300,16 @@ class KalmanRun {
   double nis_[3] = {0, 0, 0};
   int dof_[3] = {0, 0, 0};
   bool used_[3] = {false, false, false};
+  Rejected rejected_[3];
+  int streak_[3] = {0, 0, 0};  // rejections per sensor since the last accepted update
+  RangeRejects range_;
+  struct Start {
+    int kind = 0;
+    double t = 0.0;
+    bool alone = false;  // no full-pose update accepted since
+  } start_;
+  std::string restart_text_;
+  std::vector<std::string> restart_culprits_;
 };
 
 void CheckInputs(const SensorLogs& logs, const std::vector<FusionWindow>& windows) {
@@ -240,9 +382,10 @@ PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& 
   return out;
 }
 
-EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
+namespace {
+
+EpochFusion FusePlain(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
                       const ConsistencyOptions& options) {
-  if (poses.empty()) Throw("FuseEpoch: expected at least one full-pose measurement (camera or robot), got none");
   EpochFusion e;
   e.measurements = poses;
   e.fused = FusePoses(poses);
@@ -258,6 +401,93 @@ EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::opti
     }
   }
   e.consistency = CheckConsistency(e.measurements, options);
+  return e;
+}
+
+}  // namespace
+
+Mat6 CovarianceUnion(const Mat6& A, const Mat6& B) {
+  // B v = l A v with V^T A V = I: A = V^-T V^-1, B = V^-T diag(l) V^-1.
+  const Eigen::GeneralizedSelfAdjointEigenSolver<Mat6> g(0.5 * (B + B.transpose()), 0.5 * (A + A.transpose()));
+  if (g.info() != Eigen::Success) Throw("CovarianceUnion: the covariances must be symmetric positive definite");
+  const Mat6 Vinv = g.eigenvectors().inverse();
+  const Vec6 l = g.eigenvalues().cwiseMax(1.0);
+  const Mat6 U = Vinv.transpose() * l.asDiagonal() * Vinv;
+  return 0.5 * (U + U.transpose());
+}
+
+bool BeyondRange(const Vec2& reading, const Inclinometer& model) {
+  const Vec2 d = reading - model.bias;
+  const double limit = model.range + 5.0 * model.sigma;
+  return !(std::abs(d.x()) <= limit && std::abs(d.y()) <= limit);  // NaN is beyond too
+}
+
+EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
+                      const ConsistencyOptions& options, bool exclude_faults) {
+  if (poses.empty()) Throw("FuseEpoch: expected at least one full-pose measurement (camera or robot), got none");
+  EpochFusion e = FusePlain(poses, tilt, options);
+  if (e.consistency.consistent || !exclude_faults) return e;
+
+  // Leave one out: which sensor's removal makes the rest consistent?
+  struct Suspect {
+    size_t index;
+    EpochFusion rest;
+  };
+  std::vector<Suspect> suspects;
+  const size_t n = e.measurements.size();
+  for (size_t i = 0; i < n; ++i) {
+    if (e.consistency.sensors[i].dof == 0) continue;  // nothing to compare it with
+    EpochFusion rest;
+    if (i < poses.size()) {
+      if (poses.size() == 1) continue;  // the inclinometer alone cannot be fused
+      std::vector<PoseMeasurement> others = poses;
+      others.erase(others.begin() + static_cast<std::ptrdiff_t>(i));
+      rest = FusePlain(others, tilt, options);
+    } else {
+      rest = FusePlain(poses, std::nullopt, options);
+    }
+    if (rest.consistency.consistent) suspects.push_back({i, std::move(rest)});
+  }
+  // Prefer those whose own residual against the others fails too.
+  std::vector<const Suspect*> chosen;
+  for (const Suspect& s : suspects)
+    if (e.consistency.sensors[s.index].flagged) chosen.push_back(&s);
+  if (chosen.empty())
+    for (const Suspect& s : suspects) chosen.push_back(&s);
+
+  const auto own = [&](size_t i) {
+    const SensorConsistency& c = e.consistency.sensors[i];
+    return "NIS " + Num(c.nis) + " on " + std::to_string(c.dof) + " dof against the others (p " + Num(c.p_value) + ")";
+  };
+  const std::string failed = "consistency test failed (p " + Num(e.consistency.p_value) + " < " +
+                             Num(options.significance) + ")";
+  if (chosen.size() == 1) {
+    const Suspect& s = *chosen.front();
+    const std::string name = e.measurements[s.index].name;
+    EpochFusion out = s.rest;
+    out.consistency = e.consistency;
+    out.excluded = {name};
+    out.fault = name + " excluded: " + own(s.index) + "; the rest agree (p " + Num(s.rest.consistency.p_value) + ")";
+    return out;
+  }
+  if (chosen.size() >= 2) {
+    // Either suspect may be the wrong one: keep the fusion of all and widen its covariance
+    // to cover each hypothesis.
+    Mat6 U = e.fused.covariance;
+    std::string names;
+    for (const Suspect* s : chosen) {
+      const Vec6 d = BoxMinus(s->rest.fused.T, e.fused.T);
+      U = CovarianceUnion(U, Mat6(s->rest.fused.covariance + d * d.transpose()));
+      names += (names.empty() ? "" : " or ") + e.measurements[s->index].name;
+    }
+    e.fused.covariance = U;
+    e.fault = failed + ": " + names + " may be wrong (leaving out either makes the rest agree); kept all and "
+              "widened the covariance to cover each";
+    return e;
+  }
+  const double scale = e.consistency.chi2 / std::max(1, e.consistency.dof);
+  e.fused.covariance *= std::max(1.0, scale);
+  e.fault = failed + ": no single sensor explains it; covariance scaled by chi2/dof " + Num(scale);
   return e;
 }
 
@@ -285,9 +515,13 @@ WindowMeasurements MeasureWindow(const SensorLogs& logs, const FusionSetup& setu
       m.robot = RobotFlangePose(Eigen::VectorXd(sum / n), setup, 1.0 / n, 1.0);
     }
   }
-  if (logs.inclinometer)
-    m.inclinometer =
-        MeanTilt(*logs.inclinometer, window.start_s, window.end_s, false, setup.inclinometer, &m.inclinometer_readings);
+  if (logs.inclinometer) {
+    RangeRejects rejects;
+    m.inclinometer = MeanTilt(*logs.inclinometer, window.start_s, window.end_s, false, setup.inclinometer,
+                              &m.inclinometer_readings, setup.exclude_faults ? &rejects : nullptr);
+    m.inclinometer_beyond_range = rejects.count;
+    m.inclinometer_worst_rad = rejects.worst_rad;
+  }
   return m;
 }
 
@@ -304,7 +538,11 @@ std::vector<FusedSample> FuseMoifa(const SensorLogs& logs, const FusionSetup& se
       if (m.camera) poses.push_back(PoseMeasurement::FromCovariance("camera", m.camera->T, m.camera->covariance));
       if (m.robot) poses.push_back(PoseMeasurement::FromCovariance("robot", m.robot->T, m.robot->covariance));
       if (poses.empty()) continue;
-      out.push_back(MoifaSample(static_cast<int>(w), windows[w].end_s, FuseEpoch(poses, m.inclinometer, copt)));
+      out.push_back(MoifaSample(static_cast<int>(w), windows[w].end_s, FuseEpoch(poses, m.inclinometer, copt, setup.exclude_faults)));
+      RangeRejects rejects;
+      rejects.count = m.inclinometer_beyond_range;
+      rejects.worst_rad = m.inclinometer_worst_rad;
+      NoteRangeRejects(rejects, !m.inclinometer, setup.inclinometer, &out.back());
     }
     return out;
   }
@@ -318,12 +556,15 @@ std::vector<FusedSample> FuseMoifa(const SensorLogs& logs, const FusionSetup& se
       poses.push_back(PoseMeasurement::FromCovariance("robot", rob.T, rob.covariance));
     }
     std::optional<TiltReading> tilt;
+    RangeRejects rejects;
     if (logs.inclinometer) {
       const double half = 0.5 * setup.inclinometer.period;
       int n = 0;
-      tilt = MeanTilt(*logs.inclinometer, s.time_s - half, s.time_s + half, true, setup.inclinometer, &n);
+      tilt = MeanTilt(*logs.inclinometer, s.time_s - half, s.time_s + half, true, setup.inclinometer, &n,
+                      setup.exclude_faults ? &rejects : nullptr);
     }
-    out.push_back(MoifaSample(s.frame, s.time_s, FuseEpoch(poses, tilt, copt)));
+    out.push_back(MoifaSample(s.frame, s.time_s, FuseEpoch(poses, tilt, copt, setup.exclude_faults)));
+    NoteRangeRejects(rejects, !tilt, setup.inclinometer, &out.back());
   }
   return out;
 }
@@ -333,8 +574,10 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
   CheckInputs(logs, windows);
   std::vector<FusedSample> out;
   if (windows.empty()) {
-    KalmanRun run(logs, setup, 1.0);
-    for (const Event& e : MergedEvents(logs, logs.tracker.samples.back().time_s)) {
+    const std::vector<Event> events = MergedEvents(logs, logs.tracker.samples.back().time_s);
+    KalmanRun run(logs, setup, 1.0,
+                  static_cast<double>(events.size()) / static_cast<double>(logs.tracker.samples.size()));
+    for (const Event& e : events) {
       run.Process(e);
       if (e.kind != SensorKind::kCamera) continue;
       const TrackerSample& s = logs.tracker.samples[e.index];
@@ -359,7 +602,7 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
       e0 = e1;
       continue;
     }
-    KalmanRun run(logs, setup, std::max(1, robot_readings));
+    KalmanRun run(logs, setup, std::max(1, robot_readings), static_cast<double>(e1 - first));
     run.Process(events[first]);
     for (size_t k = e0; k < e1; ++k)
       if (k != first && events[k].t >= events[first].t) run.Process(events[k]);

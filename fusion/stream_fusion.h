@@ -42,6 +42,16 @@
 //     covariance of each joint reading is inflated by the number of readings in the window
 //     so that the window's readings together carry it once. With PoseKalmanOptions' process noise and velocity prior near zero
 //     (setup `kalman`) the KF then is the static filter of a standing robot.
+//
+// Faults (issue 14). MOIFA: leave-one-out exclusion when an epoch's test fails (FuseEpoch).
+// KF: every update is gated on its innovation (NIS against the chi-square quantile); a
+// rejected update is skipped and recorded in the row (`excluded`, `fault`). The gate is the
+// setup's kalman.nis_gate_probability when given (> 0), else 1 - significance / n with n the
+// mean number of updates per row (all sensors), so that a clean row loses an update with
+// probability about the significance (Bonferroni). When two sensors are each rejected at least
+// twice in a row with no update accepted in between, the filter's state is the outlier (e.g.
+// it started on a faulty sample): it restarts at the current measurement. Inclinometer
+// readings beyond the sensor's range (BeyondRange) are rejected by both methods.
 #pragma once
 
 #include <optional>
@@ -89,13 +99,39 @@ struct TiltReading {
 // -z is gravity) fused, the inclinometer's constraint added when the fused orientation is in
 // its range (linearized there, then once more at the result), and the chi-square test of all
 // that were used. InputError when `poses` is empty.
+//
+// Faults. When that test fails (p < significance), each sensor is left out in turn
+// (leave-one-out) and the rest fused and tested again. The suspects are the sensors whose
+// removal makes the rest consistent; among them, those flagged by their own statistic (their
+// residual against the others, SensorConsistency) when there are any.
+//  - one suspect: it is excluded, the row is the fusion of the rest with its covariance;
+//  - several (the disagreement lies along directions only they observe, e.g. a position
+//    jump between camera and robot that the inclinometer cannot see): the fault cannot be
+//    attributed. The pose stays the fusion of all, its covariance is widened to the union
+//    of the hypotheses "suspect i is wrong" (each: the rest's covariance plus the outer
+//    product of the rest's offset from the pose), so it covers whichever suspect is wrong;
+//  - none (no single removal explains it, e.g. two faulty sensors): the covariance is
+//    scaled by chi2 / dof of the failed test.
+// `excluded` and `fault` say what was done. Without a failed test nothing changes, so clean
+// data is affected only in the rows whose test fails by chance, at the significance level.
 struct EpochFusion {
   FusedPose fused;                            // weights in the order of `measurements`
-  std::vector<PoseMeasurement> measurements;  // poses, then the inclinometer if used
-  ConsistencyReport consistency;
+  std::vector<PoseMeasurement> measurements;  // the sensors fused: poses, then the inclinometer if used
+  ConsistencyReport consistency;              // of every sensor, before any exclusion
+  std::vector<std::string> excluded;          // sensors left out of `fused`
+  std::string fault;                          // why, or how the covariance was widened; empty if consistent
 };
+// exclude_faults false: no leave-one-out, the fusion of all as given.
 EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
-                      const ConsistencyOptions& options);
+                      const ConsistencyOptions& options, bool exclude_faults = true);
+
+// A covariance no smaller than either (A and B symmetric positive definite): both made
+// diagonal by one basis, the larger variance kept along each of its directions.
+Mat6 CovarianceUnion(const Mat6& A, const Mat6& B);
+
+// Whether an inclinometer reading (bias included) is one the sensor cannot give: beyond its
+// range on either axis by more than 5 sigma. Such readings are rejected before fusion.
+bool BeyondRange(const Vec2& reading, const Inclinometer& model);
 
 enum class FusionMethod { kMoifa, kKalman };
 const char* ToString(FusionMethod m);
@@ -117,6 +153,11 @@ struct FusedSample {
   double p_value = 1.0;               // 1 when nothing can be compared (dof 0)
   std::vector<std::string> flagged;   // sensors whose p-value is below the significance
   std::vector<SensorStatistic> statistics;  // per sensor in `sensors`
+  // Sensors (or some of their samples) left out of this row as inconsistent: MOIFA's
+  // leave-one-out exclusion (EpochFusion), the KF's gated updates, inclinometer readings
+  // beyond the sensor's range. `fault` says which, why, and what was done.
+  std::vector<std::string> excluded;
+  std::string fault;
 };
 
 // A time interval [start_s, end_s) over which the robot stands still.
@@ -132,7 +173,9 @@ struct WindowMeasurements {
   std::optional<PoseWithCovariance> robot;   // FK of the mean joint reading
   int robot_readings = 0;
   std::optional<TiltReading> inclinometer;   // the mean reading
-  int inclinometer_readings = 0;
+  int inclinometer_readings = 0;             // used in the mean
+  int inclinometer_beyond_range = 0;         // rejected (BeyondRange)
+  double inclinometer_worst_rad = 0.0;       // largest |reading - bias| among them
 };
 WindowMeasurements MeasureWindow(const SensorLogs& logs, const FusionSetup& setup, const FusionWindow& window);
 

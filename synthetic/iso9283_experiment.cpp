@@ -419,7 +419,9 @@ Iso9283Experiment RunIso9283Experiment(const Iso9283ExperimentOptions& o) {
           // camera's and robot's fused orientation, then at the result.
           std::optional<TiltReading> tilt;
           if (const auto reading = incl.Simulate(truth.Tool(qa).R, crng)) tilt = TiltReading{*reading, incl};
-          const FusedPose f = FuseEpoch(poses, tilt, ConsistencyOptions{}).fused;
+          // Without fault exclusion: the error model below needs the robot's weight (index 1),
+          // and this simulation has no faults (an excluded sensor would only be a false alarm).
+          const FusedPose f = FuseEpoch(poses, tilt, ConsistencyOptions{}, false).fused;
           T_est = f.T;
           P_est = f.covariance;
           W_robot = f.weights[1];

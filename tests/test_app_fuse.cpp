@@ -172,7 +172,8 @@ TEST(AppFuse, FusesCleanLogs) {
   ASSERT_EQ(r.code, 0) << r.err;
   const CsvTable t = ReadCsv(d / "fused.csv");
   ASSERT_EQ(t.rows.size(), 40u);  // 20 frames, moifa and kf
-  EXPECT_EQ(t.header.size(), 14u + 36u);
+  EXPECT_EQ(t.header.size(), 16u + 36u);
+  EXPECT_TRUE(t.HasColumn("excluded") && t.HasColumn("fault"));
   EXPECT_EQ(t.rows[0][t.Column("method")], "moifa");
   EXPECT_EQ(t.rows[1][t.Column("method")], "kf");
   EXPECT_EQ(t.rows[0][t.Column("sensors")], "camera;robot;inclinometer");
@@ -182,6 +183,47 @@ TEST(AppFuse, FusesCleanLogs) {
   const CsvTable k = ReadCsv(d / "kf.csv");
   ASSERT_EQ(k.rows.size(), 20u);
   EXPECT_EQ(k.rows[5][k.Column("sensors")], "camera;robot");
+}
+
+// A robot joint offset burst (A2 +0.5 deg for 0.2 s) in the joint log: `mcms fuse` names the
+// robot in the rows it corrupts (columns excluded and fault) and leaves it out of them.
+TEST(AppFuse, AFaultySensorIsNamedAndLeftOut) {
+  Logs l = CleanLogs();
+  Lines& j = l.files["joints.csv"];
+  for (int k = 140; k < 160; ++k) {  // 1.40 .. 1.59 s; line k + 2
+    std::stringstream s(j[k + 1]);
+    std::vector<std::string> cells;
+    std::string c;
+    while (std::getline(s, c, ',')) cells.push_back(c);
+    SetCell(j, k + 2, 2, N(std::stod(cells.at(2)) + 0.5));
+  }
+  const fs::path d = test::ScratchDir("app_fuse_fault");
+  Write(d, l);
+  const CliRun r = Fuse(d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "fused.csv");
+  int named = 0, clean_rows_changed = 0;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    const double time = t.Number(i, t.Column("time_s"));
+    const std::string& excluded = t.rows[i][t.Column("excluded")];
+    const std::string& fault = t.rows[i][t.Column("fault")];
+    // MOIFA interpolates the joints at the frame (1.6 s is clean); the KF row at 1.6 s has
+    // taken the readings since 1.5 s.
+    const bool kf = t.rows[i][t.Column("method")] == "kf";
+    if (time > 1.39 && time < (kf ? 1.61 : 1.55)) {
+      EXPECT_NE(excluded.find("robot"), std::string::npos) << time << " " << fault;
+      EXPECT_NE(fault.find("robot"), std::string::npos) << fault;
+      // (A KF row also took the clean readings of its interval: the robot is among its sensors.)
+      if (!kf) {
+        EXPECT_EQ(t.rows[i][t.Column("sensors")].find("robot"), std::string::npos) << time;
+      }
+      ++named;
+    } else {
+      clean_rows_changed += excluded.empty() ? 0 : 1;
+    }
+  }
+  EXPECT_EQ(named, 5);  // frames at 1.4, 1.5 s (MOIFA), 1.4, 1.5, 1.6 s (KF)
+  EXPECT_EQ(clean_rows_changed, 0);
 }
 
 // The demo fuses the logs it writes by the path `mcms fuse` runs: fusing those files again

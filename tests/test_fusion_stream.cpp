@@ -6,7 +6,9 @@
 // count the robot's one systematic error once per reading.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 #include <Eigen/Cholesky>
 
@@ -142,6 +144,51 @@ TEST(StreamFusion, WindowMoifaIsTheEpochFusionOfTheWindowsMeasurements) {
   const Mat6 one = RobotFlangePose(s.logs.robot->samples[3 * 100 + 5].q, s.setup).covariance;
   EXPECT_LT(m.robot->covariance.trace(), one.trace());
   EXPECT_GT(m.robot->covariance.trace(), s.setup.robot_accuracy_covariance.trace());
+}
+
+// Faults per window (issue 14): a robot joint offset over a whole dwell, a glitch in the
+// window's first camera frame (the KF starts on it, so it must restart), inclinometer readings
+// beyond its range. Each is named and left out, and the row's covariance covers its error.
+TEST(StreamFusion, FaultsInAWindowAreLeftOutAndNamed) {
+  Static s = MakeStatic(15);
+  const auto in = [&](double t, int w) { return t >= s.windows[w].start_s && t < s.windows[w].end_s; };
+  for (auto& r : s.logs.robot->samples)
+    if (in(r.time_s, 5)) r.q[1] += 0.5 * 3.14159265358979323846 / 180.0;
+  for (auto& c : s.logs.tracker.samples)
+    if (c.time_s == s.windows[9].start_s)
+      c.T_rig_target = BoxPlus(c.T_rig_target, (Vec6() << 3e-3, 0, 0, 2e-3, 0, 0).finished());
+  for (auto& r : s.logs.inclinometer->samples)
+    if (in(r.time_s, 12)) r.reading = Vec2(1.4, 0.0);  // 80 deg on a 30 deg sensor
+  const auto moifa = FuseMoifa(s.logs, s.setup, s.windows);
+  const auto kf = FuseKalman(s.logs, s.setup, s.windows);
+  ASSERT_EQ(moifa.size(), static_cast<size_t>(kWindows));
+  ASSERT_EQ(kf.size(), static_cast<size_t>(kWindows));
+  const auto has = [](const FusedSample& f, const std::string& x) {
+    return std::find(f.excluded.begin(), f.excluded.end(), x) != f.excluded.end();
+  };
+  EXPECT_TRUE(has(moifa[5], "robot")) << moifa[5].fault;
+  EXPECT_TRUE(has(kf[5], "robot")) << kf[5].fault;
+  EXPECT_TRUE(has(moifa[9], "camera")) << moifa[9].fault;
+  EXPECT_NE(kf[9].fault.find("restarted"), std::string::npos) << kf[9].fault;
+  EXPECT_TRUE(has(kf[9], "camera")) << kf[9].fault;
+  EXPECT_TRUE(has(moifa[12], "inclinometer")) << moifa[12].fault;
+  EXPECT_TRUE(has(kf[12], "inclinometer")) << kf[12].fault;
+  EXPECT_NE(moifa[12].fault.find("beyond its range"), std::string::npos) << moifa[12].fault;
+  for (int w : {5, 9, 12})
+    std::printf("window %d\n  moifa: excluded %zu, fault: %s\n  kf: excluded %zu, fault: %s\n", w,
+                moifa[w].excluded.size(), moifa[w].fault.c_str(), kf[w].excluded.size(), kf[w].fault.c_str());
+  const double q999 = 22.46;  // chi-square 6 dof, 99.9 %
+  double nm = 0, nk = 0;
+  for (int w : {5, 9, 12}) {
+    EXPECT_LT(Nees(moifa[w], s.truth[w]), q999) << w << " " << moifa[w].fault;
+    EXPECT_LT(Nees(kf[w], s.truth[w]), q999) << w << " " << kf[w].fault;
+  }
+  for (int w = 0; w < kWindows; ++w) {
+    nm += Nees(moifa[w], s.truth[w]) / kWindows;
+    nk += Nees(kf[w], s.truth[w]) / kWindows;
+  }
+  EXPECT_LT(nm, 6 + 3 * 0.55);
+  EXPECT_LT(nk, 6 + 3 * 0.55);
 }
 
 TEST(StreamFusion, BadWindowsAreRefused) {
