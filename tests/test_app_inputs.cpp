@@ -208,11 +208,38 @@ TEST(Inputs, SpuriousBlobsAndMissingBallImagesAreNamedPerCamera) {
     const std::string& reason = t.rows[i][t.Column("reason")];
     EXPECT_NE(t.rows[i][t.Column("status")], "ok") << reason;
     EXPECT_FALSE(reason.empty());
-    spurious += reason.find("blobs matching no ball (spurious reflections?) rejected: cam") != std::string::npos;
-    missing += reason.find("ball images expected but not observed: cam") != std::string::npos;
+    spurious += reason.find("blobs matching no ball (spurious reflections?) rejected (cam") != std::string::npos;
+    missing += reason.find("ball images expected but not observed (cam") != std::string::npos;
   }
   EXPECT_EQ(spurious, 4);
   EXPECT_GT(missing, 0);
+}
+
+// A bumped camera (rotated by 5 mrad after calibration): its dropped observations are
+// attributed to it by name.
+TEST(Inputs, OutliersAreAttributedToTheirCamera) {
+  const fs::path d = Copy("bumped");
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    if (c != 1 || key != "rt_cam_rig") return text;
+    const double rx = std::stod(text.substr(1));
+    return "[" + Num(rx + 0.005) + text.substr(text.find(','));
+  });
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  int named = 0;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    const std::string& reason = t.rows[i][t.Column("reason")];
+    EXPECT_NE(t.rows[i][t.Column("status")], "ok") << reason;
+    named += reason.find("outlier observation(s) dropped (cam1 ") != std::string::npos;
+  }
+  EXPECT_GT(named, 0);
+}
+
+TEST(Inputs, StrayImageNameIsBlamedNotFramesCsv) {
+  const fs::path d = Copy("stray");
+  fs::copy_file(d / "images" / "cam0" / "000001.png", d / "images" / "cam0" / "copy of 000001 (2).png");
+  ExpectTrackRefused(d, {"copy of 000001 (2).png is frame 10000012", "remove the stray image"});
 }
 
 uint32_t Crc32(const unsigned char* p, size_t n) {
