@@ -160,10 +160,21 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   } else if (!(in.frame_rate_hz > 0)) {
     Throw("frame rate must be positive, got ", in.frame_rate_hz);
   }
-  for (size_t f : seq.frames) {
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    const size_t f = seq.frames[i];
     if (!times.empty()) {
       const auto it = times.find(f);
-      if (it == times.end()) Throw(in.frames_csv.string(), ": no time for frame ", f);
+      if (it == times.end()) {
+        // Name the image(s) that made this frame: often a stray file whose name holds digits.
+        std::string images;
+        for (const auto& p : seq.image_paths[i])
+          if (!p.empty()) {
+            if (!images.empty()) images += ", ";
+            images += p.string();
+          }
+        Throw("image ", images, " is frame ", f, " (the digits of its name) but ", in.frames_csv.string(),
+              " has no time for frame ", f, "; remove the stray image or add the frame to ", in.frames_csv.filename().string());
+      }
       seq.times_s.push_back(it->second);
     } else {
       seq.times_s.push_back(static_cast<double>(f) / in.frame_rate_hz);
