@@ -281,17 +281,17 @@ CameraModel CameraModel::Read(const fs::path& path) {
 }
 
 namespace {
-std::vector<double> NumberList(const YAML::Node& n, const std::string& what, const fs::path& path) {
-  if (!n || !n.IsSequence()) Throw(path.string(), ": field '", what, "' missing or not a list of numbers");
+std::vector<double> NumberList(const YAML::Node& n, const std::string& what, const fs::path&) {
+  if (!n || !n.IsSequence()) Throw("field '", what, "' missing or not a list of numbers");
   std::vector<double> v;
   for (const auto& e : n) {
     try {
       v.push_back(e.as<double>());
     } catch (const YAML::Exception&) {
-      Throw(path.string(), " line ", e.Mark().line + 1, ": field '", what, "' must hold numbers");
+      Throw("line ", e.Mark().line + 1, ": field '", what, "' must hold numbers");
     }
     if (!std::isfinite(v.back()))
-      Throw(path.string(), " line ", e.Mark().line + 1, ": field '", what, "' holds ", e.Scalar(),
+      Throw("line ", e.Mark().line + 1, ": field '", what, "' holds ", e.Scalar(),
             "; expected finite numbers");
   }
   return v;
