@@ -242,6 +242,16 @@ TEST(Inputs, StrayImageNameIsBlamedNotFramesCsv) {
   ExpectTrackRefused(d, {"copy of 000001 (2).png is frame 12 (the digits of its name)", "remove the stray image"});
 }
 
+TEST(Inputs, BoardFileThatIsAFolderOrAScalarIsRefused) {
+  const fs::path d = test::ScratchDir("inputs_board");
+  fs::create_directories(d / "cam0");
+  fs::create_directories(d / "board_dir");
+  std::ofstream(d / "board.yaml") << "hello\n";
+  ExpectRefused(d, "calib-rig board_dir cam0 -o out", {"board file board_dir: cannot read it as YAML", "it is a folder"},
+                d / "out");
+  ExpectRefused(d, "calib-rig board.yaml cam0 -o out", {"board file board.yaml: expected a Kalibr YAML map"}, d / "out");
+}
+
 uint32_t Crc32(const unsigned char* p, size_t n) {
   uint32_t c = 0xffffffffu;
   for (size_t i = 0; i < n; ++i) {
