@@ -192,11 +192,16 @@ CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   const std::string text = ReadTextFile(path);
   cv::Mat K, D, rvec, tvec;
   int w = 0, h = 0;
-  const char* field = "the file";
+  const char* field = "camera_matrix";
+  cv::FileStorage fs_in;
   try {
-    cv::FileStorage fs_in(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
-    if (!fs_in.isOpened()) Throw("cannot open OpenCV YAML ", path.string());
-    field = "camera_matrix";
+    fs_in.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
+  } catch (const cv::Exception& e) {
+    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.err,
+          " (expected an OpenCV FileStorage file starting with %YAML:1.0)");
+  }
+  if (!fs_in.isOpened()) Throw("cannot open OpenCV YAML ", path.string());
+  try {
     fs_in["camera_matrix"] >> K;
     if (K.empty()) {
       field = "M1";
