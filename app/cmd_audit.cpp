@@ -23,6 +23,7 @@ struct AuditArgs {
 int RunAudit(const AuditArgs& a) {
   namespace fs = std::filesystem;
   const fs::path dir = a.dir;
+  if (!a.repaired.empty()) RequireWritableFile(a.repaired, "audit --repaired-rig");
   const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
   const Target target = Target::Read(dir / "target.yaml");
   const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate}, rig);

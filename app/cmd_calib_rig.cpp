@@ -78,7 +78,12 @@ int RunCalibRig(const CalibRigArgs& a) {
   for (size_t c = 0; c < a.folders.size(); ++c) {
     int width = 0, height = 0, found = 0;
     for (const fs::path& p : images[c]) {
-      const cv::Mat img = cv::imread(p.string(), cv::IMREAD_GRAYSCALE);
+      cv::Mat img;
+      try {
+        img = cv::imread(p.string(), cv::IMREAD_GRAYSCALE);
+      } catch (const cv::Exception& e) {
+        Throw("image ", p.string(), ": cannot be read as an image (", e.err, ")");
+      }
       if (img.empty()) Throw("image ", p.string(), ": cannot be read as an image");
       if (width == 0) width = img.cols, height = img.rows;
       else if (img.cols != width || img.rows != height)

@@ -51,6 +51,10 @@ struct CalibRobotArgs {
 
 Pose PoseFromArgs(const std::vector<double>& v, const char* option) {
   if (v.size() != 7) Throw("calib-robot: ", option, " takes 7 numbers x y z qw qx qy qz (m, unit quaternion), got ", v.size());
+  static const char* const kNames[7] = {"x", "y", "z", "qw", "qx", "qy", "qz"};
+  for (size_t i = 0; i < v.size(); ++i)
+    if (!std::isfinite(v[i]))
+      Throw("calib-robot: ", option, " ", kNames[i], " is ", v[i], "; expected 7 finite numbers x y z qw qx qy qz");
   const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
   if (std::abs(q.norm() - 1.0) > 1e-3) Throw("calib-robot: ", option, " quaternion has norm ", q.norm(), ", expected 1");
   return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
@@ -67,6 +71,10 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "--tool-guess");
   job.fixed = a.fixed;
   job.error_motion_harmonics = a.error_motion;
+  if (!std::isfinite(a.position_sigma_mm) || !(a.position_sigma_mm > 0))
+    Throw("calib-robot: --position-sigma-mm is ", a.position_sigma_mm, "; expected a positive finite number");
+  if (!std::isfinite(a.rotation_sigma_deg) || !(a.rotation_sigma_deg > 0))
+    Throw("calib-robot: --rotation-sigma-deg is ", a.rotation_sigma_deg, "; expected a positive finite number");
   job.position_sigma_m = a.position_sigma_mm * 1e-3;
   job.rotation_sigma_rad = a.rotation_sigma_deg * kDeg;
   job.folds = a.folds;

@@ -30,6 +30,7 @@ int RunFuse(const FuseArgs& a) {
   r.kalman = a.method != "moifa";
   r.output = a.output;
   const FuseFilesResult res = FuseLogFiles(r);
+  for (const std::string& line : res.dropped) std::fprintf(stderr, "mcms fuse: warning: %s\n", line.c_str());
   if (!a.quiet) {
     int flagged = 0, excluded = 0;
     for (const auto& row : res.rows) {

@@ -19,6 +19,7 @@ extern "C" {
 }
 
 #include "core/error.h"
+#include "core/io.h"
 
 namespace mcms {
 
@@ -82,10 +83,11 @@ std::string CalibrationBoard::Describe() const {
 CalibrationBoard CalibrationBoard::Read(const std::filesystem::path& path) {
   YAML::Node y;
   try {
-    y = YAML::LoadFile(path.string());
+    y = YAML::Load(ReadTextFile(path));  // bounded, and a folder is refused by name
   } catch (const std::exception& e) {
     Throw("board file ", path.string(), ": cannot read it as YAML (", e.what(), ")");
   }
+  if (!y.IsMap()) Throw("board file ", path.string(), ": expected a Kalibr YAML map starting with target_type (aprilgrid or checkerboard)");
   auto need = [&](const char* key) {
     if (!y[key]) Throw("board file ", path.string(), ": missing field '", key, "'");
     return y[key];

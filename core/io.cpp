@@ -84,11 +84,22 @@ void RequireWritableFolder(const fs::path& path, const std::string& what) {
 }
 
 std::string ReadTextFile(const fs::path& path) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) Throw("cannot read ", path.string(), ": it is a folder, expected a text file");
   std::ifstream in(path, std::ios::binary);
   if (!in) Throw("cannot read ", path.string(), ": file missing or not readable");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+  // Bounded: a device such as /dev/zero or a huge file given by mistake is refused
+  // after kMaxTextFileBytes instead of filling the memory.
+  std::string text;
+  char buf[1 << 16];
+  while (in.read(buf, sizeof(buf)) || in.gcount() > 0) {
+    text.append(buf, static_cast<size_t>(in.gcount()));
+    if (text.size() > kMaxTextFileBytes)
+      Throw("cannot read ", path.string(), ": larger than ", kMaxTextFileBytes / (1024 * 1024),
+            " MB, the limit for a text input (is it the right file?)");
+  }
+  if (in.bad()) Throw("cannot read ", path.string(), ": read error");
+  return text;
 }
 
 namespace {
@@ -107,7 +118,11 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
 }  // namespace
 
 CsvTable ReadCsv(const fs::path& path) {
-  std::istringstream in(ReadTextFile(path));
+  std::string text = ReadTextFile(path);
+  // A UTF-8 byte order mark (written by some spreadsheet programs) is not part of the
+  // first column's name.
+  if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) text.erase(0, 3);
+  std::istringstream in(text);
   CsvTable t;
   t.source = path;
   std::string line;

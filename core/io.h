@@ -23,10 +23,13 @@ void RequireWritableFile(const std::filesystem::path& path, const std::string& w
 // written, is refused.
 void RequireWritableFolder(const std::filesystem::path& path, const std::string& what);
 
-// Reads the whole file; InputError naming the file when it cannot be read.
+// Reads the whole file; InputError naming the file when it cannot be read, is a folder,
+// or is larger than kMaxTextFileBytes (64 MB: every text input of mcms is far smaller).
+constexpr size_t kMaxTextFileBytes = size_t{64} << 20;
 std::string ReadTextFile(const std::filesystem::path& path);
 
 // Simple CSV reading: a header row and numeric/text cells. Errors name file and row.
+// A leading UTF-8 byte order mark is skipped.
 struct CsvTable {
   std::filesystem::path source;
   std::vector<std::string> header;

@@ -125,12 +125,43 @@ void WriteFusionSetup(const std::filesystem::path& path, const FusionSetup& setu
   });
 }
 
+namespace {
+// Leaves out the readings no sensor of this range can give (|reading - bias| beyond the
+// range by more than 5 sigma on either axis), naming each in `dropped`. InputError when
+// nothing is left.
+void DropOutOfRangeTilts(const Inclinometer& inc, InclinometerLog* log, std::vector<std::string>* dropped) {
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  const double limit = inc.range + 5.0 * inc.sigma;
+  std::vector<InclinometerSample> kept;
+  for (const InclinometerSample& s : log->samples) {
+    const Vec2 tilt = s.reading - inc.bias;
+    const int axis = std::abs(tilt.x()) > limit ? 0 : std::abs(tilt.y()) > limit ? 1 : -1;
+    if (axis < 0) {
+      kept.push_back(s);
+      continue;
+    }
+    char buf[256];
+    std::snprintf(buf, sizeof(buf), "%s line %d: tilt_%c %.4g deg is beyond the inclinometer's range of %.4g deg "
+                  "(setup range_deg); reading not used",
+                  log->source.string().c_str(), s.line, axis == 0 ? 'x' : 'y', s.reading[axis] / kDeg, inc.range / kDeg);
+    dropped->push_back(buf);
+  }
+  if (kept.empty() && !log->samples.empty())
+    Throw(log->source.string(), ": every inclinometer reading is beyond the sensor's range of ", inc.range / kDeg,
+          " deg (setup file inclinometer.range_deg); check the units of the log and the setup");
+  log->samples = std::move(kept);
+}
+}  // namespace
+
 FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
   FuseFilesResult out;
   out.setup = ReadFusionSetup(r.setup);
   out.logs.tracker = ReadTrackerLog(r.tracker);
   if (!r.robot.empty()) out.logs.robot = ReadJointLog(r.robot, out.setup.robot);
-  if (!r.inclinometer.empty()) out.logs.inclinometer = ReadInclinometerLog(r.inclinometer);
+  if (!r.inclinometer.empty()) {
+    out.logs.inclinometer = ReadInclinometerLog(r.inclinometer);
+    DropOutOfRangeTilts(out.setup.inclinometer, &*out.logs.inclinometer, &out.dropped);
+  }
   if (!r.windows.empty()) out.windows = ReadFusionWindows(r.windows);
   CheckTimeOverlap(out.logs);
   StreamFusionOptions so;

@@ -41,6 +41,10 @@ struct FuseFilesResult {
   FusionSetup setup;
   std::vector<FusionWindow> windows;
   std::vector<FusedSample> rows;  // FuseStream's order
+  // Input rows left out before fusion, one line each naming the file, line and value
+  // (an inclinometer reading beyond the sensor's range plus 5 sigma, which a saturating
+  // sensor cannot produce); the rest is fused.
+  std::vector<std::string> dropped;
 };
 
 // Reads and checks every input before anything is written (InputError naming the file),

@@ -6,8 +6,12 @@
 #include <mutex>
 #include <thread>
 #include <cctype>
+#include <cstdint>
 #include <cstdio>
+#include <fstream>
 #include <map>
+#include <optional>
+#include <sstream>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
 
@@ -31,6 +35,57 @@ std::optional<size_t> FrameNumber(const fs::path& p) {
     if (std::isdigit(static_cast<unsigned char>(ch))) digits += ch;
   if (digits.empty()) return std::nullopt;
   return static_cast<size_t>(std::stoull(digits));
+}
+// Width and height from a PNG file's IHDR chunk, without decoding; nullopt for any other
+// file (or an unreadable one).
+std::optional<std::array<int, 2>> PngHeaderSize(const fs::path& p) {
+  unsigned char h[24];
+  std::ifstream in(p, std::ios::binary);
+  if (!in.read(reinterpret_cast<char*>(h), sizeof(h))) return std::nullopt;
+  static const unsigned char kSig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (!std::equal(kSig, kSig + 8, h) || std::string(reinterpret_cast<char*>(h + 12), 4) != "IHDR") return std::nullopt;
+  auto be32 = [&](int o) {
+    return (static_cast<uint32_t>(h[o]) << 24) | (static_cast<uint32_t>(h[o + 1]) << 16) |
+           (static_cast<uint32_t>(h[o + 2]) << 8) | static_cast<uint32_t>(h[o + 3]);
+  };
+  const uint32_t w = be32(16), hh = be32(20);
+  if (w > 0x7fffffffu || hh > 0x7fffffffu) return std::array<int, 2>{-1, -1};
+  return std::array<int, 2>{static_cast<int>(w), static_cast<int>(hh)};
+}
+
+constexpr double kMaxImagePixels = double(1 << 26);  // 67 MP: larger is not a camera frame of this tool
+
+// Reads an image; empty with the reason in *problem when it cannot be read, when its
+// (header) size differs from `expected` (when given), or when OpenCV refuses it.
+cv::Mat ReadImage(const fs::path& p, const std::array<int, 2>* expected, std::string* problem) {
+  if (const auto hs = PngHeaderSize(p)) {
+    const bool absurd = (*hs)[0] <= 0 || (*hs)[1] <= 0 || double((*hs)[0]) * double((*hs)[1]) > kMaxImagePixels;
+    if ((expected && *hs != *expected) || absurd) {
+      std::ostringstream s;
+      s << "image " << p.string() << " header says " << (*hs)[0] << "x" << (*hs)[1];
+      if (expected) s << " but the rig says " << (*expected)[0] << "x" << (*expected)[1];
+      s << "; not decoded";
+      *problem = s.str();
+      return {};
+    }
+  }
+  cv::Mat im;
+  try {
+    im = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    *problem = "cannot decode " + p.string() + " (" + e.err + ")";
+    return {};
+  }
+  if (im.empty()) {
+    *problem = "cannot decode " + p.string();
+    return {};
+  }
+  if (expected && (im.cols != (*expected)[0] || im.rows != (*expected)[1])) {
+    *problem = "image " + p.string() + " is " + std::to_string(im.cols) + "x" + std::to_string(im.rows) +
+               " but the rig says " + std::to_string((*expected)[0]) + "x" + std::to_string((*expected)[1]);
+    return {};
+  }
+  return im;
 }
 }  // namespace
 
@@ -71,12 +126,18 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
     paths.resize(rig.size());
     seq.image_paths.push_back(paths);
   }
-  // Image size check on the first image of each camera: a wrong rig is an error.
+  // Image size check on the first readable image of each camera: a wrong rig is an
+  // error. Corrupt images (or a PNG header claiming an absurd size) are per-frame
+  // problems, found again when their frame is read.
   for (size_t c = 0; c < rig.size(); ++c) {
+    seq.image_sizes.push_back({rig.cameras[c].Width(), rig.cameras[c].Height()});
+    int tried = 0;
     for (const auto& paths : seq.image_paths) {
       if (paths[c].empty()) continue;
-      const cv::Mat im = cv::imread(paths[c].string(), cv::IMREAD_UNCHANGED);
-      if (im.empty()) break;  // a corrupt first image is a per-frame problem; check the camera later
+      if (++tried > 5) break;
+      std::string problem;
+      const cv::Mat im = ReadImage(paths[c], nullptr, &problem);
+      if (im.empty()) continue;
       if (im.cols != rig.cameras[c].Width() || im.rows != rig.cameras[c].Height())
         Throw("image ", paths[c].string(), " is ", im.cols, "x", im.rows, " but the rig says camera '", rig.names[c],
               "' is ", rig.cameras[c].Width(), "x", rig.cameras[c].Height());
@@ -99,10 +160,21 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   } else if (!(in.frame_rate_hz > 0)) {
     Throw("frame rate must be positive, got ", in.frame_rate_hz);
   }
-  for (size_t f : seq.frames) {
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    const size_t f = seq.frames[i];
     if (!times.empty()) {
       const auto it = times.find(f);
-      if (it == times.end()) Throw(in.frames_csv.string(), ": no time for frame ", f);
+      if (it == times.end()) {
+        // Name the image(s) that made this frame: often a stray file whose name holds digits.
+        std::string images;
+        for (const auto& p : seq.image_paths[i])
+          if (!p.empty()) {
+            if (!images.empty()) images += ", ";
+            images += p.string();
+          }
+        Throw("image ", images, " is frame ", f, " (the digits of its name) but ", in.frames_csv.string(),
+              " has no time for frame ", f, "; remove the stray image or add the frame to ", in.frames_csv.filename().string());
+      }
       seq.times_s.push_back(it->second);
     } else {
       seq.times_s.push_back(static_cast<double>(f) / in.frame_rate_hz);
@@ -121,8 +193,7 @@ std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::ve
       (*problems)[c] = "image missing";
       continue;
     }
-    images[c] = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
-    if (images[c].empty()) (*problems)[c] = "cannot decode " + p.string();
+    images[c] = ReadImage(p, c < seq.image_sizes.size() ? &seq.image_sizes[c] : nullptr, &(*problems)[c]);
   }
   return images;
 }

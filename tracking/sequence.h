@@ -6,6 +6,7 @@
 //   frames.csv (optional)              frame,time_s  -- otherwise time = frame / rate
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -25,6 +26,10 @@ struct ImageSequence {
   std::vector<size_t> frames;                                    // sorted frame numbers
   std::vector<double> times_s;                                   // one per frame
   std::vector<std::vector<std::filesystem::path>> image_paths;  // [frame][camera], empty path = missing
+  // [camera] {width, height} the rig gives; an image of another size (read from a PNG's
+  // header before decoding, from the decoded image otherwise) degrades its frame.
+  // Empty: not checked.
+  std::vector<std::array<int, 2>> image_sizes;
 };
 
 // Lists the frames and checks the layout against the rig: InputError when the folder
@@ -33,7 +38,8 @@ struct ImageSequence {
 ImageSequence ScanImageSequence(const SequenceInput& input, const CameraRig& rig);
 
 // The images of frame index i (seq.frames[i]), one per camera; a missing or undecodable
-// image is an empty Mat with the reason in problems[c].
+// image, or one of another size than seq.image_sizes (a PNG whose header claims 60000 x
+// 60000 is not decoded), is an empty Mat with the reason in problems[c].
 std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems);
 
 // Runs fn(i) for i in [begin, end) on `threads` threads (1 = in this thread, in order).

@@ -39,7 +39,8 @@ Target Target::Read(const std::filesystem::path& path) {
   if (!std::filesystem::exists(path)) Throw("target file ", path.string(), " does not exist");
   Target t;
   try {
-    const YAML::Node root = YAML::LoadFile(path.string());
+    const YAML::Node root = YAML::Load(ReadTextFile(path));
+    if (!root.IsMap()) Throw(path.string(), ": expected a YAML map with ball_radius_m and balls_m");
     if (root["name"]) t.name = root["name"].as<std::string>();
     if (!root["ball_radius_m"]) Throw(path.string(), ": missing field 'ball_radius_m'");
     t.ball_radius = root["ball_radius_m"].as<double>();
@@ -49,12 +50,18 @@ Target Target::Read(const std::filesystem::path& path) {
     for (const auto& b : balls) {
       const auto v = b.as<std::vector<double>>();
       if (v.size() != 3) Throw(path.string(), " line ", b.Mark().line + 1, ": each ball needs [x, y, z]");
+      for (size_t k = 0; k < 3; ++k)
+        if (!std::isfinite(v[k]) || std::abs(v[k]) > 100.0)
+          Throw(path.string(), " line ", b.Mark().line + 1, ": ball ", t.balls_target.size(), " has ", "xyz"[k], " = ",
+                v[k], " m; expected a finite position within 100 m of the target origin");
       t.balls_target.emplace_back(v[0], v[1], v[2]);
     }
   } catch (const YAML::Exception& e) {
     Throw("cannot parse target file ", path.string(), ": ", e.what());
   }
-  if (!(t.ball_radius > 0) || !std::isfinite(t.ball_radius)) Throw(path.string(), ": ball_radius_m must be positive");
+  if (!(t.ball_radius > 0) || !std::isfinite(t.ball_radius) || t.ball_radius > 10.0)
+    Throw(path.string(), ": ball_radius_m must be a positive finite number of metres (at most 10), found ",
+          t.ball_radius);
   try {
     t.MinDistanceGap();
   } catch (const InputError& e) {

@@ -100,6 +100,80 @@ std::string Join(const std::vector<std::string>& v) {
 }
 }  // namespace
 
+// Says what was rejected and where, per camera: the outliers dropped by the refinement,
+// blobs that no ball explains (spurious reflections), and isolated ball images the final
+// pose puts well inside a camera's view that were not observed (occlusion, a lost blob).
+void Tracker::DescribeRejections(const std::vector<std::vector<ImagePoint>>& pts,
+                                 const std::vector<std::optional<std::vector<ImagePoint>>>& in,
+                                 const PoseRefinement& ref, const std::vector<int>& views,
+                                 std::vector<std::string>* notes) const {
+  const int ncam = static_cast<int>(rig_.size());
+  const int nb = static_cast<int>(target_.balls_target.size());
+  std::vector<int> dropped(ncam, 0), spurious(ncam, 0);
+  std::set<std::pair<int, int>> seen;  // (camera, ball) kept or dropped
+  for (const auto& o : ref.kept) seen.insert({o.camera, o.ball});
+  for (const auto& o : ref.dropped) {
+    seen.insert({o.camera, o.ball});
+    ++dropped[o.camera];
+  }
+  std::ostringstream out, spur, miss;
+  for (int c = 0; c < ncam; ++c) {
+    for (const ImagePoint& p : pts[c]) {
+      bool explained = false;
+      for (const auto* list : {&ref.kept, &ref.dropped})
+        for (const auto& o : *list) explained = explained || (o.camera == c && o.q == p.q);
+      spurious[c] += explained ? 0 : 1;
+    }
+    if (dropped[c]) out << (out.tellp() > 0 ? " / " : "") << rig_.names[c] << " " << dropped[c];
+    if (spurious[c]) spur << (spur.tellp() > 0 ? " / " : "") << rig_.names[c] << " " << spurious[c];
+    if (c >= static_cast<int>(in.size()) || !in[c]) continue;  // no image: already said
+    const CameraModel& cam = rig_.cameras[c];
+    // Predicted image centre and apparent radius of every ball in front of the camera.
+    std::vector<Vec2> q(nb);
+    std::vector<double> radius(nb, -1.0);
+    for (int b = 0; b < nb; ++b) {
+      const Vec3 p_cam = cam.T_cam_rig() * (ref.T_rig_target * target_.balls_target[b]);
+      if (!(p_cam.z() > 0.0)) continue;
+      q[b] = cam.Project(p_cam);
+      radius[b] = cam.Intrinsics()[0] * target_.ball_radius / p_cam.z();
+    }
+    std::string balls;
+    int nmiss = 0;
+    for (int b = 0; b < nb; ++b) {
+      if (views[b] == 0 || seen.count({c, b}) || radius[b] < 0) continue;
+      // Images within two diameters of another ball's image may merge into one blob (a
+      // limit of the detector, not a fault): only isolated ball images count as missing.
+      bool crowded = false;
+      for (int o = 0; o < nb; ++o)
+        crowded = crowded || (o != b && radius[o] > 0 && (q[o] - q[b]).norm() < 2.0 * (radius[b] + radius[o]));
+      if (crowded) continue;
+      const Vec3 p_cam = cam.T_cam_rig() * (ref.T_rig_target * target_.balls_target[b]);
+      // Fully inside the image with a margin of the ball's apparent radius plus 2 px.
+      if (cam.Sees(p_cam, radius[b] + 2.0)) {
+        balls += ' ';
+        balls += std::to_string(b);
+        ++nmiss;
+      }
+    }
+    if (nmiss) miss << (miss.tellp() > 0 ? " / " : "") << rig_.names[c] << (nmiss > 1 ? " balls" : " ball") << balls;
+  }
+  std::ostringstream s;
+  if (!ref.dropped.empty()) {
+    s << ref.dropped.size() << " outlier observation(s) dropped (" << out.str() << ")";
+    notes->push_back(s.str());
+  }
+  if (spur.tellp() > 0) {
+    s.str("");
+    s << "blobs matching no ball (spurious reflections?) rejected (" << spur.str() << ")";
+    notes->push_back(s.str());
+  }
+  if (miss.tellp() > 0) {
+    s.str("");
+    s << "ball images expected but not observed (" << miss.str() << ")";
+    notes->push_back(s.str());
+  }
+}
+
 FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
                                    const std::vector<std::optional<std::vector<ImagePoint>>>& in,
                                    const std::vector<std::string>& problems) {
@@ -245,7 +319,7 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
   }
   for (int b = 0; b < nb; ++b)
     if (views[b] == 0) notes.push_back("ball " + std::to_string(b) + " not observed");
-  if (!ref.dropped.empty()) notes.push_back(std::to_string(ref.dropped.size()) + " outlier observation(s) dropped");
+  DescribeRejections(pts, in, ref, views, &notes);
 
   res.T_rig_target = ref.T_rig_target;
   res.cov = ref.cov;

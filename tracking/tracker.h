@@ -89,6 +89,9 @@ class Tracker {
 
  private:
   std::optional<Pose> Predict(double time_s) const;
+  void DescribeRejections(const std::vector<std::vector<ImagePoint>>& pts,
+                          const std::vector<std::optional<std::vector<ImagePoint>>>& in, const PoseRefinement& ref,
+                          const std::vector<int>& views, std::vector<std::string>* notes) const;
 
   CameraRig rig_;
   Target target_;

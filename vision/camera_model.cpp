@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstdio>
@@ -21,6 +22,8 @@ namespace fs = std::filesystem;
 static_assert(sizeof(mrcal_lensmodel_t) <= 32, "lensmodel storage too small");
 
 namespace {
+constexpr double kMaxIntrinsic = 1e6;
+constexpr double kMinBaseline = 1e-3;  // m between two camera centres  // px for fx, fy, cx, cy; unitless for distortion
 const mrcal_lensmodel_t& Lens(const unsigned char* raw) {
   return *reinterpret_cast<const mrcal_lensmodel_t*>(raw);
 }
@@ -43,9 +46,21 @@ void CameraModel::InitLens() {
   const int n = mrcal_lensmodel_num_params(&lens);
   if (n != static_cast<int>(intrinsics_.size()))
     Throw("lens model '", lensmodel_name_, "' takes ", n, " intrinsics, got ", intrinsics_.size());
-  for (double v : intrinsics_)
-    if (!std::isfinite(v)) Throw("lens model '", lensmodel_name_, "': intrinsics must be finite numbers");
-  if (width_ <= 0 || height_ <= 0) Throw("camera image size must be positive, got ", width_, "x", height_);
+  // Sane bounds: a focal length or centre beyond 1e6 px, or a distortion parameter
+  // beyond 1e6, is a broken file (such a camera would silently project nothing).
+  static const char* const kCore[4] = {"fx", "fy", "cx", "cy"};
+  const bool has_core = mrcal_lensmodel_metadata(&lens).has_core;
+  for (size_t i = 0; i < intrinsics_.size(); ++i) {
+    const double v = intrinsics_[i];
+    const std::string name = has_core && i < 4 ? std::string(kCore[i]) : "intrinsics[" + std::to_string(i) + "]";
+    if (!std::isfinite(v) || std::abs(v) > kMaxIntrinsic)
+      Throw("lens model '", lensmodel_name_, "': ", name, " = ", v, " is not a finite number within +-",
+            kMaxIntrinsic);
+    if (has_core && i < 2 && !(v > 0.0))
+      Throw("lens model '", lensmodel_name_, "': focal length ", name, " = ", v, " px must be positive");
+  }
+  if (width_ <= 0 || height_ <= 0 || width_ > 100000 || height_ > 100000)
+    Throw("camera image size must be positive and at most 100000 px, got ", width_, "x", height_);
   std::memcpy(lensmodel_, &lens, sizeof(lens));
 }
 
@@ -117,6 +132,9 @@ CameraModel CameraModel::ReadCameramodel(const fs::path& path) {
   if (!mrcal_lensmodel_name(name, sizeof(name), &m->lensmodel)) Throw("camera model ", path.string(), ": bad lens model");
   const int n = mrcal_lensmodel_num_params(&m->lensmodel);
   std::vector<double> intr(m->intrinsics, m->intrinsics + n);
+  for (int i = 0; i < 6; ++i)
+    if (!std::isfinite(m->rt_cam_ref[i]))
+      Throw("camera model ", path.string(), ": extrinsics[", i, "] = ", m->rt_cam_ref[i], "; expected finite numbers");
   try {
     return CameraModel(name, intr, static_cast<int>(m->imagersize[0]), static_cast<int>(m->imagersize[1]),
                        Pose::FromRt(m->rt_cam_ref));
@@ -168,26 +186,51 @@ std::string LensFromDistortionCount(int n, const fs::path& path) {
 
 CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   if (!fs::exists(path)) Throw("camera file ", path.string(), " does not exist");
+  // OpenCV's FileStorage reports malformed content (a camera_matrix with 8 numbers, a
+  // text where a number belongs) by cv::Exception assertions: each becomes an
+  // InputError naming the file.
+  const std::string text = ReadTextFile(path);
+  cv::Mat K, D, rvec, tvec;
+  int w = 0, h = 0;
+  const char* field = "camera_matrix";
   cv::FileStorage fs_in;
   try {
-    fs_in.open(path.string(), cv::FileStorage::READ);
+    fs_in.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
   } catch (const cv::Exception& e) {
-    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.what());
+    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.err,
+          " (expected an OpenCV FileStorage file starting with %YAML:1.0)");
   }
   if (!fs_in.isOpened()) Throw("cannot open OpenCV YAML ", path.string());
-  cv::Mat K, D, rvec, tvec;
-  fs_in["camera_matrix"] >> K;
-  if (K.empty()) fs_in["M1"] >> K;
-  fs_in["distortion_coefficients"] >> D;
-  if (D.empty()) fs_in["D1"] >> D;
-  int w = 0, h = 0;
-  fs_in["image_width"] >> w;
-  fs_in["image_height"] >> h;
+  try {
+    fs_in["camera_matrix"] >> K;
+    if (K.empty()) {
+      field = "M1";
+      fs_in["M1"] >> K;
+    }
+    field = "distortion_coefficients";
+    fs_in["distortion_coefficients"] >> D;
+    if (D.empty()) {
+      field = "D1";
+      fs_in["D1"] >> D;
+    }
+    field = "image_width";
+    fs_in["image_width"] >> w;
+    field = "image_height";
+    fs_in["image_height"] >> h;
+    field = "rvec";
+    fs_in["rvec"] >> rvec;
+    field = "tvec";
+    fs_in["tvec"] >> tvec;
+  } catch (const cv::Exception& e) {
+    Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " is malformed (", e.err,
+          "); expected e.g. camera_matrix as a 3x3 !!opencv-matrix with 9 numbers");
+  }
   if (K.rows != 3 || K.cols != 3) Throw(path.string(), ": field camera_matrix missing or not 3x3");
   if (w <= 0 || h <= 0) Throw(path.string(), ": fields image_width and image_height missing or not positive");
   K.convertTo(K, CV_64F);
   std::vector<double> intr = {K.at<double>(0, 0), K.at<double>(1, 1), K.at<double>(0, 2), K.at<double>(1, 2)};
   if (!D.empty()) {
+    if (D.channels() != 1) Throw(path.string(), ": field distortion_coefficients must be a one-channel matrix");
     D.convertTo(D, CV_64F);
     D = D.reshape(1, 1);
     for (int i = 0; i < D.cols; ++i) intr.push_back(D.at<double>(0, i));
@@ -195,16 +238,17 @@ CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   const int ndist = D.empty() ? 0 : D.cols;
   const std::string lens = LensFromDistortionCount(ndist, path);
   Pose T;
-  fs_in["rvec"] >> rvec;
-  fs_in["tvec"] >> tvec;
   if (!rvec.empty() && !tvec.empty()) {
+    if (rvec.total() != 3 || tvec.total() != 3 || rvec.channels() != 1 || tvec.channels() != 1)
+      Throw(path.string(), ": rvec and tvec must have 3 values each");
     rvec.convertTo(rvec, CV_64F);
     tvec.convertTo(tvec, CV_64F);
-    if (rvec.total() != 3 || tvec.total() != 3) Throw(path.string(), ": rvec and tvec must have 3 values each");
     double rt[6];
     for (int i = 0; i < 3; ++i) {
       rt[i] = rvec.at<double>(i);
       rt[3 + i] = tvec.at<double>(i);
+      if (!std::isfinite(rt[i]) || !std::isfinite(rt[3 + i]))
+        Throw(path.string(), ": rvec and tvec must hold finite numbers, found ", rt[i], " and ", rt[3 + i]);
     }
     T = Pose::FromRt(rt);
   }
@@ -242,15 +286,18 @@ CameraModel CameraModel::Read(const fs::path& path) {
 }
 
 namespace {
-std::vector<double> NumberList(const YAML::Node& n, const std::string& what, const fs::path& path) {
-  if (!n || !n.IsSequence()) Throw(path.string(), ": field '", what, "' missing or not a list of numbers");
+std::vector<double> NumberList(const YAML::Node& n, const std::string& what, const fs::path&) {
+  if (!n || !n.IsSequence()) Throw("field '", what, "' missing or not a list of numbers");
   std::vector<double> v;
   for (const auto& e : n) {
     try {
       v.push_back(e.as<double>());
     } catch (const YAML::Exception&) {
-      Throw(path.string(), " line ", e.Mark().line + 1, ": field '", what, "' must hold numbers");
+      Throw("line ", e.Mark().line + 1, ": field '", what, "' must hold numbers");
     }
+    if (!std::isfinite(v.back()))
+      Throw("line ", e.Mark().line + 1, ": field '", what, "' holds ", e.Scalar(),
+            "; expected finite numbers");
   }
   return v;
 }
@@ -260,17 +307,25 @@ CameraRig CameraRig::Read(const fs::path& path) {
   if (!fs::exists(path)) Throw("rig file ", path.string(), " does not exist");
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path.string());
+    root = YAML::Load(ReadTextFile(path));
   } catch (const YAML::Exception& e) {
     Throw("cannot parse rig file ", path.string(), ": ", e.what());
   }
+  if (!root.IsMap())
+    Throw(path.string(), ": expected a YAML map with a list 'cameras', found ",
+          root.IsScalar() ? "a single value '" + root.Scalar() + "'" : root.IsSequence() ? std::string("a list") : std::string("nothing"));
   const YAML::Node cams = root["cameras"];
   if (!cams || !cams.IsSequence() || cams.size() == 0)
     Throw(path.string(), ": expected a non-empty list 'cameras'");
   CameraRig rig;
   for (size_t i = 0; i < cams.size(); ++i) {
     const YAML::Node c = cams[i];
+    if (!c.IsMap()) Throw(path.string(), " line ", c.Mark().line + 1, ": camera ", i, " must be a map (name, model or lensmodel, ...)");
+    if (c["name"] && !c["name"].IsScalar()) Throw(path.string(), " line ", c.Mark().line + 1, ": camera ", i, ": 'name' must be a text");
     const std::string name = c["name"] ? c["name"].as<std::string>() : "cam" + std::to_string(i);
+    if (std::find(rig.names.begin(), rig.names.end(), name) != rig.names.end())
+      Throw(path.string(), " line ", c.Mark().line + 1, ": camera name '", name,
+            "' is used twice; every camera needs its own name (its image folder)");
     const std::string where = path.string() + ", camera " + name;
     try {
       if (c["model"]) {
@@ -297,6 +352,15 @@ CameraRig CameraRig::Read(const fs::path& path) {
     }
     rig.names.push_back(name);
   }
+  // A rig whose cameras share one centre has no baseline: nothing can be triangulated.
+  for (size_t i = 0; i < rig.size(); ++i)
+    for (size_t j = i + 1; j < rig.size(); ++j) {
+      const Vec3 ci = rig.cameras[i].T_cam_rig().Inverse().t, cj = rig.cameras[j].T_cam_rig().Inverse().t;
+      if ((ci - cj).norm() < kMinBaseline)
+        Throw(path.string(), ": cameras '", rig.names[i], "' and '", rig.names[j], "' are both at (", ci.x(), ", ",
+              ci.y(), ", ", ci.z(), ") m in the rig frame (", (ci - cj).norm() * 1e3,
+              " mm apart, at least 1 mm needed); check their rt_cam_rig: a rig needs a baseline");
+    }
   return rig;
 }
 

@@ -1,0 +1,426 @@
+// Bad inputs through the real `mcms` binary (issue 14): each is refused with one line
+// naming the input and the bad value, a non-zero exit and nothing written, or (a frame's
+// image, an inclinometer row) left out with the reason while the rest is processed.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <sstream>
+#include <unistd.h>
+
+#include "core/io.h"
+#include "model/inclinometer.h"
+#include "model/robot_model.h"
+#include "tests/test_util.h"
+#include "vision/camera_model.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+using Lines = std::vector<std::string>;
+
+struct CliRun {
+  int code;
+  std::string err;
+};
+
+// Runs mcms with `args` from folder `cwd`; stderr is returned.
+CliRun Mcms(const std::string& args, const fs::path& cwd) {
+  const std::string cmd = "cd " + cwd.string() + " && " + std::string(MCMS_CLI) + " " + args + " 2> " +
+                          (cwd / "stderr.txt").string() + " > /dev/null";
+  const int status = std::system(cmd.c_str());
+  std::ifstream in(cwd / "stderr.txt");
+  std::stringstream s;
+  s << in.rdbuf();
+  return {WEXITSTATUS(status), s.str()};
+}
+
+const fs::path& Recording() {
+  static const fs::path dir = [] {
+    const fs::path d = test::ScratchDir("inputs_recording_" + std::to_string(::getpid())) / "rec";
+    const CliRun r = Mcms("render --frames 5 --quiet -o " + d.string(), d.parent_path());
+    EXPECT_EQ(r.code, 0) << r.err;
+    return d;
+  }();
+  return dir;
+}
+
+fs::path Copy(const std::string& name) {
+  const fs::path d = test::ScratchDir("inputs_" + name) / "rec";
+  fs::copy(Recording(), d, fs::copy_options::recursive);
+  fs::remove(d / "poses.csv");
+  return d;
+}
+
+std::string Num(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+// Writes the recording's rig inline, with the text of a camera's fields replaced by `edit`
+// (camera index, field name, text) when it returns a value.
+void WriteRig(const fs::path& dir, const std::function<std::string(size_t, const std::string&, const std::string&)>& edit) {
+  const CameraRig rig = CameraRig::Read(Recording() / "rig.yaml");
+  std::ofstream o(dir / "rig.yaml", std::ios::trunc);
+  o << "cameras:\n";
+  for (size_t c = 0; c < rig.size(); ++c) {
+    const CameraModel& m = rig.cameras[c];
+    std::ostringstream intr, rt, size;
+    intr << "[";
+    for (size_t i = 0; i < m.Intrinsics().size(); ++i) intr << (i ? ", " : "") << Num(m.Intrinsics()[i]);
+    intr << "]";
+    double r[6];
+    m.T_cam_rig().ToRt(r);
+    rt << "[";
+    for (int i = 0; i < 6; ++i) rt << (i ? ", " : "") << Num(r[i]);
+    rt << "]";
+    size << "[" << m.Width() << ", " << m.Height() << "]";
+    const std::map<std::string, std::string> fields = {{"name", rig.names[c]},
+                                                       {"lensmodel", m.LensModelName()},
+                                                       {"intrinsics", intr.str()},
+                                                       {"imagersize", size.str()},
+                                                       {"rt_cam_rig", rt.str()}};
+    bool first = true;
+    for (const char* key : {"name", "lensmodel", "intrinsics", "imagersize", "rt_cam_rig"}) {
+      const std::string text = edit(c, key, fields.at(key));
+      o << (first ? "  - " : "    ") << key << ": " << text << "\n";
+      first = false;
+    }
+  }
+}
+
+void ExpectRefused(const fs::path& d, const std::string& args, const std::vector<std::string>& needles,
+                   const fs::path& output) {
+  const CliRun r = Mcms(args, d);
+  EXPECT_EQ(r.code, 2) << r.err;
+  for (const auto& n : needles) EXPECT_NE(r.err.find(n), std::string::npos) << "expected '" << n << "' in: " << r.err;
+  EXPECT_EQ(r.err.find("internal error"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(output)) << "no output may be written";
+  for (const auto& e : fs::directory_iterator(output.parent_path()))
+    EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << "left behind: " << e.path();
+}
+
+void ExpectTrackRefused(const fs::path& d, const std::vector<std::string>& needles) {
+  ExpectRefused(d, "track --quiet " + d.string(), needles, d / "poses.csv");
+}
+
+TEST(Inputs, AbsurdIntrinsicsAreRefused) {
+  const fs::path d = Copy("intrinsics");
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    return c == 1 && key == "intrinsics" ? "[1e308" + text.substr(text.find(',')) : text;
+  });
+  ExpectTrackRefused(d, {"rig.yaml, camera cam1", "fx = 1e+308", "within +-1e+06"});
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    return c == 2 && key == "intrinsics" ? "[-900" + text.substr(text.find(',')) : text;
+  });
+  ExpectTrackRefused(d, {"camera cam2", "focal length fx = -900 px must be positive"});
+}
+
+TEST(Inputs, DuplicateCameraNamesAreRefused) {
+  const fs::path d = Copy("duplicate");
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    return c == 2 && key == "name" ? std::string("cam1") : text;
+  });
+  ExpectTrackRefused(d, {"rig.yaml line", "camera name 'cam1' is used twice"});
+}
+
+TEST(Inputs, NonFiniteExtrinsicsAndADegenerateRigAreRefused) {
+  const fs::path d = Copy("inf");
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    return c == 3 && key == "rt_cam_rig" ? "[0, 0, 0, .inf, 0, 0]" : text;
+  });
+  ExpectTrackRefused(d, {"rig.yaml", "camera cam3", "field 'rt_cam_rig' holds .inf"});
+  WriteRig(d, [](size_t, const std::string& key, const std::string& text) {
+    return key == "rt_cam_rig" ? "[0.1, 0, 0, 0.5, 0.2, 3]" : text;
+  });
+  ExpectTrackRefused(d, {"rig.yaml: cameras 'cam0' and 'cam1' are both at", "a rig needs a baseline"});
+}
+
+TEST(Inputs, RigThatIsAFolderOrAScalarIsRefused) {
+  const fs::path d = Copy("rigfile");
+  fs::remove(d / "rig.yaml");
+  fs::create_directories(d / "rig.yaml");
+  ExpectTrackRefused(d, {"rig.yaml: it is a folder, expected a text file"});
+  fs::remove_all(d / "rig.yaml");
+  std::ofstream(d / "rig.yaml") << "hello\n";
+  ExpectTrackRefused(d, {"rig.yaml: expected a YAML map with a list 'cameras', found a single value 'hello'"});
+}
+
+TEST(Inputs, OpenCvCameraMatrixWithEightNumbersIsRefused) {
+  const fs::path d = Copy("opencv");
+  std::ofstream(d / "cv.yaml") << "%YAML:1.0\n---\nimage_width: 1280\nimage_height: 1024\n"
+                                  "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+                                  "   data: [ 1100., 0., 640., 0., 1100., 512., 0., 0. ]\n";
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    if (c != 0) return text;
+    if (key == "lensmodel") return std::string("LENSMODEL_PINHOLE\n    model: cv.yaml");
+    return text;
+  });
+  // A camera with 'model' reads the file; the inline fields are then ignored.
+  ExpectTrackRefused(d, {"cv.yaml", "field camera_matrix is malformed"});
+}
+
+TEST(Inputs, NanBallPositionIsRefused) {
+  const fs::path d = Copy("target");
+  std::ofstream(d / "target.yaml", std::ios::trunc)
+      << "name: t\nball_radius_m: 0.01\nballs_m:\n  - [0, 0, 0]\n  - [0.1, .nan, 0]\n  - [0, 0.1, 0]\n";
+  ExpectTrackRefused(d, {"target.yaml line 5: ball 1 has y = nan m"});
+}
+
+TEST(Inputs, Utf8BomInFramesCsvIsAccepted) {
+  const fs::path d = Copy("bom");
+  const std::string text = ReadTextFile(d / "frames.csv");
+  std::ofstream(d / "frames.csv", std::ios::trunc | std::ios::binary) << "\xEF\xBB\xBF" << text;
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(ReadCsv(d / "poses.csv").rows.size(), 5u);
+}
+
+// Issue 14 item 3: frames with spurious reflections or occluded ball images are not "ok"
+// with an empty reason; the reason names what was rejected and in which camera.
+TEST(Inputs, SpuriousBlobsAndMissingBallImagesAreNamedPerCamera) {
+  const fs::path d = test::ScratchDir("inputs_spurious");
+  ASSERT_EQ(std::system((std::string(MCMS_CLI) + " render --print-default > " + (d / "default.yaml").string()).c_str()), 0);
+  std::string text = ReadTextFile(d / "default.yaml");
+  for (const auto& [key, value] : {std::pair<std::string, std::string>{"spurious_per_image: 0", "spurious_per_image: 20"},
+                                   {"occlusion_probability: 0", "occlusion_probability: 0.3"}}) {
+    const auto at = text.find(key);
+    ASSERT_NE(at, std::string::npos) << key;
+    text.replace(at, key.size(), value);
+  }
+  std::ofstream(d / "scenario.yaml") << text;
+  const CliRun render = Mcms("render scenario.yaml --frames 4 --quiet -o rec", d);
+  ASSERT_EQ(render.code, 0) << render.err;
+  const CliRun r = Mcms("track --quiet rec", d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "rec" / "poses.csv");
+  ASSERT_EQ(t.rows.size(), 4u);
+  int spurious = 0, missing = 0;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    const std::string& reason = t.rows[i][t.Column("reason")];
+    EXPECT_NE(t.rows[i][t.Column("status")], "ok") << reason;
+    EXPECT_FALSE(reason.empty());
+    spurious += reason.find("blobs matching no ball (spurious reflections?) rejected (cam") != std::string::npos;
+    missing += reason.find("ball images expected but not observed (cam") != std::string::npos;
+  }
+  EXPECT_EQ(spurious, 4);
+  EXPECT_GT(missing, 0);
+}
+
+// A bumped camera (rotated by 5 mrad after calibration): its dropped observations are
+// attributed to it by name.
+TEST(Inputs, OutliersAreAttributedToTheirCamera) {
+  const fs::path d = Copy("bumped");
+  WriteRig(d, [](size_t c, const std::string& key, const std::string& text) {
+    if (c != 1 || key != "rt_cam_rig") return text;
+    const double rx = std::stod(text.substr(1));
+    return "[" + Num(rx + 0.005) + text.substr(text.find(','));
+  });
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  int named = 0;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    const std::string& reason = t.rows[i][t.Column("reason")];
+    EXPECT_NE(t.rows[i][t.Column("status")], "ok") << reason;
+    named += reason.find("outlier observation(s) dropped (cam1 ") != std::string::npos;
+  }
+  EXPECT_GT(named, 0);
+}
+
+TEST(Inputs, StrayImageNameIsBlamedNotFramesCsv) {
+  const fs::path d = Copy("stray");
+  fs::copy_file(d / "images" / "cam0" / "000001.png", d / "images" / "cam0" / "copy of 000001 (2).png");
+  ExpectTrackRefused(d, {"copy of 000001 (2).png is frame 12 (the digits of its name)", "remove the stray image"});
+}
+
+TEST(Inputs, BoardFileThatIsAFolderOrAScalarIsRefused) {
+  const fs::path d = test::ScratchDir("inputs_board");
+  fs::create_directories(d / "cam0");
+  fs::create_directories(d / "board_dir");
+  std::ofstream(d / "board.yaml") << "hello\n";
+  ExpectRefused(d, "calib-rig board_dir cam0 -o out", {"board file board_dir: cannot read it as YAML", "it is a folder"},
+                d / "out");
+  ExpectRefused(d, "calib-rig board.yaml cam0 -o out", {"board file board.yaml: expected a Kalibr YAML map"}, d / "out");
+}
+
+uint32_t Crc32(const unsigned char* p, size_t n) {
+  uint32_t c = 0xffffffffu;
+  for (size_t i = 0; i < n; ++i) {
+    c ^= p[i];
+    for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+  }
+  return c ^ 0xffffffffu;
+}
+
+// A PNG whose header (with a valid CRC) claims 60000 x 60000: that frame is degraded
+// with the reason, every other frame is tracked, the run ends with exit 0.
+TEST(Inputs, HugePngHeaderDegradesItsFrameOnly) {
+  const fs::path d = Copy("hugepng");
+  const fs::path png = d / "images" / "cam2" / "000003.png";
+  std::string bytes = ReadTextFile(png);
+  ASSERT_GT(bytes.size(), 33u);
+  auto put = [&](size_t o, uint32_t v) {
+    for (int k = 0; k < 4; ++k) bytes[o + k] = static_cast<char>((v >> (24 - 8 * k)) & 0xff);
+  };
+  put(16, 60000);
+  put(20, 60000);
+  put(29, Crc32(reinterpret_cast<const unsigned char*>(bytes.data()) + 12, 17));
+  std::ofstream(png, std::ios::trunc | std::ios::binary) << bytes;
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  ASSERT_EQ(t.rows.size(), 5u);
+  const int st = t.Column("status"), re = t.Column("reason");
+  EXPECT_EQ(t.rows[3][st], "degraded");
+  EXPECT_NE(t.rows[3][re].find("header says 60000x60000 but the rig says 1280x1024"), std::string::npos)
+      << t.rows[3][re];
+  EXPECT_FALSE(t.rows[3][t.Column("x_m")].empty()) << "three cameras still give a pose";
+}
+
+TEST(Inputs, RenderOfAnEndlessFileIsBounded) {
+  const fs::path d = test::ScratchDir("inputs_render_zero");
+  ExpectRefused(d, "render /dev/zero -o " + (d / "out").string(), {"/dev/zero: larger than 64 MB"}, d / "out");
+}
+
+TEST(Inputs, NonFiniteBaseGuessIsNamed) {
+  const fs::path d = test::ScratchDir("inputs_base_guess");
+  std::ofstream(d / "m.yaml") << "measurements:\n  - {q_rad: [0, 0, 0, 0, 0, 0], position_m: [1, 0, 1]}\n";
+  ExpectRefused(d, "calib-robot m.yaml -o robot.yaml --base-guess nan 0 0 1 0 0 0",
+                {"calib-robot: --base-guess x is nan; expected 7 finite numbers"}, d / "robot.yaml");
+}
+
+TEST(Inputs, AuditRepairedRigIntoAFolderIsRefusedBeforeTheWork) {
+  const fs::path d = Copy("audit");
+  fs::create_directories(d / "out");
+  ExpectRefused(d, "audit --quiet " + d.string() + " --repaired-rig " + (d / "out").string(),
+                {"audit --repaired-rig", "is a folder", "nothing was written"}, d / "out" / "rig.yaml");
+}
+
+std::string N(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+
+// Small clean logs: 20 camera frames at 10 Hz from 0.2 s, joints at 100 Hz and the
+// inclinometer at 50 Hz from 0 to 2.2 s, default robot, nearly noise-free readings.
+struct Logs {
+  std::map<std::string, Lines> files;  // poses.csv, joints.csv, incl.csv, setup.yaml
+};
+
+Logs CleanLogs() {
+  const RobotModel robot = RobotModel::Default();
+  Eigen::VectorXd q0(6);
+  q0 << 0.1, -0.4, 0.6, 0.2, 0.7, 0.1;
+  const auto q_at = [&](double t) {
+    Eigen::VectorXd q = q0;
+    for (int j = 0; j < 6; ++j) q[j] += 0.1 * std::sin((0.3 + 0.1 * j) * t + j);
+    return q;
+  };
+  Pose T_base_rig;
+  T_base_rig.R = ExpSO3(Vec3(0.0, 0.0, 0.4));
+  T_base_rig.t = Vec3(2.0, -1.0, 0.5);
+  Pose T_flange_target;
+  T_flange_target.t = Vec3(0.0, 0.0, 0.1);
+  Inclinometer incl;
+  incl.R_flange_incl = robot.T_base_flange(q0).R.transpose();
+  const Eigen::Quaterniond qi(incl.R_flange_incl);
+  const auto qr = T_base_rig.Quaternion();
+
+  Logs l;
+  l.files["setup.yaml"] = {
+      "T_base_rig:",
+      "  translation_m: [2.0, -1.0, 0.5]",
+      "  quaternion_wxyz: [" + N(qr.w()) + ", " + N(qr.x()) + ", " + N(qr.y()) + ", " + N(qr.z()) + "]",
+      "  sigma_rotation_rad: 1e-6",
+      "  sigma_translation_m: 1e-6",
+      "T_flange_target:",
+      "  translation_m: [0, 0, 0.1]",
+      "  quaternion_wxyz: [1, 0, 0, 0]",
+      "inclinometer:",
+      "  quaternion_wxyz: [" + N(qi.w()) + ", " + N(qi.x()) + ", " + N(qi.y()) + ", " + N(qi.z()) + "]",
+      "  sigma_deg: 0.01",
+      "robot_accuracy:",
+      "  position_sigma_m: [2e-5, 2e-5, 2e-5]",
+      "  orientation_sigma_deg: 0.001",
+  };
+  Lines& j = l.files["joints.csv"];
+  j.push_back("time_s,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg");
+  for (int k = 0; k <= 220; ++k) {
+    const Eigen::VectorXd q = q_at(k / 100.0);
+    std::string row = N(k / 100.0);
+    for (int i = 0; i < 6; ++i) (row += ",") += N(q[i] * 180.0 / 3.14159265358979323846);
+    j.push_back(row);
+  }
+  Lines& in = l.files["incl.csv"];
+  in.push_back("time_s,tilt_x_rad,tilt_y_rad");
+  for (int k = 0; k <= 110; ++k) {
+    const Vec2 r = incl.Predict(robot.T_base_flange(q_at(2 * k / 100.0)).R);
+    in.push_back(N(2 * k / 100.0) + "," + N(r.x()) + "," + N(r.y()));
+  }
+  Lines& p = l.files["poses.csv"];
+  std::string header = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz";
+  const char* ax[6] = {"rx", "ry", "rz", "px", "py", "pz"};
+  for (auto& a : ax)
+    for (auto& b : ax) header += std::string(",cov_") + a + "_" + b;
+  p.push_back(header);
+  for (int m = 0; m < 20; ++m) {
+    const double t = (20 + 10 * m) / 100.0;
+    const Pose T = T_base_rig.Inverse() * robot.T_base_flange(q_at(t)) * T_flange_target;
+    const auto q = T.Quaternion();
+    std::string row = std::to_string(m) + "," + N(t) + ",ok,\"\"," + N(T.t.x()) + "," + N(T.t.y()) + "," +
+                      N(T.t.z()) + "," + N(q.w()) + "," + N(q.x()) + "," + N(q.y()) + "," + N(q.z());
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 6; ++c) (row += ",") += N(r != c ? 0.0 : r < 3 ? 1e-8 : 1e-9);
+    p.push_back(row);
+  }
+  return l;
+}
+
+void Write(const fs::path& dir, const Logs& l) {
+  for (const auto& [name, lines] : l.files) {
+    std::ofstream o(dir / name);
+    for (const auto& s : lines) o << s << "\n";
+  }
+}
+
+const std::string kFuse = "fuse --quiet --tracker poses.csv --inclinometer incl.csv --setup setup.yaml -o fused.csv";
+
+// An 80 deg reading of a 30 deg inclinometer is left out with a warning naming the file,
+// the line and the value; the other rows are fused. Readings all out of range are refused.
+TEST(Inputs, InclinometerReadingBeyondItsRangeIsLeftOut) {
+  const fs::path d = test::ScratchDir("inputs_incl_range");
+  Logs l = CleanLogs();
+  l.files.erase("joints.csv");
+  Write(d, l);
+  const CliRun clean = Mcms(kFuse, d);
+  ASSERT_EQ(clean.code, 0) << clean.err;
+  const size_t rows = ReadCsv(d / "fused.csv").rows.size();
+  fs::remove(d / "fused.csv");
+  Lines& in = l.files["incl.csv"];
+  in[12] = in[12].substr(0, in[12].find(',')) + "," + Num(80.0 * 3.14159265358979323846 / 180.0) + ",0";
+  Write(d, l);
+  const CliRun r = Mcms(kFuse, d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("incl.csv line 13: tilt_x 80 deg is beyond the inclinometer's range of 30 deg"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(ReadCsv(d / "fused.csv").rows.size(), rows);
+  fs::remove(d / "fused.csv");
+  for (size_t k = 1; k < in.size(); ++k) in[k] = in[k].substr(0, in[k].find(',')) + ",1.4,0";
+  Write(d, l);
+  ExpectRefused(d, kFuse, {"incl.csv: every inclinometer reading is beyond the sensor's range of 30 deg"},
+                d / "fused.csv");
+}
+
+}  // namespace
+}  // namespace mcms
