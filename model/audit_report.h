@@ -1,0 +1,55 @@
+// The result of a model audit (issue 11), common to every mode (robot, cameras, fusion):
+// how well the nominal model explains the measured data, the effects from the catalog
+// (model/extensions.h) that earned their place, and the candidates that could not be told
+// apart. Written as text for people and as JSON for scripts:
+//   {"mode": .., "nominal": {"chi2_per_dof": .., "n": ..}, "clean": true|false,
+//    "effects": [{"name", "where", "parameters": {..}, "sigma": {..}, "heldout_rms_before",
+//                 "heldout_rms_after", "heldout_loglik_gain", "bic_gain"}],
+//    "undecided": [[name, name], ..], "tests": [..], "notes": [..]}
+// Units: parameters and sigmas in SI (rad, m, s, dimensionless factors); held-out RMS in
+// the unit the mode states in `rms_unit` (m for robot positions, px for cameras).
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace mcms {
+
+// One statistical test of the nominal residuals (chi-square, runs, autocorrelation, a
+// trend against a covariate): its statistic, p-value and whether it failed at `alpha`.
+struct AuditTest {
+  std::string name;       // e.g. "chi-square", "runs in time", "trend vs joint 2"
+  double statistic = 0.0;
+  double p_value = 1.0;
+  bool failed = false;
+};
+
+struct AuditEffect {
+  std::string name;   // catalog name, e.g. "joint_offset"
+  std::string where;  // "joint 2", "a2", "cam1", "ball 3", a sensor's name; empty when global
+  std::vector<std::pair<std::string, double>> parameters, sigma;  // SI, in the unit's order
+  double heldout_rms_before = 0.0, heldout_rms_after = 0.0;
+  double heldout_loglik_gain = 0.0;  // summed over held-out measurements (nats)
+  double bic_gain = 0.0;             // BIC(before) - BIC(after) on all data (> 0 = earns its place)
+};
+
+struct AuditReport {
+  std::string mode;             // "robot", "cameras", "fusion"
+  double nominal_chi2_per_dof = 0.0;
+  long nominal_n = 0;           // residuals (scalar) the chi-square is over
+  std::string rms_unit = "m";
+  bool clean = true;            // no effect named and no test failed
+  std::vector<AuditTest> tests;
+  std::vector<AuditEffect> effects;
+  std::vector<std::vector<std::string>> undecided;  // groups of "name at where" labels
+  std::vector<std::string> notes;                   // what the audit could not test, and why
+
+  std::string ToJson() const;
+  // Human text: the tests, each effect with its size +- sigma and gains, the undecided groups.
+  std::string Text() const;
+  void WriteJson(const std::filesystem::path& path) const;  // atomically
+};
+
+}  // namespace mcms
