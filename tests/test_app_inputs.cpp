@@ -302,7 +302,7 @@ TEST(Inputs, NonFiniteBaseGuessIsNamed) {
 TEST(Inputs, AuditRepairedRigIntoAFolderIsRefusedBeforeTheWork) {
   const fs::path d = Copy("audit");
   fs::create_directories(d / "out");
-  ExpectRefused(d, "audit --quiet " + d.string() + " --repaired-rig " + (d / "out").string(),
+  ExpectRefused(d, "audit cameras --quiet " + d.string() + " --repaired-rig " + (d / "out").string(),
                 {"audit --repaired-rig", "is a folder", "nothing was written"}, d / "out" / "rig.yaml");
 }
 

@@ -177,7 +177,7 @@ TEST(HonestDefaults, TrackMeasuresTheNoiseModelAndItsCovarianceIsHonest) {
 TEST(HonestDefaults, AuditNamesNoCameraOnCleanRecordings) {
   for (const Noise& n : kNoises) {
     const fs::path rec = Recording(n);
-    const CliRun r = Mcms("audit --quiet " + rec.string(), test::ScratchDir("noise_audit_" + std::to_string(::getpid())));
+    const CliRun r = Mcms("audit cameras --quiet " + rec.string(), test::ScratchDir("noise_audit_" + std::to_string(::getpid())));
     std::printf("%s", r.out.c_str());
     EXPECT_EQ(r.code, 0) << r.err;
     EXPECT_NE(r.out.find("every camera is consistent"), std::string::npos) << r.out;
@@ -191,14 +191,14 @@ TEST(HonestDefaults, AuditNamesNoCameraOnCleanRecordings) {
 TEST(HonestDefaults, AuditBlamesTheNoiseModelNotTheCameras) {
   const fs::path rec = Recording({0.5, 1.0, 7, 100});
   const fs::path dir = test::ScratchDir("noise_audit_blame_" + std::to_string(::getpid()));
-  const CliRun bad = Mcms("audit -q --gain 0 --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
+  const CliRun bad = Mcms("audit cameras -q --gain 0 --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
   std::printf("%s%s", bad.out.c_str(), bad.err.c_str());
   EXPECT_NE(bad.code, 0);
   EXPECT_NE(bad.out.find("INCONSISTENT: noise model"), std::string::npos) << bad.out;
   EXPECT_EQ(bad.out.find("camera moved"), std::string::npos) << bad.out;
   EXPECT_NE(bad.err.find("larger than the pixel noise model predicts"), std::string::npos) << bad.err;
   EXPECT_FALSE(fs::exists(dir / "rig.yaml"));
-  const CliRun good = Mcms("audit -q --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
+  const CliRun good = Mcms("audit cameras -q --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
   std::printf("%s", good.out.c_str());
   EXPECT_EQ(good.code, 0) << good.err;
   EXPECT_NE(good.out.find("every camera is consistent"), std::string::npos) << good.out;
@@ -242,7 +242,7 @@ TEST(HonestDefaults, ThreadsDoNotChangeTheOutputAndRedirectedProgressIsLines) {
   EXPECT_EQ(r1.err.find('\r'), std::string::npos);
   EXPECT_NE(r1.err.find("track: 10/10 (100%)\n"), std::string::npos) << r1.err;
   const fs::path s = test::ScratchDir("noise_help");
-  for (const char* c : {"track --help", "audit --help", "render --help"})
+  for (const char* c : {"track --help", "audit cameras --help", "render --help"})
     EXPECT_NE(Mcms(c, s).out.find("--threads"), std::string::npos) << c;
 }
 

@@ -1,0 +1,14 @@
+// The modes of `mcms audit` (issue 11), one file each: each adds its subcommand to the
+// `audit` command (app/cmd_audit.cpp) and returns it with its runner.
+//   audit cameras DIR      app/cmd_audit_cameras.cpp
+//   audit robot LOG.csv    app/cmd_audit_robot.cpp
+#pragma once
+
+#include "app/commands.h"
+
+namespace mcms::app {
+
+std::pair<CLI::App*, Runner> AddAuditCameras(CLI::App& audit);
+std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit);
+
+}  // namespace mcms::app
