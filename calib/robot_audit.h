@@ -1,0 +1,141 @@
+// The robot mode of the model audit (issue 11): given a robot's joint values and the
+// positions (and optionally orientations) of its tool measured by an external instrument
+// (the camera rig, a laser tracker), show where the nominal forward model disagrees with
+// the measurements beyond chance, name the catalog effects (model/extensions.h) that
+// explain it, with their sizes and standard deviations, and measure what each gains on
+// held-out data.
+//
+// Model: p_meas = T_meas_base * T_base_flange(q; extensions) * t_flange_tool + e,
+//        e ~ N(0, Sigma) (anisotropic, full 3x3; 6x6 with the orientation residual
+//        Log(R_pred R_meas^T) for 6-D measurements), Sigma unknown.
+// The registration T_meas_base (6) and the tool (3; 6 for 6-D) are always free, as in
+// `calib-robot`; an extension that the registration absorbs (the first joint's offset,
+// its d) is reported as not identifiable, not as found.
+//
+// Noise: Sigma is estimated with the model by maximum likelihood (profiled), so every
+// comparison between models is a likelihood ratio with Sigma free. When poses are repeated
+// (rows with the same joint values), their scatter gives an estimate of the noise alone
+// (pure error), and the nominal fit is tested against it (lack-of-fit F test).
+//
+// Procedure:
+//  1. nominal fit; tests of its residuals: lack of fit (when there are repeats), lag-1
+//     autocorrelation in time, and the correlation of each residual component with every
+//     covariate (time, each joint, each joint's gravity torque, direction of the last
+//     move, temperature);
+//  2. greedy forward selection over the catalog: every candidate is screened by the
+//     chi-square its linearised fit removes (one Jacobian for all), the most promising
+//     are fitted in full (Ceres, Sigma re-estimated), and a candidate is accepted when
+//       - its likelihood-ratio statistic exceeds the chi-square quantile at
+//         false_alarm / 2 / (candidates at this step) (Bonferroni: the designed
+//         false-alarm rate of the whole audit on a clean log is at most false_alarm),
+//       - its BIC gain is positive, and
+//       - it gains held-out log-likelihood in k-fold cross-validation whose folds are
+//         contiguous blocks of time (drift cannot leak from the training blocks);
+//     the best accepted is added and the step repeats; candidates whose statistic is
+//     within a small margin of the best are reported as undecided, not guessed.
+//  3. each named effect with its size +- sigma, held-out RMS before and after and the
+//     held-out log-likelihood gain; the extended model.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/pose_math.h"
+#include "model/audit_report.h"
+#include "model/extensions.h"
+#include "model/robot_model.h"
+
+namespace mcms {
+
+struct RobotLogRow {
+  double time_s = 0.0;
+  Eigen::VectorXd q;
+  Vec3 p_meas = Vec3::Zero();
+  std::optional<Mat3> R_meas_tool;
+  double temperature_c = std::nan("");
+  double payload_kg = std::nan("");
+  int line = 0;  // 1-based line in the file (0 when made in code)
+};
+
+struct RobotLog {
+  std::filesystem::path source;
+  std::vector<RobotLogRow> rows;
+  bool has_time = false, has_temperature = false, has_payload = false;
+  bool six_dof() const { return !rows.empty() && rows.front().R_meas_tool.has_value(); }
+};
+
+// Reads a measurement log:
+//  - CSV with columns time_s, q1_rad..qN_rad, x_m, y_m, z_m, optional qw, qx, qy, qz
+//    (measured orientation of the tool), temperature_c, payload_kg;
+//  - or a calib-robot measurement file (YAML, calib/robot_calibration.h), rows in order
+//    (no time: the row index is the time).
+// InputError naming the file, the line and the column: fewer than kMinRobotLogRows rows,
+// joint columns that do not match the robot's joint count, joint values outside the
+// robot's limits, time going backwards, non-finite cells, a quaternion that is not unit.
+constexpr int kMinRobotLogRows = 12;
+RobotLog ReadRobotLog(const std::filesystem::path& path, const RobotModel& robot);
+// The same checks on a log made in code.
+void CheckRobotLog(const RobotLog& log, const RobotModel& robot);
+
+struct RobotAuditOptions {
+  // Designed probability that the audit calls a clean log not clean (any test failed or
+  // any effect named): split evenly between the residual tests and the selection.
+  double false_alarm = 0.01;
+  int folds = 5;          // k of the time-blocked cross-validation (>= 2)
+  int max_effects = 4;    // greedy steps at most
+  int max_full_fits = 4;  // candidates fitted in full per step (best by screening)
+  // Restrict the catalog to these names (empty = every robot effect).
+  std::vector<std::string> only;
+  std::optional<Pose> base_guess;  // T_meas_base start; default: rigid fit (3-D) / mean (6-D)
+  double reference_temperature_c = 20.0;
+  // Joint values closer than this (rad or m, every joint) are the same pose (repeats).
+  double repeat_tolerance = 1e-6;
+  std::function<void(const std::string&)> progress;
+  bool IsValid(std::string* why) const;
+};
+
+// One fitted model: the registration, the tool, the extensions with their parameters,
+// the noise covariance, and per-row residuals (predicted - measured; m, and rad).
+struct RobotAuditFit {
+  std::vector<Extension> extensions;
+  std::vector<std::vector<double>> parameters;  // one block per extension
+  std::vector<std::vector<double>> sigmas;      // standard deviations (0 = held)
+  Pose T_meas_base;
+  Pose T_flange_tool;
+  Eigen::MatrixXd noise;      // m x m, m = 3 or 6
+  Eigen::MatrixXd residuals;  // rows x m
+  double loglik = 0.0;
+};
+
+struct RobotAuditResult {
+  AuditReport report;
+  RobotAuditFit nominal, extended;
+  // The robot with what its description can hold applied (joint offsets, link lengths,
+  // error motion, registration-free); effects it cannot hold are listed in the report.
+  RobotModel extended_robot;
+  // For plots: per named effect, the covariate that exposed it, its values per row, and
+  // the residual before the effect along the effect's direction with the effect itself.
+  struct EffectPlot {
+    std::string effect, covariate;
+    std::vector<double> x, residual_before, effect_size;
+  };
+  std::vector<EffectPlot> plots;
+};
+
+RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& options = {});
+
+// The whole `mcms audit robot` job: read, audit, write the output folder (report.txt,
+// report.json, robot.yaml, residuals.csv, plots/*.svg; atomically) and/or a JSON file.
+struct RobotAuditJob {
+  std::filesystem::path log, robot, output_dir, json;
+  RobotAuditOptions options;
+};
+// Returns the report text.
+std::string RunRobotAuditJob(const RobotAuditJob& job);
+
+}  // namespace mcms

@@ -1,0 +1,151 @@
+// `mcms audit robot LOG.csv` end to end: a CSV log with a hidden joint offset is audited,
+// the JSON names the effect; bad logs (one row, time going backwards, joints beyond the
+// limits, a NaN temperature, a different joint count) get an error naming the file and
+// the problem, a non-zero exit and no output.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "core/random.h"
+#include "model/extensions.h"
+#include "test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int code;
+  std::string out, err;
+};
+
+CliRun Mcms(const std::string& args, const fs::path& cwd) {
+  const std::string cmd = "cd " + cwd.string() + " && " + std::string(MCMS_CLI) + " " + args + " > " +
+                          (cwd / "stdout.txt").string() + " 2> " + (cwd / "stderr.txt").string();
+  const int status = std::system(cmd.c_str());
+  const auto slurp = [](const fs::path& p) {
+    std::ifstream in(p);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+  };
+  return {WEXITSTATUS(status), slurp(cwd / "stdout.txt"), slurp(cwd / "stderr.txt")};
+}
+
+// A CSV log of the default robot: 30 poses x 4 passes over 2 h, a hidden joint 3 offset
+// of `offset_deg`, anisotropic noise, a temperature column.
+std::string LogCsv(double offset_deg, uint64_t seed) {
+  Rng rng(seed);
+  const RobotModel robot = RobotModel::Default();
+  std::vector<Eigen::VectorXd> poses;
+  const double lo[6] = {-1.2, -1.6, 0.2, -2.5, -1.6, -3.0}, hi[6] = {1.2, 0.4, 2.2, 2.5, 1.6, 3.0};
+  for (int i = 0; i < 30; ++i) {
+    Eigen::VectorXd q(6);
+    for (int j = 0; j < 6; ++j) q[j] = rng.Uniform(lo[j], hi[j]);
+    poses.push_back(q);
+  }
+  const Pose T_meas_base{ExpSO3(Vec3(0.0, 0.0, 2.5)), Vec3(2.0, 0.5, -0.2)};
+  const Extension ext{Effect::kJointOffset, 2, 0};
+  const double p = offset_deg * M_PI / 180;
+  const double* params[1] = {&p};
+  std::ostringstream o;
+  o.precision(12);
+  o << "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad,x_m,y_m,z_m,temperature_c\n";
+  for (int k = 0; k < 120; ++k) {
+    const Eigen::VectorXd& q = poses[k % 30];
+    MeasurementContext c;
+    const PoseT<double> F = ExtendedFlangeT<double>(robot, {ext}, params, q, c);
+    const Vec3 x = T_meas_base.R * (F.R * robot.T_flange_tool().t + F.t) + T_meas_base.t +
+                   1e-3 * Vec3(0.02 * rng.Normal(), 0.03 * rng.Normal(), 0.05 * rng.Normal());
+    o << 60.0 * k;
+    for (int j = 0; j < 6; ++j) o << "," << q[j];
+    o << "," << x[0] << "," << x[1] << "," << x[2] << "," << 21.0 + 0.01 * rng.Normal() << "\n";
+  }
+  return o.str();
+}
+
+void Write(const fs::path& p, const std::string& s) {
+  std::ofstream(p) << s;
+}
+
+TEST(AppAuditRobot, NamesAHiddenJointOffsetInACsvLog) {
+  const fs::path d = test::ScratchDir("audit_robot_e2e");
+  Write(d / "log.csv", LogCsv(0.006, 3));
+  const CliRun r = Mcms("audit robot -q log.csv --json audit.json -o out", d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::printf("%s", r.out.c_str());
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "audit.json"));
+  EXPECT_EQ(j["mode"], "robot");
+  EXPECT_FALSE(j["clean"].get<bool>());
+  ASSERT_GE(j["effects"].size(), 1u);
+  EXPECT_EQ(j["effects"][0]["name"], "joint_offset");
+  EXPECT_EQ(j["effects"][0]["where"], "joint 3");
+  const double est = j["effects"][0]["parameters"]["offset_rad"].get<double>();
+  const double sig = j["effects"][0]["sigma"]["offset_rad"].get<double>();
+  EXPECT_LT(std::abs(est - 0.006 * M_PI / 180), 3 * sig);
+  EXPECT_GT(j["effects"][0]["heldout_loglik_gain"].get<double>(), 0.0);
+  for (const char* f : {"report.txt", "report.json", "robot.yaml", "residuals.csv", "plots/effect1.svg"})
+    EXPECT_TRUE(fs::exists(d / "out" / f)) << f;
+  // The extended robot carries the offset: auditing the same log against it is clean.
+  const CliRun again = Mcms("audit robot -q log.csv --robot out/robot.yaml --json again.json", d);
+  ASSERT_EQ(again.code, 0) << again.err;
+  const nlohmann::json j2 = nlohmann::json::parse(std::ifstream(d / "again.json"));
+  EXPECT_TRUE(j2["effects"].empty()) << again.out;
+}
+
+void ExpectRefused(const std::string& name, const std::string& csv, const std::vector<std::string>& words) {
+  const fs::path d = test::ScratchDir("audit_robot_bad_" + name);
+  Write(d / "log.csv", csv);
+  const CliRun r = Mcms("audit robot -q log.csv --json audit.json -o out", d);
+  EXPECT_NE(r.code, 0) << name;
+  for (const auto& w : words) EXPECT_NE(r.err.find(w), std::string::npos) << name << ": '" << w << "' not in: " << r.err;
+  EXPECT_FALSE(fs::exists(d / "audit.json")) << name;
+  EXPECT_FALSE(fs::exists(d / "out")) << name;
+}
+
+// The CSV with cell `col` of data row `row` (1-based) replaced by `value`.
+std::string Edit(const std::string& csv, int row, int col, std::string value) {
+  std::istringstream in(csv);
+  std::ostringstream out;
+  std::string line;
+  int k = 0;
+  while (std::getline(in, line)) {
+    if (k == row) {
+      std::vector<std::string> cells;
+      std::stringstream ls(line);
+      std::string c;
+      while (std::getline(ls, c, ',')) cells.push_back(c);
+      cells[col] = std::move(value);
+      for (size_t i = 0; i < cells.size(); ++i) out << (i ? "," : "") << cells[i];
+      out << "\n";
+    } else {
+      out << line << "\n";
+    }
+    ++k;
+  }
+  return out.str();
+}
+
+TEST(AppAuditRobot, RefusesBadLogs) {
+  const std::string good = LogCsv(0.0, 9);
+  const std::string header = good.substr(0, good.find('\n') + 1);
+  const std::string first = good.substr(header.size(), good.find('\n', header.size()) + 1 - header.size());
+  ExpectRefused("one_row", header + first, {"log.csv", "1 measurement", "at least"});
+  ExpectRefused("time_backwards", Edit(good, 5, 0, "1"), {"log.csv", "line 6", "time order"});
+  ExpectRefused("beyond_limits", Edit(good, 3, 2, "2.5"), {"log.csv", "line 4", "A2"});
+  ExpectRefused("nan_temperature", Edit(good, 2, 10, "nan"), {"log.csv", "temperature_c"});
+  // A 7-joint log for the 6-joint robot.
+  std::string seven = "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad,q7_rad,x_m,y_m,z_m\n";
+  for (int i = 0; i < 20; ++i) seven += std::to_string(i) + ",0,0,0.5,0,0,0,0,1,2,3\n";
+  ExpectRefused("seven_joints", seven, {"log.csv", "7 joint columns", "6 joints", "--robot"});
+  ExpectRefused("no_joints", "time_s,x_m,y_m,z_m\n0,1,2,3\n", {"log.csv", "q1_rad"});
+}
+
+}  // namespace
+}  // namespace mcms
