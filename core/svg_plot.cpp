@@ -94,6 +94,9 @@ std::string Plot::ToSvg(int W, int H) const {
     if (y0 != 0) y0 -= m;
   }
   if (x1 == x0) x0 -= 0.5, x1 += 0.5;
+  // A margin of 2 % left and right, so no marker sits on the frame.
+  const double xm = 0.02 * (x1 - x0);
+  x0 -= xm, x1 += xm;
   // The legend gets its own band under the title: rows of entries, wrapped to the width.
   const double L = 80, R = 24, B = 55;
   struct Entry {
@@ -142,9 +145,10 @@ std::string Plot::ToSvg(int W, int H) const {
   o << "<text x='" << (L + W - R) / 2 << "' y='" << H - 12 << "' text-anchor='middle'>" << Escape(x_label) << "</text>\n";
   o << "<text transform='translate(18," << (T + H - B) / 2 << ") rotate(-90)' text-anchor='middle'>"
     << Escape(y_label + (log_y ? " (log scale)" : "")) << "</text>\n";
-  // Data, clipped to the plot area.
+  // Data, clipped to the plot area and a marker's radius around it (the ranges cover
+  // every value, so the clip only guards against rounding).
   std::snprintf(buf, sizeof(buf), "<clipPath id='plotarea'><rect x='%.1f' y='%.1f' width='%.1f' height='%.1f'/></clipPath>\n<g clip-path='url(#plotarea)'>\n",
-                L, T, W - L - R, H - T - B);
+                L - 4, T - 4, W - L - R + 8, H - T - B + 8);
   o << buf;
   for (const auto& s : series) {
     // Band first, under the data.
@@ -168,19 +172,29 @@ std::string Plot::ToSvg(int W, int H) const {
           o << buf;
         }
     } else {
-      // A gap (non-finite value) breaks the line.
+      // A gap (non-finite value) breaks the line; a value alone between gaps is a dot.
       std::string pts;
+      size_t count = 0;
+      double last_x = 0, last_y = 0;
       auto flush = [&] {
-        if (!pts.empty()) o << "<polyline fill='none' stroke='" << s.color << "' stroke-width='1.5' points='" << pts << "'/>\n";
+        if (count == 1) {
+          std::snprintf(buf, sizeof(buf), "<circle cx='%.1f' cy='%.1f' r='1.5' fill='%s'/>\n", last_x, last_y, s.color.c_str());
+          o << buf;
+        } else if (count > 1) {
+          o << "<polyline fill='none' stroke='" << s.color << "' stroke-width='1.5' points='" << pts << "'/>\n";
+        }
         pts.clear();
+        count = 0;
       };
       for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
         if (!(std::isfinite(s.x[i]) && usable_y(s.y[i]))) {
           flush();
           continue;
         }
-        std::snprintf(buf, sizeof(buf), "%.1f,%.1f ", X(s.x[i]), Y(s.y[i]));
+        last_x = X(s.x[i]), last_y = Y(s.y[i]);
+        std::snprintf(buf, sizeof(buf), "%.1f,%.1f ", last_x, last_y);
         pts += buf;
+        ++count;
       }
       flush();
     }
