@@ -60,6 +60,9 @@ std::string Plot::ToSvg(int W, int H) const {
     y0 = std::min(y0, v);
     y1 = std::max(y1, v);
   };
+  auto has_vector = [](const PlotSeries& s, size_t i) {
+    return i < s.dx.size() && i < s.dy.size() && std::isfinite(s.dx[i]) && std::isfinite(s.dy[i]);
+  };
   for (const auto& s : series)
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
       if (!std::isfinite(s.x[i])) continue;
@@ -69,7 +72,15 @@ std::string Plot::ToSvg(int W, int H) const {
       x1 = std::max(x1, s.x[i]);
       extend_y(s.y[i]);
       if (band) extend_y(s.y_low[i]), extend_y(s.y_high[i]);
+      if (has_vector(s, i) && usable_y(s.y[i])) {
+        const double tx = s.x[i] + s.vector_scale * s.dx[i];
+        x0 = std::min(x0, tx), x1 = std::max(x1, tx);
+        extend_y(s.y[i] + s.vector_scale * s.dy[i]);
+      }
     }
+  if (x_range) x0 = x_range->first, x1 = x_range->second;
+  if (y_range) y0 = y_range->first, y1 = y_range->second;
+  const bool fixed_y = y_range.has_value();
   if (!(x1 >= x0)) x0 = 0, x1 = 1;
   if (!(y1 >= y0)) y0 = log_y ? 1 : 0, y1 = log_y ? 10 : 1;
   if (log_y) {
@@ -85,7 +96,7 @@ std::string Plot::ToSvg(int W, int H) const {
       if (m * d1 >= y1 * 0.9999999) hi = m * d1;
     y0 = lo, y1 = hi;
     if (y1 <= y0) y1 = 10 * y0;
-  } else {
+  } else if (!fixed_y) {
     if (y0 > 0 && y0 < 0.5 * y1) y0 = 0;
     if (y1 == y0) y1 = y0 + 1;
     // A margin of 4 % above and below, so no marker sits on the frame.
@@ -93,10 +104,13 @@ std::string Plot::ToSvg(int W, int H) const {
     y1 += m;
     if (y0 != 0) y0 -= m;
   }
-  if (x1 == x0) x0 -= 0.5, x1 += 0.5;
-  // A margin of 2 % left and right, so no marker sits on the frame.
-  const double xm = 0.02 * (x1 - x0);
-  x0 -= xm, x1 += xm;
+  if (y1 <= y0) y1 = y0 + 1;
+  if (x1 <= x0) x0 -= 0.5, x1 += 0.5;
+  if (!x_range) {
+    // A margin of 2 % left and right, so no marker sits on the frame.
+    const double xm = 0.02 * (x1 - x0);
+    x0 -= xm, x1 += xm;
+  }
   // The legend gets its own band under the title: rows of entries, wrapped to the width.
   const double L = 80, R = 24, B = 55;
   struct Entry {
@@ -113,9 +127,17 @@ std::string Plot::ToSvg(int W, int H) const {
     lx += w;
   }
   const double T = entries.empty() ? 40 : ly + 16;
-  auto X = [&](double x) { return L + (x - x0) / (x1 - x0) * (W - L - R); };
+  // The plot area [AL, AR] x [AT, AB] in SVG pixels; with equal_scale one unit is as long
+  // on both axes and the area shrinks along one of them.
+  double AL = L, AR = W - R, AT = T, AB = H - B;
+  if (equal_scale && !log_y) {
+    const double k = std::min((AR - AL) / (x1 - x0), (AB - AT) / (y1 - y0));
+    AR = AL + k * (x1 - x0);
+    AB = AT + k * (y1 - y0);
+  }
+  auto X = [&](double x) { return AL + (x - x0) / (x1 - x0) * (AR - AL); };
   auto F = [&](double y) { return log_y ? std::log10(y / y0) / std::log10(y1 / y0) : (y - y0) / (y1 - y0); };
-  auto Y = [&](double y) { return H - B - F(y) * (H - T - B); };
+  auto Y = [&](double y) { return y_down ? AT + F(y) * (AB - AT) : AB - F(y) * (AB - AT); };
   std::ostringstream o;
   char buf[320];
   o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H << "' viewBox='0 0 " << W << " " << H
@@ -124,7 +146,7 @@ std::string Plot::ToSvg(int W, int H) const {
   const double xs = NiceStep(x1 - x0);
   for (double v = std::ceil(x0 / xs - 1e-9) * xs; v <= x1 + 1e-9 * xs; v += xs) {
     std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/><text x='%.1f' y='%.1f' text-anchor='middle'>%s</text>\n",
-                  X(v), T, X(v), H - B, X(v), H - B + 16, TickLabel(v, xs).c_str());
+                  X(v), AT, X(v), AB, X(v), AB + 16, TickLabel(v, xs).c_str());
     o << buf;
   }
   std::vector<double> yticks;
@@ -137,18 +159,18 @@ std::string Plot::ToSvg(int W, int H) const {
   }
   for (double v : yticks) {
     std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/><text x='%.1f' y='%.1f' text-anchor='end'>%s</text>\n",
-                  L, Y(v), W - R, Y(v), L - 6, Y(v) + 4, TickLabel(v, log_y ? v : ys).c_str());
+                  AL, Y(v), AR, Y(v), AL - 6, Y(v) + 4, TickLabel(v, log_y ? v : ys).c_str());
     o << buf;
   }
-  o << "<rect x='" << L << "' y='" << T << "' width='" << W - L - R << "' height='" << H - T - B
+  o << "<rect x='" << AL << "' y='" << AT << "' width='" << AR - AL << "' height='" << AB - AT
     << "' fill='none' stroke='black'/>\n";
-  o << "<text x='" << (L + W - R) / 2 << "' y='" << H - 12 << "' text-anchor='middle'>" << Escape(x_label) << "</text>\n";
-  o << "<text transform='translate(18," << (T + H - B) / 2 << ") rotate(-90)' text-anchor='middle'>"
+  o << "<text x='" << (AL + AR) / 2 << "' y='" << AB + 43 << "' text-anchor='middle'>" << Escape(x_label) << "</text>\n";
+  o << "<text transform='translate(18," << (AT + AB) / 2 << ") rotate(-90)' text-anchor='middle'>"
     << Escape(y_label + (log_y ? " (log scale)" : "")) << "</text>\n";
   // Data, clipped to the plot area and a marker's radius around it (the ranges cover
   // every value, so the clip only guards against rounding).
   std::snprintf(buf, sizeof(buf), "<clipPath id='plotarea'><rect x='%.1f' y='%.1f' width='%.1f' height='%.1f'/></clipPath>\n<g clip-path='url(#plotarea)'>\n",
-                L - 4, T - 4, W - L - R + 8, H - T - B + 8);
+                AL - 4, AT - 4, AR - AL + 8, AB - AT + 8);
   o << buf;
   for (const auto& s : series) {
     // Band first, under the data.
@@ -164,6 +186,24 @@ std::string Plot::ToSvg(int W, int H) const {
       o << "<polygon fill='" << s.color << "' fill-opacity='0.18' stroke='none' points='" << upper << lower << "'/>\n";
   }
   for (const auto& s : series) {
+    // Vectors: a segment from each point with an open arrow head at its tip.
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!has_vector(s, i) || !std::isfinite(s.x[i]) || !usable_y(s.y[i])) continue;
+      const double ty = s.y[i] + s.vector_scale * s.dy[i];
+      if (!usable_y(ty)) continue;
+      const double ax = X(s.x[i]), ay = Y(s.y[i]), bx = X(s.x[i] + s.vector_scale * s.dx[i]), by = Y(ty);
+      const double len = std::hypot(bx - ax, by - ay);
+      std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='%s' stroke-width='1'/>\n", ax, ay, bx,
+                    by, s.color.c_str());
+      o << buf;
+      if (len > 3) {
+        const double ux = (bx - ax) / len, uy = (by - ay) / len, h = std::min(5.0, 0.4 * len);
+        std::snprintf(buf, sizeof(buf), "<polyline fill='none' stroke='%s' stroke-width='1' points='%.1f,%.1f %.1f,%.1f %.1f,%.1f'/>\n",
+                      s.color.c_str(), bx - h * (ux - 0.5 * uy), by - h * (uy + 0.5 * ux), bx, by, bx - h * (ux + 0.5 * uy),
+                      by - h * (uy - 0.5 * ux));
+        o << buf;
+      }
+    }
     if (s.points) {
       for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
         if (std::isfinite(s.x[i]) && usable_y(s.y[i])) {

@@ -6,6 +6,7 @@
 // Log axes are labelled in real units and the legend never overlaps the plot area.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -246,6 +247,38 @@ TEST(SvgPlot, LegendSitsAboveThePlotAreaAndLinearTicksHaveNoRoundingNoise) {
   EXPECT_GT(top, 60.0);  // the legend wrapped to more than one row
   // Ticks through zero read 0, not 1e-17.
   for (const auto& l : YTickLabels(svg)) EXPECT_EQ(l.find("e-"), std::string::npos) << l;
+}
+
+TEST(SvgPlot, ResidualVectorsOverTheImageKeepImageAxes) {
+  // Residuals of 0.5 px drawn 100 times magnified over a 640 x 480 image, rows downwards.
+  Plot p{"residuals over the image", "u (px)", "v (px)", {}};
+  p.y_down = true;
+  p.equal_scale = true;
+  p.x_range = {{0.0, 640.0}};
+  p.y_range = {{0.0, 480.0}};
+  PlotSeries r{"residual x 100", {100, 500}, {20, 400}, "#d62728", true};
+  r.dx = {0.5, 0.0};
+  r.dy = {0.0, -0.5};
+  r.vector_scale = 100;
+  p.series = {r};
+  const std::string svg = p.ToSvg(900, 600);
+  // Two arrow shafts, two heads; the base markers at the points.
+  const std::regex shaft("<line x1='([0-9.]+)' y1='([0-9.]+)' x2='([0-9.]+)' y2='([0-9.]+)' stroke='#d62728' stroke-width='1'/>");
+  std::vector<std::array<double, 4>> shafts;
+  for (auto it = std::sregex_iterator(svg.begin(), svg.end(), shaft); it != std::sregex_iterator(); ++it)
+    shafts.push_back({std::stod((*it)[1]), std::stod((*it)[2]), std::stod((*it)[3]), std::stod((*it)[4])});
+  ASSERT_EQ(shafts.size(), 2u);
+  EXPECT_EQ(Count(svg, "<polyline fill='none' stroke='#d62728'"), 2u);
+  // The first points right (+u), 50 px of image long; the second points up the image (-v).
+  EXPECT_GT(shafts[0][2], shafts[0][0]);
+  EXPECT_NEAR(shafts[0][3], shafts[0][1], 0.11);
+  EXPECT_LT(shafts[1][3], shafts[1][1]);
+  // Rows downwards: v = 20 is above v = 400; equal scale: 50 px of image are as long on both axes.
+  EXPECT_LT(shafts[0][1], shafts[1][1]);
+  EXPECT_NEAR(shafts[0][2] - shafts[0][0], shafts[1][1] - shafts[1][3], 0.2);
+  // The axes span the image, labelled 0 and 640.
+  EXPECT_NE(svg.find(">640</text>"), std::string::npos);
+  EXPECT_NE(svg.find(">0</text>"), std::string::npos);
 }
 
 }  // namespace
