@@ -188,7 +188,11 @@ std::string Note(const std::string& s) { return "<p class=\"note\">" + Html(s) +
 void TableRows(std::ostringstream& o, const Table& t, size_t begin, size_t end) {
   for (size_t r = begin; r < end; ++r) {
     o << "<tr>";
-    for (const auto& c : t.rows[r]) o << "<td>" << Html(c) << "</td>";
+    for (size_t c = 0; c < t.rows[r].size(); ++c) {
+      // Numbers to 6 significant digits (the file keeps them all); text as it is.
+      const auto v = t.Value(r, static_cast<int>(c));
+      o << "<td>" << (v && t.rows[r][c].size() > 8 ? Num(*v) : Html(t.rows[r][c])) << "</td>";
+    }
     o << "</tr>\n";
   }
 }
@@ -437,7 +441,11 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   if (ec) Throw("mcms report DIR: cannot read the folder ", dir.string(), ": ", ec.message());
   for (const auto& e : it) {
     const std::string name = e.path().filename().string();
-    if (name.empty() || name[0] == '.' || name.find(".partial-") != std::string::npos) continue;
+    // Hidden files, temporaries of an atomic write, and HTML pages (earlier reports) are
+    // not part of the run.
+    if (name.empty() || name[0] == '.' || name.find(".partial-") != std::string::npos ||
+        Lower(e.path().extension().string()) == ".html")
+      continue;
     if (e.is_directory(ec)) {
       size_t count = 0;
       for (auto sub = fs::recursive_directory_iterator(e.path(), fs::directory_options::skip_permission_denied, ec);
@@ -459,7 +467,7 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
     else if (ext == ".csv") csvs.push_back(&f);
     else if (ext == ".txt" || ext == ".md" || ext == ".log") reports.push_back(&f);
     else if (ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel") inputs.push_back(&f);
-    else if (ext != ".html") others.push_back(&f);
+    else others.push_back(&f);
   }
   if (svgs.empty() && csvs.empty() && reports.empty() && inputs.empty())
     Throw("mcms report DIR: ", dir.string(),
@@ -523,9 +531,11 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
 
   // Reports: summary*.txt first, then the rest in name order.
   std::vector<const File*> ordered = reports;
-  std::stable_sort(ordered.begin(), ordered.end(), [](const File* a, const File* b) {
-    return (Lower(a->name).find("summary") != std::string::npos) > (Lower(b->name).find("summary") != std::string::npos);
-  });
+  auto rank = [](const File* f) {
+    const std::string n = Lower(f->name);
+    return n == "summary.txt" ? 0 : n.find("summary") != std::string::npos ? 1 : 2;
+  };
+  std::stable_sort(ordered.begin(), ordered.end(), [&](const File* a, const File* b) { return rank(a) < rank(b); });
   if (!ordered.empty()) {
     section("reports", "Results");
     for (const File* f : ordered) {

@@ -11,7 +11,8 @@
 //                              summarised (rows, per-column min / median / max / mean for
 //                              numeric columns, counts for text columns, first and last rows)
 //   *.txt, *.md, *.log         reports, shown as preformatted text (summary*.txt first)
-//   *.yaml, *.yml, *.json,     inputs and models, in collapsed sections
+//   *.yaml, *.yml, *.json,     inputs and models, in collapsed sections (*.html files, earlier
+//                              reports, are left out)
 //   *.cameramodel
 //   anything else, subfolders  listed with their size (an images/ folder is counted, not
 //                              embedded)

@@ -97,8 +97,9 @@ std::string Plot::ToSvg(int W, int H) const {
     y0 = lo, y1 = hi;
     if (y1 <= y0) y1 = 10 * y0;
   } else if (!fixed_y) {
+    // A constant is drawn in the middle of the axis, not on its frame.
+    if (y1 == y0) y0 -= 1, y1 += 1;
     if (y0 > 0 && y0 < 0.5 * y1) y0 = 0;
-    if (y1 == y0) y1 = y0 + 1;
     // A margin of 4 % above and below, so no marker sits on the frame.
     const double m = 0.04 * (y1 - y0);
     y1 += m;

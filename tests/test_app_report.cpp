@@ -26,7 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Run {
+struct CliRun {
   int code;
   std::string out, err;
 };
@@ -38,13 +38,13 @@ std::string Slurp(const fs::path& p) {
   return s.str();
 }
 
-Run Shell(const std::string& cmd, const fs::path& scratch) {
+CliRun Shell(const std::string& cmd, const fs::path& scratch) {
   const fs::path err = scratch / "stderr.txt", out = scratch / "stdout.txt";
   const int status = std::system((cmd + " 2> " + err.string() + " > " + out.string()).c_str());
   return {WEXITSTATUS(status), Slurp(out), Slurp(err)};
 }
 
-Run Mcms(const std::string& args, const fs::path& scratch) { return Shell(std::string(MCMS_CLI) + " " + args, scratch); }
+CliRun Mcms(const std::string& args, const fs::path& scratch) { return Shell(std::string(MCMS_CLI) + " " + args, scratch); }
 
 std::string Chromium() {
   if (const char* env = std::getenv("MCMS_CHROMIUM")) return env;
@@ -71,7 +71,7 @@ BrowserResult OpenInBrowser(const fs::path& page, const fs::path& scratch, const
                              (scratch / "chromium-profile").string();
   const std::string url = "file://" + fs::absolute(page).string();
   BrowserResult r;
-  const Run dom = Shell(common + " --dump-dom " + url, scratch);
+  const CliRun dom = Shell(common + " --dump-dom " + url, scratch);
   EXPECT_EQ(dom.code, 0) << dom.err;
   std::smatch m;
   if (std::regex_search(dom.out, m, std::regex("<body data-figures=\"([0-9]+)\" data-figures-rendered=\"([0-9]+)\"")))
@@ -83,7 +83,7 @@ BrowserResult OpenInBrowser(const fs::path& page, const fs::path& scratch, const
     if (line.find(":CONSOLE") != std::string::npos) r.console.push_back(line);
   if (!screenshot.empty()) {
     fs::remove(screenshot);
-    const Run shot = Shell(common + " --window-size=1280,4000 --screenshot=" + screenshot.string() + " " + url, scratch);
+    const CliRun shot = Shell(common + " --window-size=1280,4000 --screenshot=" + screenshot.string() + " " + url, scratch);
     EXPECT_EQ(shot.code, 0) << shot.err;
   }
   return r;
@@ -126,9 +126,9 @@ void ExpectCleanPage(const fs::path& page, const fs::path& scratch, size_t min_f
 TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
   REQUIRE_CHROMIUM();
   const fs::path s = test::ScratchDir("report_demo");
-  const Run demo = Mcms("demo --quiet --points 4 -o " + (s / "demo").string(), s);
+  const CliRun demo = Mcms("demo --quiet --points 4 -o " + (s / "demo").string(), s);
   ASSERT_EQ(demo.code, 0) << demo.err;
-  const Run rep = Mcms("report " + (s / "demo").string(), s);
+  const CliRun rep = Mcms("report " + (s / "demo").string(), s);
   ASSERT_EQ(rep.code, 0) << rep.err;
   EXPECT_NE(rep.out.find("the output of mcms demo"), std::string::npos) << rep.out;
   const fs::path page = s / "demo" / "report.html";
@@ -149,9 +149,9 @@ TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
 TEST(ReportCli, FovMapReportOpensInHeadlessChromium) {
   REQUIRE_CHROMIUM();
   const fs::path s = test::ScratchDir("report_fovmap");
-  const Run map = Mcms("fov-map --quiet --grid=-0.5:0.5:5,-0.4:0.4:4,0:1:3 -o " + (s / "map").string(), s);
+  const CliRun map = Mcms("fov-map --quiet --grid=-0.5:0.5:5,-0.4:0.4:4,0:1:3 -o " + (s / "map").string(), s);
   ASSERT_EQ(map.code, 0) << map.err;
-  const Run rep = Mcms("report " + (s / "map").string() + " -o " + (s / "map.html").string(), s);
+  const CliRun rep = Mcms("report " + (s / "map").string() + " -o " + (s / "map.html").string(), s);
   ASSERT_EQ(rep.code, 0) << rep.err;
   EXPECT_NE(rep.out.find("the output of mcms fov-map"), std::string::npos) << rep.out;
   ExpectCleanPage(s / "map.html", s, 4);  // three heat maps and sigma against distance
@@ -175,7 +175,7 @@ TEST(ReportCli, BrowserCheckCatchesAFigureThatDoesNotRender) {
 
 TEST(ReportCli, BadInputIsRefusedWithNothingWritten) {
   const fs::path s = test::ScratchDir("report_bad");
-  Run r = Mcms("report " + (s / "missing").string(), s);
+  CliRun r = Mcms("report " + (s / "missing").string(), s);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("missing does not exist"), std::string::npos) << r.err;
   fs::create_directories(s / "empty");
