@@ -138,12 +138,15 @@ TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
   for (const auto& e : fs::directory_iterator(s / "demo")) svgs += e.path().extension() == ".svg";
   EXPECT_GE(svgs, 4u);  // the per-point errors and the ISO 9283 plots
   const std::string html = Slurp(page);
-  EXPECT_EQ(Count(html, "<img class=\"figure\""), svgs);
+  // ... and the per-frame plots of its tracker_poses.csv: status, position, predicted sigma,
+  // reprojection RMS.
+  EXPECT_EQ(Count(html, "<img class=\"figure\""), svgs + 4);
+  EXPECT_NE(html.find("tracker_poses.csv: status per frame"), std::string::npos);
   for (const char* needle : {"summary.txt", "point_errors.csv", "iso9283_summary.txt", "fusion_setup.yaml"})
     EXPECT_NE(html.find(needle), std::string::npos) << needle;
   const fs::path artefacts = fs::path(MCMS_BINARY_DIR) / "test-artifacts";
   fs::create_directories(artefacts);
-  ExpectCleanPage(page, s, svgs, artefacts / "report-demo.png");
+  ExpectCleanPage(page, s, svgs + 4, artefacts / "report-demo.png");
 }
 
 TEST(ReportCli, FovMapReportOpensInHeadlessChromium) {
