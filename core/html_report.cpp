@@ -1,5 +1,7 @@
 #include "core/html_report.h"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -13,6 +15,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/pose_math.h"
 #include "core/svg_plot.h"
 
 namespace mcms {
@@ -265,6 +268,87 @@ std::pair<double, double> ChiSquareBand95(int k) {
   return k == 3 ? std::make_pair(0.2158, 9.3484) : std::make_pair(1.2373, 14.4494);
 }
 
+// Adds err_x_mm, err_y_mm, err_z_mm, err_rot_mdeg and nees columns to a tracker pose table
+// from a truth pose table (frame,x_m,y_m,z_m,qw,qx,qy,qz: T_rig_target, what `mcms render`
+// writes to truth/poses.csv), matched by frame. The error is e = BoxMinus(T_true, T_est) in
+// the [dtheta; dp] layout of the covariance, NEES = e^T Cov^-1 e. Returns a summary line,
+// or the reason nothing was added.
+std::string AddTruthColumns(Table& t, const Table& truth) {
+  const char* pose_cols[] = {"x_m", "y_m", "z_m", "qw", "qx", "qy", "qz"};
+  int tc[7], ec[7];
+  for (int i = 0; i < 7; ++i) {
+    tc[i] = truth.Column(pose_cols[i]);
+    ec[i] = t.Column(pose_cols[i]);
+    if (tc[i] < 0) return std::string("the truth file has no ") + pose_cols[i] + " column";
+  }
+  const int tf = truth.Column("frame"), ef = t.Column("frame");
+  if (tf < 0) return "the truth file has no frame column";
+  const char* axes[] = {"rx", "ry", "rz", "px", "py", "pz"};
+  int cov[6][6];
+  bool have_cov = true;
+  for (int a = 0; a < 6; ++a)
+    for (int b = 0; b < 6; ++b) {
+      cov[a][b] = t.Column(std::string("cov_") + axes[a] + "_" + axes[b]);
+      have_cov = have_cov && cov[a][b] >= 0;
+    }
+  auto pose_of = [](const Table& tab, size_t r, const int* c) -> std::optional<Pose> {
+    double v[7];
+    for (int i = 0; i < 7; ++i) {
+      const auto x = tab.Value(r, c[i]);
+      if (!x) return std::nullopt;
+      v[i] = *x;
+    }
+    return Pose::FromQuaternion(Eigen::Quaterniond(v[3], v[4], v[5], v[6]).normalized(), Vec3(v[0], v[1], v[2]));
+  };
+  std::map<long long, Pose> truth_by_frame;
+  for (size_t r = 0; r < truth.rows.size(); ++r)
+    if (const auto f = truth.Value(r, tf))
+      if (const auto T = pose_of(truth, r, tc)) truth_by_frame[std::llround(*f)] = *T;
+  for (const char* h : {"err_x_mm", "err_y_mm", "err_z_mm", "err_rot_mdeg", "nees"}) t.header.push_back(h);
+  size_t matched = 0, with_nees = 0, inside = 0;
+  double sum_nees = 0, sum_sq_mm = 0;
+  const auto [lo, hi] = ChiSquareBand95(6);
+  for (size_t r = 0; r < t.rows.size(); ++r) {
+    std::string cells[5];
+    const auto f = t.Value(r, ef);
+    const auto est = pose_of(t, r, ec);
+    const auto tr = f ? truth_by_frame.find(std::llround(*f)) : truth_by_frame.end();
+    if (est && tr != truth_by_frame.end()) {
+      const Vec6 e = BoxMinus(tr->second, *est);
+      ++matched;
+      sum_sq_mm += 1e6 * e.tail<3>().squaredNorm();
+      for (int a = 0; a < 3; ++a) cells[a] = Num(1e3 * e[3 + a]);
+      cells[3] = Num(e.head<3>().norm() * 180.0 / M_PI * 1e3);
+      if (have_cov) {
+        Mat6 C;
+        bool ok = true;
+        for (int a = 0; a < 6; ++a)
+          for (int b = 0; b < 6; ++b) {
+            const auto v = t.Value(r, cov[a][b]);
+            ok = ok && v.has_value();
+            C(a, b) = v.value_or(0.0);
+          }
+        Eigen::LDLT<Mat6> ldlt(C);
+        if (ok && ldlt.info() == Eigen::Success && ldlt.isPositive() && (ldlt.vectorD().array() > 0).all()) {
+          const double nees = e.dot(ldlt.solve(e));
+          cells[4] = Num(nees);
+          ++with_nees;
+          sum_nees += nees;
+          inside += nees >= lo && nees <= hi;
+        }
+      }
+    }
+    for (auto& c : cells) t.rows[r].push_back(c);
+  }
+  std::ostringstream o;
+  o << "against the truth (matched by frame): " << matched << " of " << t.rows.size() << " frames";
+  if (matched) o << ", position error RMS " << Num(std::sqrt(sum_sq_mm / static_cast<double>(matched))) << " mm";
+  if (with_nees)
+    o << ", mean NEES " << Num(sum_nees / static_cast<double>(with_nees)) << " (6 for a consistent covariance), "
+      << inside << " of " << with_nees << " frames inside the 95 % band [" << lo << ", " << hi << "]";
+  return o.str();
+}
+
 // Per-frame plots of a tracker pose CSV; figures appended to `out`, count returned.
 size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream& out) {
   const char* colors[] = {"#2ca02c", "#ff7f0e", "#d62728", "#9467bd", "#8c564b", "#1f77b4"};
@@ -329,15 +413,18 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
     p.series.push_back(s);
     emit(p, "reprojection RMS per frame");
   }
-  // Errors against a truth file, with the predicted 3-sigma band.
+  // Errors against a truth file, one axis per plot, each with its predicted 3-sigma band.
   {
-    Plot p{"Error against the truth per frame (band: predicted +-3 sigma)", "time (s)", "error (mm)", {}};
     const std::string axes = "xyz";
     const int cov[] = {cxx, cyy, czz};
     for (int a = 0; a < 3; ++a) {
-      const int c = t.Column(std::string("err_") + axes[a] + "_mm");
+      const std::string h = std::string("err_") + axes[a] + "_mm";
+      const int c = t.Column(h);
       if (c < 0) continue;
-      PlotSeries s{std::string("err_") + axes[a], {}, {}, colors[(a + 3) % 6], true};
+      Plot p{std::string("Error in ") + axes[a] + " against the truth per frame" +
+                 (cov[a] >= 0 ? " (band: predicted +-3 sigma)" : ""),
+             "time (s)", std::string(1, axes[a]) + " error (mm)", {}};
+      PlotSeries s{"measured error", {}, {}, colors[(a + 3) % 6], true};
       for (size_t r = 0; r < n; ++r) {
         s.x.push_back(time[r]);
         s.y.push_back(t.Value(r, c).value_or(NAN));
@@ -348,11 +435,13 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
           s.y_high.push_back(b);
         }
       }
+      if (cov[a] >= 0) s.label += " (band: predicted +-3 sigma)";
       p.series.push_back(s);
+      emit(p, h + " per frame");
     }
     for (size_t c = 0; c < t.header.size(); ++c) {
       const std::string& h = t.header[c];
-      const bool axis_error = h == "err_x_mm" || h == "err_y_mm" || h == "err_z_mm";  // in the plot above
+      const bool axis_error = h == "err_x_mm" || h == "err_y_mm" || h == "err_z_mm";  // plotted above
       if (!StartsWith(h, "err") || axis_error) continue;
       Plot q{"Per-frame " + h, "time (s)", h, {}};
       PlotSeries s{h, {}, {}, colors[2], true};
@@ -360,7 +449,6 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
       q.series.push_back(s);
       emit(q, h + " per frame");
     }
-    if (!p.series.empty()) emit(p, "error against the truth per frame");
   }
   for (size_t c = 0; c < t.header.size(); ++c) {
     const std::string h = Lower(t.header[c]);
@@ -507,6 +595,18 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
     if (!err.empty()) table_errors[f->name] = err;
     else tables[f->name] = std::move(t);
   }
+  // A tracker pose table beside the truth of a rendered recording (`mcms render` writes
+  // truth/poses.csv, `mcms track DIR` poses.csv): errors and NEES against the truth, unless
+  // the table carries them already.
+  std::vector<std::string> truth_notes;
+  const fs::path truth_file = dir / "truth" / "poses.csv";
+  for (auto& [name, t] : tables) {
+    if (!IsTrackerPoses(t) || t.Column("nees") >= 0 || !fs::is_regular_file(truth_file, ec)) continue;
+    std::string err;
+    const Table truth = ParseCsv(ReadTextFile(truth_file), &err);
+    truth_notes.push_back(name + " " +
+                          (err.empty() ? AddTruthColumns(t, truth) : "not compared with truth/poses.csv: " + err));
+  }
   c.kind = DetectKind(files, tables, texts);
 
   std::ostringstream o;
@@ -569,7 +669,11 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   if (!figs.str().empty() || !track.str().empty()) {
     section("figures", "Figures");
     body << figs.str();
-    if (!track.str().empty()) body << "<h3>Per-frame tracking</h3>\n" << track.str();
+    if (!track.str().empty()) {
+      body << "<h3>Per-frame tracking</h3>\n";
+      for (const auto& n : truth_notes) body << "<p>" << Html(n) << "</p>\n";
+      body << track.str();
+    }
   }
 
   if (!csvs.empty()) {

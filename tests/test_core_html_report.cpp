@@ -162,9 +162,9 @@ TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
   const std::string html = BuildHtmlReport({d, "track run", 25, 100000}, &c);
   EXPECT_EQ(c.kind, "track");
   const auto figs = EmbeddedFigures(html);
-  // status, position, predicted sigma, RMS, err_rot_mdeg, error with band, NEES.
-  ASSERT_EQ(figs.size(), 7u);
-  EXPECT_EQ(c.figures, 7u);
+  // status, position, predicted sigma, RMS, error in x, y, z with bands, err_rot_mdeg, NEES.
+  ASSERT_EQ(figs.size(), 9u);
+  EXPECT_EQ(c.figures, 9u);
   auto find = [&](const std::string& title) -> std::string {
     for (const auto& f : figs)
       if (f.find(title) != std::string::npos) return f;
@@ -174,13 +174,57 @@ TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
   const std::string status = find("Per-frame status");
   EXPECT_NE(status.find("ok (36 frames)"), std::string::npos);
   EXPECT_NE(status.find("lost (4 frames)"), std::string::npos);
-  const std::string err = find("Error against the truth per frame (band: predicted +-3 sigma)");
-  EXPECT_EQ(Count(err, "<polygon"), 3u);  // one band per axis
+  for (const char* axis : {"x", "y", "z"}) {
+    const std::string err = find(std::string("Error in ") + axis + " against the truth per frame (band: predicted +-3 sigma)");
+    EXPECT_EQ(Count(err, "<polygon"), 1u);  // the band
+    EXPECT_EQ(Count(err, "<circle cx"), 36u + 1u);  // the tracked frames and the legend's marker
+  }
   const std::string nees = find("NEES per frame");
   EXPECT_NE(nees.find("6 dof"), std::string::npos);
   EXPECT_EQ(Count(nees, "<polygon"), 1u);
   EXPECT_NE(nees.find("(log scale)"), std::string::npos);
   EXPECT_NE(html.find("<title>track run</title>"), std::string::npos);
+}
+
+// A tracker's poses.csv beside the truth of a rendered recording (truth/poses.csv): the
+// page computes the error and NEES per frame, in the covariance's [dtheta; dp] layout.
+TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
+  const fs::path d = test::ScratchDir("html_report_truth");
+  fs::create_directories(d / "truth");
+  const char* axes[] = {"rx", "ry", "rz", "px", "py", "pz"};
+  std::string est = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,rms_px";
+  for (const char* a : axes)
+    for (const char* b : axes) est += std::string(",cov_") + a + "_" + b;
+  est += "\n";
+  std::string truth = "frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz\n";
+  // Frame k: the estimate is 1 mm off in x and k * 0.1 mrad about z; sigma 1 mm and 0.1 mrad.
+  for (int k = 0; k < 4; ++k) {
+    const double half = 0.5 * 1e-4 * k;
+    char row[200];
+    std::snprintf(row, sizeof(row), "%d,%d,ok,\"\",0.101,0.2,0.9,%.12f,0,0,%.12f,5,0.1", k, k, std::cos(half), -std::sin(half));
+    est += row;
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 6; ++j) est += i != j ? ",0" : i < 3 ? ",1e-8" : ",1e-6";
+    est += "\n";
+    std::snprintf(row, sizeof(row), "%d,%d,0.1,0.2,0.9,1,0,0,0\n", k, k);
+    truth += row;
+  }
+  est += "4,4,lost,\"no balls\",,,,,,,,0,";
+  for (int i = 0; i < 36; ++i) est += ",";
+  est += "\n";
+  Write(d / "poses.csv", est);
+  Write(d / "truth" / "poses.csv", truth);
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d}, &c);
+  EXPECT_EQ(c.kind, "track");
+  // NEES = (1 mm / 1 mm)^2 + (k * 0.1 mrad / 0.1 mrad)^2 = 1 + k^2: mean (1 + 2 + 5 + 10) / 4 = 4.5.
+  EXPECT_NE(html.find("poses.csv against the truth (matched by frame): 4 of 5 frames, position error RMS 1 mm, "
+                      "mean NEES 4.5 (6 for a consistent covariance), 3 of 4 frames inside the 95 % band"),
+            std::string::npos);
+  EXPECT_EQ(c.figures, 9u);  // status, position, sigma, RMS, errors x, y, z, rotation error, NEES
+  // The table on the page carries the new columns: x error -1 mm (truth - estimate), NEES 1 + k^2.
+  EXPECT_NE(html.find("<th>nees</th>"), std::string::npos);
+  for (const char* v : {"<td>-1</td>", "<td>2</td>", "<td>5</td>", "<td>10</td>"}) EXPECT_NE(html.find(v), std::string::npos) << v;
 }
 
 TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
