@@ -471,6 +471,48 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
   return figures;
 }
 
+bool IsIso9283Characteristics(const Table& t) {
+  return t.Column("pose") >= 0 && t.Column("AP_mm") >= 0 && t.Column("RP_mm") >= 0;
+}
+
+// Plots of an ISO 9283 characteristics table (`mcms iso9283 -o`, the demo's
+// iso9283_characteristics.csv): AP per pose on a log axis in mm, and RP measured (markers)
+// next to RP predicted from the covariances (lines) when the table has RP_pred_mm; one
+// colour per condition.
+size_t Iso9283Plots(const Table& t, const std::string& name, std::ostringstream& out) {
+  const char* colors[] = {"#d62728", "#ff7f0e", "#1f77b4", "#2ca02c", "#9467bd", "#8c564b"};
+  const int cp = t.Column("pose"), cc = t.Column("condition"), ca = t.Column("AP_mm"), cr = t.Column("RP_mm"),
+            cq = t.Column("RP_pred_mm");
+  std::vector<std::string> conditions;
+  std::map<std::string, size_t> index;
+  for (const auto& row : t.rows) {
+    const std::string c = cc >= 0 ? row[cc] : std::string("measured");
+    if (!index.count(c)) index[c] = conditions.size(), conditions.push_back(c);
+  }
+  Plot ap{"ISO 9283 pose accuracy AP per pose", "pose (P1..P5)", "AP (mm)", {}};
+  ap.log_y = true;
+  Plot rp{std::string("ISO 9283 pose repeatability RP per pose") + (cq >= 0 ? " (markers: measured, lines: predicted)" : ""),
+          "pose (P1..P5)", "RP (mm)", {}};
+  for (size_t k = 0; k < conditions.size(); ++k) {
+    PlotSeries a{conditions[k], {}, {}, colors[k % 6], true}, r = a, q{conditions[k] + " (predicted)", {}, {}, colors[k % 6], false};
+    for (size_t i = 0; i < t.rows.size(); ++i) {
+      if ((cc >= 0 ? t.rows[i][cc] : std::string("measured")) != conditions[k]) continue;
+      // Pose "P3" -> 3; a plain number is used as it is.
+      const std::string& pose = t.rows[i][cp];
+      const double x = std::strtod(pose.c_str() + (pose.size() > 1 && (pose[0] == 'P' || pose[0] == 'p') ? 1 : 0), nullptr);
+      a.x.push_back(x), a.y.push_back(t.Value(i, ca).value_or(NAN));
+      r.x.push_back(x), r.y.push_back(t.Value(i, cr).value_or(NAN));
+      if (cq >= 0) q.x.push_back(x), q.y.push_back(t.Value(i, cq).value_or(NAN));
+    }
+    ap.series.push_back(a);
+    rp.series.push_back(r);
+    if (cq >= 0) rp.series.push_back(q);
+  }
+  out << FigureHtml(ap.ToSvg(900, 420), name + ": AP per pose");
+  out << FigureHtml(rp.ToSvg(900, 420), name + ": RP per pose, measured and predicted");
+  return 2;
+}
+
 std::string DetectKind(const std::vector<File>& files, const std::map<std::string, Table>& tables,
                        const std::map<std::string, std::string>& texts) {
   std::set<std::string> names;
@@ -484,7 +526,7 @@ std::string DetectKind(const std::vector<File>& files, const std::map<std::strin
     if (text.find("\"effects\"") != std::string::npos && text.find("\"nominal\"") != std::string::npos) return "audit";
   }
   for (const auto& [n, t] : tables) {
-    if (t.Column("AP_mm") >= 0 || (t.Column("pose") >= 0 && t.Column("cycle") >= 0)) return "iso9283";
+    if (IsIso9283Characteristics(t) || (t.Column("pose") >= 0 && t.Column("cycle") >= 0)) return "iso9283";
     if (IsTrackerPoses(t)) return "track";
   }
   return "mcms output";
@@ -666,6 +708,10 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   std::ostringstream track;
   for (const auto& [name, t] : tables)
     if (IsTrackerPoses(t) && !t.rows.empty()) c.figures += TrackerPlots(t, name, track);
+  // ISO 9283 characteristics get their plots unless the folder has them already (the demo).
+  const bool has_iso_svg = std::any_of(svgs.begin(), svgs.end(), [](const File* f) { return StartsWith(f->name, "iso9283_"); });
+  for (const auto& [name, t] : tables)
+    if (IsIso9283Characteristics(t) && !t.rows.empty() && !has_iso_svg) c.figures += Iso9283Plots(t, name, figs);
   if (!figs.str().empty() || !track.str().empty()) {
     section("figures", "Figures");
     body << figs.str();
