@@ -36,6 +36,7 @@ bool HtmlReportOptions::IsValid(std::string* why) const {
 namespace {
 
 constexpr size_t kMaxSvgBytes = size_t{8} << 20;  // a larger SVG is listed, not embedded
+constexpr size_t kReportHeadLines = 60;           // lines of a long report shown before "more"
 
 std::string Html(const std::string& s) {
   std::string o;
@@ -681,7 +682,19 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   if (!ordered.empty()) {
     section("reports", "Results");
     for (const File* f : ordered) {
-      body << "<h3>" << Html(f->name) << "</h3>\n<pre>" << Html(texts[f->name]) << "</pre>\n";
+      // A long report shows its head; the rest is one click away.
+      const std::string& text = texts[f->name];
+      size_t cut_at = 0, lines = 0;
+      for (size_t i = 0; i < text.size() && lines < kReportHeadLines; ++i)
+        if (text[i] == '\n') ++lines, cut_at = i + 1;
+      const size_t total_lines = static_cast<size_t>(std::count(text.begin(), text.end(), '\n'));
+      body << "<h3>" << Html(f->name) << "</h3>\n";
+      if (total_lines > kReportHeadLines + 10) {
+        body << "<pre>" << Html(text.substr(0, cut_at)) << "</pre>\n<details><summary>" << total_lines - kReportHeadLines
+             << " more lines</summary><pre>" << Html(text.substr(cut_at)) << "</pre></details>\n";
+      } else {
+        body << "<pre>" << Html(text) << "</pre>\n";
+      }
       if (cut[f->name]) body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
       ++c.texts;
     }

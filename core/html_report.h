@@ -10,7 +10,8 @@
 //   *.csv                      tables: shown whole up to `max_table_rows` rows, otherwise
 //                              summarised (rows, per-column min / median / max / mean for
 //                              numeric columns, counts for text columns, first and last rows)
-//   *.txt, *.md, *.log         reports, shown as preformatted text (summary*.txt first)
+//   *.txt, *.md, *.log         reports, shown as preformatted text (summary*.txt first; the
+//                              first 60 lines of a long one, the rest in a collapsed section)
 //   *.yaml, *.yml, *.json,     inputs and models, in collapsed sections (*.html files, earlier
 //                              reports, are left out)
 //   *.cameramodel

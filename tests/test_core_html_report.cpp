@@ -101,6 +101,9 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   h.WriteSvg(d / "heatmap.svg");
   Write(d / "summary.txt", "mean error 0.02 mm < 0.05 mm & fine\n");
   Write(d / "setup.yaml", "rig: {cameras: 4}\n");
+  std::string long_text;
+  for (int i = 0; i < 200; ++i) long_text += "line " + std::to_string(i) + "\n";
+  Write(d / "region.txt", long_text);
   Write(d / "small.csv", "point,err_mm\n1,0.5\n2,0.25\n");
   std::string big = "# a comment line\ncondition,value\n";
   for (int i = 0; i < 100; ++i) big += std::string(i % 3 ? "\"a, b\"" : "c") + "," + std::to_string(i) + "\n";
@@ -116,7 +119,10 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   const std::string html = BuildHtmlReport({d, "", 25, 100000}, &c);
   EXPECT_EQ(c.figures, 2u);
   EXPECT_EQ(c.tables, 2u);  // small and big; ragged is named with its problem
-  EXPECT_EQ(c.texts, 1u);
+  EXPECT_EQ(c.texts, 2u);
+  // summary.txt before the other reports; a long report shows 60 lines, the rest collapsed.
+  EXPECT_LT(html.find("<h3>summary.txt</h3>"), html.find("<h3>region.txt</h3>"));
+  EXPECT_NE(html.find("line 59\n</pre>\n<details><summary>140 more lines</summary><pre>line 60\n"), std::string::npos);
   EXPECT_EQ(c.inputs, 1u);
   // The figures are the files, byte for byte.
   const auto figs = EmbeddedFigures(html);
