@@ -525,6 +525,7 @@ std::string DetectKind(const std::vector<File>& files, const std::map<std::strin
   for (const auto& [n, text] : texts) {
     if (text.find("# mcms calib-robot report") != std::string::npos) return "calib-robot";
     if (text.find("\"effects\"") != std::string::npos && text.find("\"nominal\"") != std::string::npos) return "audit";
+    if (text.find("camera  observations  chi2/dof") != std::string::npos) return "audit";  // `mcms audit cameras` > FILE
   }
   for (const auto& [n, t] : tables) {
     if (IsIso9283Characteristics(t) || (t.Column("pose") >= 0 && t.Column("cycle") >= 0)) return "iso9283";

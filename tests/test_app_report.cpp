@@ -1,4 +1,5 @@
-// mcms report in a real browser: the HTML page of `mcms demo` and of `mcms fov-map` opens in
+// mcms report (and --html of demo and fov-map) in a real browser: the HTML page of `mcms demo`
+// and of `mcms fov-map` opens in
 // headless Chromium (Debian's chromium, scripts/setup.sh installs it) with no console
 // message but the page's own "N of N figures rendered", every figure decoded by the
 // browser, and a screenshot that is not blank (kept as a test artefact in
@@ -126,13 +127,17 @@ void ExpectCleanPage(const fs::path& page, const fs::path& scratch, size_t min_f
 TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
   REQUIRE_CHROMIUM();
   const fs::path s = test::ScratchDir("report_demo");
-  const CliRun demo = Mcms("demo --quiet --points 4 -o " + (s / "demo").string(), s);
+  // `mcms demo --html` writes the page as `mcms report DIR` does.
+  const CliRun demo = Mcms("demo --quiet --points 4 --html -o " + (s / "demo").string(), s);
   ASSERT_EQ(demo.code, 0) << demo.err;
+  const fs::path page = s / "demo" / "report.html";
+  EXPECT_NE(demo.out.find("wrote " + page.string()), std::string::npos) << demo.out;
+  ASSERT_TRUE(fs::exists(page));
+  const std::string from_demo = Slurp(page);
   const CliRun rep = Mcms("report " + (s / "demo").string(), s);
   ASSERT_EQ(rep.code, 0) << rep.err;
   EXPECT_NE(rep.out.find("the output of mcms demo"), std::string::npos) << rep.out;
-  const fs::path page = s / "demo" / "report.html";
-  ASSERT_TRUE(fs::exists(page));
+  EXPECT_EQ(Slurp(page), from_demo);
   // Every SVG the demo wrote is on the page, with its summary and tables.
   size_t svgs = 0;
   for (const auto& e : fs::directory_iterator(s / "demo")) svgs += e.path().extension() == ".svg";
@@ -152,8 +157,9 @@ TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
 TEST(ReportCli, FovMapReportOpensInHeadlessChromium) {
   REQUIRE_CHROMIUM();
   const fs::path s = test::ScratchDir("report_fovmap");
-  const CliRun map = Mcms("fov-map --quiet --grid=-0.5:0.5:5,-0.4:0.4:4,0:1:3 -o " + (s / "map").string(), s);
+  const CliRun map = Mcms("fov-map --quiet --html --grid=-0.5:0.5:5,-0.4:0.4:4,0:1:3 -o " + (s / "map").string(), s);
   ASSERT_EQ(map.code, 0) << map.err;
+  EXPECT_TRUE(fs::exists(s / "map" / "report.html"));
   const CliRun rep = Mcms("report " + (s / "map").string() + " -o " + (s / "map.html").string(), s);
   ASSERT_EQ(rep.code, 0) << rep.err;
   EXPECT_NE(rep.out.find("the output of mcms fov-map"), std::string::npos) << rep.out;
