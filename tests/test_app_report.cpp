@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -117,6 +118,7 @@ void ExpectCleanPage(const fs::path& page, const fs::path& scratch, size_t min_f
   cv::Scalar mean, sd;
   cv::meanStdDev(img, mean, sd);
   EXPECT_GT(sd[0], 10.0);
+  std::printf("screenshot of %s: %s (%.1f %% of the pixels inked)\n", page.filename().c_str(), screenshot.c_str(), 100 * inked);
 }
 
 #define REQUIRE_CHROMIUM()                                                                     \
