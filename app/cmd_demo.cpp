@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "app/commands.h"
+#include "core/html_report.h"
 #include "synthetic/demo.h"
 
 namespace mcms::app {
@@ -14,6 +15,7 @@ McmsCommand demo_command([](CLI::App& app) {
   auto args = std::make_shared<DemoOptions>();
   auto out = std::make_shared<std::string>("mcms-demo");
   auto no_iso = std::make_shared<bool>(false);
+  auto html = std::make_shared<bool>(false);
   CLI::App* cmd = app.add_subcommand(
       "demo",
       "The main job on the embedded default: the paper's lab experiment (section 3.4). A KR 5 arc carries the "
@@ -33,15 +35,21 @@ McmsCommand demo_command([](CLI::App& app) {
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--save-images", args->save_images, "also write the rendered recording (PNG, ~0.6 MB per image)");
   cmd->add_flag("--no-iso9283", *no_iso, "skip the ISO 9283 experiment");
+  cmd->add_flag("--html", *html, "also write OUT/report.html, the run's self-contained HTML report (as `mcms report OUT`)");
   cmd->add_option("--threads", args->threads, "render threads (default: the hardware's)")->check(CLI::Range(1, 1024));
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
-  return std::make_pair(cmd, Runner([args, out, no_iso] {
+  return std::make_pair(cmd, Runner([args, out, no_iso, html] {
                           args->out = *out;
                           args->iso9283 = !*no_iso;
                           RunDemo(*args, [](const std::string& text) {
                             std::fputs(text.c_str(), stdout);
                             std::fflush(stdout);
                           });
+                          if (*html) {
+                            const auto page = std::filesystem::path(*out) / "report.html";
+                            const HtmlReportContents c = WriteHtmlReport({*out}, page);
+                            std::printf("wrote %s: %zu figures, %zu tables\n", page.string().c_str(), c.figures, c.tables);
+                          }
                           return 0;
                         }));
 });

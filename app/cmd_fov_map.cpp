@@ -14,6 +14,7 @@
 
 #include "app/commands.h"
 #include "core/error.h"
+#include "core/html_report.h"
 #include "core/io.h"
 #include "synthetic/fov_map_job.h"
 
@@ -34,6 +35,7 @@ struct FovArgs {
   int simulate = 0, repeats = 30;
   uint64_t seed = 1;
   bool quiet = false;
+  bool html = false;  // also write DIR/report.html
   // Measured data.
   std::string measured, lines, json, reference;
   int measured_repeats = 5;
@@ -93,6 +95,11 @@ int RunFovMap(const FovArgs& a) {
   }
   job.quiet = a.quiet;
   RunFovMapJob(job, stdout);
+  if (a.html) {
+    const std::filesystem::path page = std::filesystem::path(a.out) / "report.html";
+    const HtmlReportContents c = WriteHtmlReport({a.out}, page);
+    std::printf("wrote %s: %zu figures, %zu tables\n", page.string().c_str(), c.figures, c.tables);
+  }
   return 0;
 }
 
@@ -112,6 +119,7 @@ const McmsCommand kFovMap([](CLI::App& app) {
       "DIR receives map.csv, heatmap_z<k>.svg, sigma_vs_distance.svg, region.txt (and simulated.*,\n"
       "measured.*); it is written to a temporary folder and renamed into place when complete.");
   sub->add_option("-o,--output", a->out, "output folder (required)")->type_name("DIR");
+  sub->add_flag("--html", a->html, "also write DIR/report.html, the run's self-contained HTML report (as `mcms report DIR`)");
   sub->add_option("--scenario", a->scenario, "scenario file: rig, target and image formation (default: the built-in one)")
       ->check(CLI::ExistingFile);
   sub->add_option("--rig", a->rig, "rig file (rig.yaml), replacing the scenario's")->check(CLI::ExistingFile);

@@ -31,70 +31,232 @@ double NiceStep(double span) {
 }
 }  // namespace
 
-void Plot::WriteSvg(const std::filesystem::path& path, int W, int H) const {
+namespace {
+// A tick value as text: values within rounding of zero print as 0, never 1e-17.
+std::string TickLabel(double v, double step) {
+  if (std::abs(v) < 1e-9 * std::abs(step)) v = 0.0;
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", v);
+  return buf;
+}
+// Ticks of a logarithmic axis over [lo, hi] (lo > 0): 1, 2, 5 times the powers of ten
+// when the range spans few decades, the powers of ten alone when it spans many.
+std::vector<double> LogTicks(double lo, double hi) {
+  std::vector<double> t;
+  const double decades = std::log10(hi / lo);
+  const std::vector<double> mult = decades > 4 ? std::vector<double>{1.0} : std::vector<double>{1.0, 2.0, 5.0};
+  for (double d = std::pow(10.0, std::floor(std::log10(lo))); d <= hi * 1.0001; d *= 10)
+    for (double m : mult)
+      if (m * d >= lo * 0.9999 && m * d <= hi * 1.0001) t.push_back(m * d);
+  return t;
+}
+}  // namespace
+
+std::string Plot::ToSvg(int W, int H) const {
+  auto usable_y = [&](double v) { return std::isfinite(v) && (!log_y || v > 0); };
   double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+  auto extend_y = [&](double v) {
+    if (!usable_y(v)) return;
+    y0 = std::min(y0, v);
+    y1 = std::max(y1, v);
+  };
+  auto has_vector = [](const PlotSeries& s, size_t i) {
+    return i < s.dx.size() && i < s.dy.size() && std::isfinite(s.dx[i]) && std::isfinite(s.dy[i]);
+  };
   for (const auto& s : series)
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-      if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i])) continue;
+      if (!std::isfinite(s.x[i])) continue;
+      const bool band = i < s.y_low.size() && i < s.y_high.size();
+      if (!usable_y(s.y[i]) && !band) continue;
       x0 = std::min(x0, s.x[i]);
       x1 = std::max(x1, s.x[i]);
-      y0 = std::min(y0, s.y[i]);
-      y1 = std::max(y1, s.y[i]);
+      extend_y(s.y[i]);
+      if (band) extend_y(s.y_low[i]), extend_y(s.y_high[i]);
+      if (has_vector(s, i) && usable_y(s.y[i])) {
+        const double tx = s.x[i] + s.vector_scale * s.dx[i];
+        x0 = std::min(x0, tx), x1 = std::max(x1, tx);
+        extend_y(s.y[i] + s.vector_scale * s.dy[i]);
+      }
     }
+  if (x_range) x0 = x_range->first, x1 = x_range->second;
+  if (y_range) y0 = y_range->first, y1 = y_range->second;
+  const bool fixed_y = y_range.has_value();
   if (!(x1 >= x0)) x0 = 0, x1 = 1;
-  if (!(y1 >= y0)) y0 = 0, y1 = 1;
-  if (y0 > 0 && y0 < 0.5 * y1) y0 = 0;
-  if (x1 == x0) x1 = x0 + 1;
-  if (y1 == y0) y1 = y0 + 1;
-  const double L = 80, R = 20, T = 40, B = 55;
-  auto X = [&](double x) { return L + (x - x0) / (x1 - x0) * (W - L - R); };
-  auto Y = [&](double y) { return H - B - (y - y0) / (y1 - y0) * (H - T - B); };
+  if (!(y1 >= y0)) y0 = log_y ? 1 : 0, y1 = log_y ? 10 : 1;
+  if (log_y) {
+    // Whole decades (or 1-2-5 steps) at both ends, so the extremes carry a label.
+    const std::vector<double> nice = {1, 2, 5, 10};
+    const double d0 = std::pow(10.0, std::floor(std::log10(y0)));
+    double lo = d0;
+    for (double m : nice)
+      if (m * d0 <= y0 * 1.0000001) lo = m * d0;
+    const double d1 = std::pow(10.0, std::floor(std::log10(y1)));
+    double hi = 10 * d1;
+    for (double m : {10.0, 5.0, 2.0, 1.0})
+      if (m * d1 >= y1 * 0.9999999) hi = m * d1;
+    y0 = lo, y1 = hi;
+    if (y1 <= y0) y1 = 10 * y0;
+  } else if (!fixed_y) {
+    // A constant is drawn in the middle of the axis, not on its frame.
+    if (y1 == y0) y0 -= 1, y1 += 1;
+    if (y0 > 0 && y0 < 0.5 * y1) y0 = 0;
+    // A margin of 4 % above and below, so no marker sits on the frame.
+    const double m = 0.04 * (y1 - y0);
+    y1 += m;
+    if (y0 != 0) y0 -= m;
+  }
+  if (y1 <= y0) y1 = y0 + 1;
+  if (x1 <= x0) x0 -= 0.5, x1 += 0.5;
+  if (!x_range) {
+    // A margin of 2 % left and right, so no marker sits on the frame.
+    const double xm = 0.02 * (x1 - x0);
+    x0 -= xm, x1 += xm;
+  }
+  // The legend gets its own band under the title: rows of entries, wrapped to the width.
+  const double L = 80, R = 24, B = 55;
+  struct Entry {
+    double x, y;
+    const PlotSeries* s;
+  };
+  std::vector<Entry> entries;
+  double lx = L, ly = 44;
+  for (const auto& s : series) {
+    if (s.label.empty()) continue;
+    const double w = 34 + 6.8 * static_cast<double>(s.label.size()) + 18;
+    if (lx > L && lx + w > W - R) lx = L, ly += 18;
+    entries.push_back({lx, ly, &s});
+    lx += w;
+  }
+  const double T = entries.empty() ? 40 : ly + 16;
+  // The plot area [AL, AR] x [AT, AB] in SVG pixels; with equal_scale one unit is as long
+  // on both axes and the area shrinks along one of them.
+  double AL = L, AR = W - R, AT = T, AB = H - B;
+  if (equal_scale && !log_y) {
+    const double k = std::min((AR - AL) / (x1 - x0), (AB - AT) / (y1 - y0));
+    AR = AL + k * (x1 - x0);
+    AB = AT + k * (y1 - y0);
+  }
+  auto X = [&](double x) { return AL + (x - x0) / (x1 - x0) * (AR - AL); };
+  auto F = [&](double y) { return log_y ? std::log10(y / y0) / std::log10(y1 / y0) : (y - y0) / (y1 - y0); };
+  auto Y = [&](double y) { return y_down ? AT + F(y) * (AB - AT) : AB - F(y) * (AB - AT); };
   std::ostringstream o;
-  char buf[256];
-  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
+  char buf[320];
+  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H << "' viewBox='0 0 " << W << " " << H
     << "' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n";
   o << "<text x='" << W / 2 << "' y='22' text-anchor='middle' font-size='15'>" << Escape(title) << "</text>\n";
-  const double xs = NiceStep(x1 - x0), ys = NiceStep(y1 - y0);
-  for (double v = std::ceil(x0 / xs) * xs; v <= x1 + 1e-12; v += xs) {
-    std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/><text x='%.1f' y='%.1f' text-anchor='middle'>%g</text>\n",
-                  X(v), T, X(v), H - B, X(v), H - B + 16, v);
+  const double xs = NiceStep(x1 - x0);
+  for (double v = std::ceil(x0 / xs - 1e-9) * xs; v <= x1 + 1e-9 * xs; v += xs) {
+    std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/><text x='%.1f' y='%.1f' text-anchor='middle'>%s</text>\n",
+                  X(v), AT, X(v), AB, X(v), AB + 16, TickLabel(v, xs).c_str());
     o << buf;
   }
-  for (double v = std::ceil(y0 / ys) * ys; v <= y1 + 1e-12; v += ys) {
-    std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/><text x='%.1f' y='%.1f' text-anchor='end'>%g</text>\n",
-                  L, Y(v), W - R, Y(v), L - 6, Y(v) + 4, v);
+  std::vector<double> yticks;
+  double ys = 1;
+  if (log_y) {
+    yticks = LogTicks(y0, y1);
+  } else {
+    ys = NiceStep(y1 - y0);
+    for (double v = std::ceil(y0 / ys - 1e-9) * ys; v <= y1 + 1e-9 * ys; v += ys) yticks.push_back(v);
+  }
+  for (double v : yticks) {
+    std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/><text x='%.1f' y='%.1f' text-anchor='end'>%s</text>\n",
+                  AL, Y(v), AR, Y(v), AL - 6, Y(v) + 4, TickLabel(v, log_y ? v : ys).c_str());
     o << buf;
   }
-  o << "<rect x='" << L << "' y='" << T << "' width='" << W - L - R << "' height='" << H - T - B
+  o << "<rect x='" << AL << "' y='" << AT << "' width='" << AR - AL << "' height='" << AB - AT
     << "' fill='none' stroke='black'/>\n";
-  o << "<text x='" << (L + W - R) / 2 << "' y='" << H - 12 << "' text-anchor='middle'>" << Escape(x_label) << "</text>\n";
-  o << "<text transform='translate(18," << (T + H - B) / 2 << ") rotate(-90)' text-anchor='middle'>" << Escape(y_label)
-    << "</text>\n";
-  int k = 0;
+  o << "<text x='" << (AL + AR) / 2 << "' y='" << AB + 43 << "' text-anchor='middle'>" << Escape(x_label) << "</text>\n";
+  o << "<text transform='translate(18," << (AT + AB) / 2 << ") rotate(-90)' text-anchor='middle'>"
+    << Escape(y_label + (log_y ? " (log scale)" : "")) << "</text>\n";
+  // Data, clipped to the plot area and a marker's radius around it (the ranges cover
+  // every value, so the clip only guards against rounding).
+  std::snprintf(buf, sizeof(buf), "<clipPath id='plotarea'><rect x='%.1f' y='%.1f' width='%.1f' height='%.1f'/></clipPath>\n<g clip-path='url(#plotarea)'>\n",
+                AL - 4, AT - 4, AR - AL + 8, AB - AT + 8);
+  o << buf;
   for (const auto& s : series) {
+    // Band first, under the data.
+    std::string upper, lower;
+    for (size_t i = 0; i < s.x.size() && i < s.y_low.size() && i < s.y_high.size(); ++i)
+      if (std::isfinite(s.x[i]) && usable_y(s.y_low[i]) && usable_y(s.y_high[i])) {
+        std::snprintf(buf, sizeof(buf), "%.1f,%.1f ", X(s.x[i]), Y(s.y_high[i]));
+        upper += buf;
+        std::snprintf(buf, sizeof(buf), "%.1f,%.1f ", X(s.x[i]), Y(s.y_low[i]));
+        lower = buf + lower;
+      }
+    if (!upper.empty())
+      o << "<polygon fill='" << s.color << "' fill-opacity='0.18' stroke='none' points='" << upper << lower << "'/>\n";
+  }
+  for (const auto& s : series) {
+    // Vectors: a segment from each point with an open arrow head at its tip.
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!has_vector(s, i) || !std::isfinite(s.x[i]) || !usable_y(s.y[i])) continue;
+      const double ty = s.y[i] + s.vector_scale * s.dy[i];
+      if (!usable_y(ty)) continue;
+      const double ax = X(s.x[i]), ay = Y(s.y[i]), bx = X(s.x[i] + s.vector_scale * s.dx[i]), by = Y(ty);
+      const double len = std::hypot(bx - ax, by - ay);
+      std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='%s' stroke-width='1'/>\n", ax, ay, bx,
+                    by, s.color.c_str());
+      o << buf;
+      if (len > 3) {
+        const double ux = (bx - ax) / len, uy = (by - ay) / len, h = std::min(5.0, 0.4 * len);
+        std::snprintf(buf, sizeof(buf), "<polyline fill='none' stroke='%s' stroke-width='1' points='%.1f,%.1f %.1f,%.1f %.1f,%.1f'/>\n",
+                      s.color.c_str(), bx - h * (ux - 0.5 * uy), by - h * (uy + 0.5 * ux), bx, by, bx - h * (ux + 0.5 * uy),
+                      by - h * (uy - 0.5 * ux));
+        o << buf;
+      }
+    }
     if (s.points) {
       for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
-        if (std::isfinite(s.x[i]) && std::isfinite(s.y[i])) {
+        if (std::isfinite(s.x[i]) && usable_y(s.y[i])) {
           std::snprintf(buf, sizeof(buf), "<circle cx='%.1f' cy='%.1f' r='2.5' fill='%s'/>\n", X(s.x[i]), Y(s.y[i]),
                         s.color.c_str());
           o << buf;
         }
     } else {
-      o << "<polyline fill='none' stroke='" << s.color << "' stroke-width='1.5' points='";
-      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i)
-        if (std::isfinite(s.x[i]) && std::isfinite(s.y[i])) {
-          std::snprintf(buf, sizeof(buf), "%.1f,%.1f ", X(s.x[i]), Y(s.y[i]));
+      // A gap (non-finite value) breaks the line; a value alone between gaps is a dot.
+      std::string pts;
+      size_t count = 0;
+      double last_x = 0, last_y = 0;
+      auto flush = [&] {
+        if (count == 1) {
+          std::snprintf(buf, sizeof(buf), "<circle cx='%.1f' cy='%.1f' r='1.5' fill='%s'/>\n", last_x, last_y, s.color.c_str());
           o << buf;
+        } else if (count > 1) {
+          o << "<polyline fill='none' stroke='" << s.color << "' stroke-width='1.5' points='" << pts << "'/>\n";
         }
-      o << "'/>\n";
+        pts.clear();
+        count = 0;
+      };
+      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+        if (!(std::isfinite(s.x[i]) && usable_y(s.y[i]))) {
+          flush();
+          continue;
+        }
+        last_x = X(s.x[i]), last_y = Y(s.y[i]);
+        std::snprintf(buf, sizeof(buf), "%.1f,%.1f ", last_x, last_y);
+        pts += buf;
+        ++count;
+      }
+      flush();
     }
-    std::snprintf(buf, sizeof(buf), "<rect x='%.1f' y='%.1f' width='12' height='12' fill='%s'/><text x='%.1f' y='%.1f'>",
-                  L + 10, T + 8 + 18.0 * k, s.color.c_str(), L + 28, T + 18 + 18.0 * k);
-    o << buf << Escape(s.label) << "</text>\n";
-    ++k;
+  }
+  o << "</g>\n";
+  for (const auto& e : entries) {
+    if (e.s->points)
+      std::snprintf(buf, sizeof(buf), "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/>", e.x + 14, e.y - 4, e.s->color.c_str());
+    else
+      std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='%s' stroke-width='2'/>", e.x + 2,
+                    e.y - 4, e.x + 26, e.y - 4, e.s->color.c_str());
+    o << buf;
+    std::snprintf(buf, sizeof(buf), "<text x='%.1f' y='%.1f'>", e.x + 32, e.y);
+    o << buf << Escape(e.s->label) << "</text>\n";
   }
   o << "</svg>\n";
-  const std::string text = o.str();
+  return o.str();
+}
+
+void Plot::WriteSvg(const std::filesystem::path& path, int W, int H) const {
+  const std::string text = ToSvg(W, H);
   WriteFileAtomically(path, [&](std::ostream& out) { out << text; });
 }
 
@@ -114,7 +276,7 @@ std::string Viridis(double t) {
 }
 }  // namespace
 
-void HeatMap::WriteSvg(const std::filesystem::path& path, int W, int H) const {
+std::string HeatMap::ToSvg(int W, int H) const {
   const size_t nx = x.size(), ny = y.size();
   if (nx == 0 || ny == 0 || values.size() != nx * ny)
     throw std::invalid_argument("HeatMap: values must hold x.size() * y.size() entries");
@@ -221,7 +383,11 @@ void HeatMap::WriteSvg(const std::filesystem::path& path, int W, int H) const {
     o << buf;
   }
   o << "</svg>\n";
-  const std::string text = o.str();
+  return o.str();
+}
+
+void HeatMap::WriteSvg(const std::filesystem::path& path, int W, int H) const {
+  const std::string text = ToSvg(W, H);
   WriteFileAtomically(path, [&](std::ostream& out) { out << text; });
 }
 

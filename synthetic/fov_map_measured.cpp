@@ -1101,13 +1101,14 @@ void WriteMeasuredReport(const MeasuredReport& R, const fs::path& dir) {
   Plot p;
   p.title = "Measured repeatability against the nominal and the fitted model";
   p.x_label = "point (input order)";
-  p.y_label = "log10 sigma_d (mm)";
+  p.y_label = "sigma_d (mm)";
+  p.log_y = true;
   PlotSeries meas{"measured", {}, {}, "#d62728", true}, nomi{"nominal model", {}, {}, "#1f77b4", false},
       fit{"extended model (inliers)", {}, {}, "#2ca02c", false};
   for (size_t i = 0; i < R.measured.points.size(); ++i) {
-    meas.x.push_back(i), meas.y.push_back(std::log10(std::sqrt(R.measured.points[i].variance.sum()) * 1e3));
-    nomi.x.push_back(i), nomi.y.push_back(std::log10(std::sqrt(R.data.nominal[i].sum()) * 1e3));
-    fit.x.push_back(i), fit.y.push_back(std::log10(std::sqrt(R.fit.InlierVariance(R.data.nominal[i]).sum()) * 1e3));
+    meas.x.push_back(i), meas.y.push_back(std::sqrt(R.measured.points[i].variance.sum()) * 1e3);
+    nomi.x.push_back(i), nomi.y.push_back(std::sqrt(R.data.nominal[i].sum()) * 1e3);
+    fit.x.push_back(i), fit.y.push_back(std::sqrt(R.fit.InlierVariance(R.data.nominal[i]).sum()) * 1e3);
   }
   p.series = {meas, nomi, fit};
   p.WriteSvg(dir / "measured_sigma.svg");

@@ -589,8 +589,9 @@ void WriteIso9283ExperimentSvg(const std::filesystem::path& ap_path, const std::
                                const Iso9283Experiment& e) {
   const char* colors[4] = {"#d62728", "#ff7f0e", "#1f77b4", "#2ca02c"};
   // AP spans two and a half decades over the conditions (0.9 mm before calibration, a few
-  // um after a correction): a log scale keeps all four readable.
-  Plot ap{"ISO 9283 pose accuracy AP per pose", "pose (P1..P5)", "log10 AP (mm)", {}};
+  // um after a correction): a log axis (labelled in mm) keeps all four readable.
+  Plot ap{"ISO 9283 pose accuracy AP per pose", "pose (P1..P5)", "AP (mm)", {}};
+  ap.log_y = true;
   Plot rp{"ISO 9283 pose repeatability RP per pose (markers: measured, lines: predicted)", "pose (P1..P5)", "RP (mm)", {}};
   for (size_t k = 0; k < e.conditions.size(); ++k) {
     const auto& c = e.conditions[k];
@@ -598,7 +599,7 @@ void WriteIso9283ExperimentSvg(const std::filesystem::path& ap_path, const std::
         rpred{c.name + " (predicted)", {}, {}, colors[k % 4], false};
     for (size_t i = 0; i < c.poses.size(); ++i) {
       a.x.push_back(i + 1);
-      a.y.push_back(std::log10(1e3 * c.poses[i].AP_p));
+      a.y.push_back(1e3 * c.poses[i].AP_p);
       r.x.push_back(i + 1);
       r.y.push_back(1e3 * c.poses[i].RP_l);
       rpred.x.push_back(i + 1);

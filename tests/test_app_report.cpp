@@ -1,0 +1,205 @@
+// mcms report (and --html of demo and fov-map) in a real browser: the HTML page of `mcms demo`
+// and of `mcms fov-map` opens in
+// headless Chromium (Debian's chromium, scripts/setup.sh installs it) with no console
+// message but the page's own "N of N figures rendered", every figure decoded by the
+// browser, and a screenshot that is not blank (kept as a test artefact in
+// build/test-artifacts/report-demo.png). The check is shown to fail on a figure the browser
+// cannot decode. Bad input on the command line is refused with nothing written.
+// Skipped, with the reason, when chromium is not installed ($MCMS_CHROMIUM overrides the
+// path).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "tests/test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int code;
+  std::string out, err;
+};
+
+std::string Slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+CliRun Shell(const std::string& cmd, const fs::path& scratch) {
+  const fs::path err = scratch / "stderr.txt", out = scratch / "stdout.txt";
+  const int status = std::system((cmd + " 2> " + err.string() + " > " + out.string()).c_str());
+  return {WEXITSTATUS(status), Slurp(out), Slurp(err)};
+}
+
+CliRun Mcms(const std::string& args, const fs::path& scratch) { return Shell(std::string(MCMS_CLI) + " " + args, scratch); }
+
+std::string Chromium() {
+  if (const char* env = std::getenv("MCMS_CHROMIUM")) return env;
+  return "/usr/bin/chromium";
+}
+
+size_t Count(const std::string& s, const std::string& needle) {
+  size_t n = 0;
+  for (size_t p = s.find(needle); p != std::string::npos; p = s.find(needle, p + 1)) ++n;
+  return n;
+}
+
+struct BrowserResult {
+  int figures = -1, rendered = -1;          // from the page's script, read back from the DOM
+  std::vector<std::string> console;         // every console message of the page
+};
+
+// Opens `page` in headless Chromium: the DOM after load (what the page's script found) and
+// the console messages; with `screenshot`, also a 1280 x 4000 screenshot.
+BrowserResult OpenInBrowser(const fs::path& page, const fs::path& scratch, const fs::path& screenshot = {}) {
+  const std::string common = "timeout 120 " + Chromium() +
+                             " --headless --no-sandbox --disable-gpu --no-first-run --hide-scrollbars"
+                             " --enable-logging=stderr --v=0 --virtual-time-budget=5000 --user-data-dir=" +
+                             (scratch / "chromium-profile").string();
+  const std::string url = "file://" + fs::absolute(page).string();
+  BrowserResult r;
+  const CliRun dom = Shell(common + " --dump-dom " + url, scratch);
+  EXPECT_EQ(dom.code, 0) << dom.err;
+  std::smatch m;
+  if (std::regex_search(dom.out, m, std::regex("<body data-figures=\"([0-9]+)\" data-figures-rendered=\"([0-9]+)\"")))
+    r.figures = std::stoi(m[1]), r.rendered = std::stoi(m[2]);
+  // Chromium logs every console message of the page (log, warning, error, uncaught
+  // exception, refused resource) as one INFO:CONSOLE line on stderr.
+  std::istringstream lines(dom.err);
+  for (std::string line; std::getline(lines, line);)
+    if (line.find(":CONSOLE") != std::string::npos) r.console.push_back(line);
+  if (!screenshot.empty()) {
+    fs::remove(screenshot);
+    const CliRun shot = Shell(common + " --window-size=1280,4000 --screenshot=" + screenshot.string() + " " + url, scratch);
+    EXPECT_EQ(shot.code, 0) << shot.err;
+  }
+  return r;
+}
+
+// Every figure of the page rendered and the only console message is the page's own.
+void ExpectCleanPage(const fs::path& page, const fs::path& scratch, size_t min_figures, const fs::path& screenshot = {}) {
+  const std::string html = Slurp(page);
+  const int embedded = static_cast<int>(Count(html, "<img class=\"figure\""));
+  EXPECT_GE(embedded, static_cast<int>(min_figures));
+  const BrowserResult b = OpenInBrowser(page, scratch, screenshot);
+  EXPECT_EQ(b.figures, embedded);
+  EXPECT_EQ(b.rendered, embedded);
+  ASSERT_EQ(b.console.size(), 1u) << "console messages:\n" << [&] {
+    std::string all;
+    for (const auto& l : b.console) all += l + "\n";
+    return all;
+  }();
+  const std::string expected = "\"mcms report: " + std::to_string(embedded) + " of " + std::to_string(embedded) +
+                               " figures rendered\"";
+  EXPECT_NE(b.console[0].find(expected), std::string::npos) << b.console[0];
+  if (screenshot.empty()) return;
+  // The screenshot: the page's size, and not blank (text, plots and tables on white).
+  const cv::Mat img = cv::imread(screenshot.string(), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(img.empty()) << "no screenshot at " << screenshot;
+  EXPECT_EQ(img.cols, 1280);
+  EXPECT_EQ(img.rows, 4000);
+  const double inked = static_cast<double>(cv::countNonZero(img < 200)) / static_cast<double>(img.total());
+  EXPECT_GT(inked, 0.005) << "the screenshot is (nearly) blank";
+  cv::Scalar mean, sd;
+  cv::meanStdDev(img, mean, sd);
+  EXPECT_GT(sd[0], 10.0);
+  std::printf("screenshot of %s: %s (%.1f %% of the pixels inked)\n", page.filename().c_str(), screenshot.c_str(), 100 * inked);
+}
+
+#define REQUIRE_CHROMIUM()                                                                     \
+  if (::access(Chromium().c_str(), X_OK) != 0)                                                 \
+  GTEST_SKIP() << "skipped: chromium not found at " << Chromium()                              \
+               << " (Debian package chromium; scripts/setup.sh installs it; $MCMS_CHROMIUM overrides)"
+
+TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
+  REQUIRE_CHROMIUM();
+  const fs::path s = test::ScratchDir("report_demo");
+  // `mcms demo --html` writes the page as `mcms report DIR` does.
+  const CliRun demo = Mcms("demo --quiet --points 4 --html -o " + (s / "demo").string(), s);
+  ASSERT_EQ(demo.code, 0) << demo.err;
+  const fs::path page = s / "demo" / "report.html";
+  EXPECT_NE(demo.out.find("wrote " + page.string()), std::string::npos) << demo.out;
+  ASSERT_TRUE(fs::exists(page));
+  const std::string from_demo = Slurp(page);
+  const CliRun rep = Mcms("report " + (s / "demo").string(), s);
+  ASSERT_EQ(rep.code, 0) << rep.err;
+  EXPECT_NE(rep.out.find("the output of mcms demo"), std::string::npos) << rep.out;
+  EXPECT_EQ(Slurp(page), from_demo);
+  // Every SVG the demo wrote is on the page, with its summary and tables.
+  size_t svgs = 0;
+  for (const auto& e : fs::directory_iterator(s / "demo")) svgs += e.path().extension() == ".svg";
+  EXPECT_GE(svgs, 4u);  // the per-point errors and the ISO 9283 plots
+  const std::string html = Slurp(page);
+  // ... and the per-frame plots of its tracker_poses.csv: status, position, predicted sigma,
+  // reprojection RMS.
+  EXPECT_EQ(Count(html, "<img class=\"figure\""), svgs + 4);
+  EXPECT_NE(html.find("tracker_poses.csv: status per frame"), std::string::npos);
+  for (const char* needle : {"summary.txt", "point_errors.csv", "iso9283_summary.txt", "fusion_setup.yaml"})
+    EXPECT_NE(html.find(needle), std::string::npos) << needle;
+  const fs::path artefacts = fs::path(MCMS_BINARY_DIR) / "test-artifacts";
+  fs::create_directories(artefacts);
+  ExpectCleanPage(page, s, svgs + 4, artefacts / "report-demo.png");
+}
+
+TEST(ReportCli, FovMapReportOpensInHeadlessChromium) {
+  REQUIRE_CHROMIUM();
+  const fs::path s = test::ScratchDir("report_fovmap");
+  const CliRun map = Mcms("fov-map --quiet --html --grid=-0.5:0.5:5,-0.4:0.4:4,0:1:3 -o " + (s / "map").string(), s);
+  ASSERT_EQ(map.code, 0) << map.err;
+  EXPECT_TRUE(fs::exists(s / "map" / "report.html"));
+  const CliRun rep = Mcms("report " + (s / "map").string() + " -o " + (s / "map.html").string(), s);
+  ASSERT_EQ(rep.code, 0) << rep.err;
+  EXPECT_NE(rep.out.find("the output of mcms fov-map"), std::string::npos) << rep.out;
+  ExpectCleanPage(s / "map.html", s, 4);  // three heat maps and sigma against distance
+}
+
+// The browser check fails on a figure the browser cannot decode: malformed XML that still
+// looks like an SVG document to the page builder.
+TEST(ReportCli, BrowserCheckCatchesAFigureThatDoesNotRender) {
+  REQUIRE_CHROMIUM();
+  const fs::path s = test::ScratchDir("report_broken_figure");
+  fs::create_directories(s / "run");
+  std::ofstream(s / "run" / "bad.svg") << "<svg xmlns='http://www.w3.org/2000/svg' width='10' height='10'><rect></svg>";
+  std::ofstream(s / "run" / "summary.txt") << "a run\n";
+  ASSERT_EQ(Mcms("report " + (s / "run").string(), s).code, 0);
+  const BrowserResult b = OpenInBrowser(s / "run" / "report.html", s);
+  EXPECT_EQ(b.figures, 1);
+  EXPECT_EQ(b.rendered, 0);
+  ASSERT_EQ(b.console.size(), 1u);
+  EXPECT_NE(b.console[0].find("figures not rendered: bad.svg"), std::string::npos) << b.console[0];
+}
+
+TEST(ReportCli, BadInputIsRefusedWithNothingWritten) {
+  const fs::path s = test::ScratchDir("report_bad");
+  CliRun r = Mcms("report " + (s / "missing").string(), s);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("missing does not exist"), std::string::npos) << r.err;
+  fs::create_directories(s / "empty");
+  r = Mcms("report " + (s / "empty").string(), s);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("holds no file a report can show"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(s / "empty" / "report.html"));
+  fs::create_directories(s / "run" / "x.html");
+  std::ofstream(s / "run" / "summary.txt") << "ok\n";
+  r = Mcms("report " + (s / "run").string() + " -o " + (s / "run" / "x.html").string(), s);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("is a folder"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace mcms
