@@ -8,6 +8,7 @@
 #include "synthetic/fov_map.h"
 #include "tracking/audit.h"
 #include "tracking/fov_prediction.h"
+#include "tracking/sequence.h"
 #include "tracking/target.h"
 #include "tracking/tracker.h"
 #include "vision/camera_model.h"
@@ -514,8 +515,69 @@ void BindVision(py::module_& m) {
           py::arg("sigma_px") = 0.1,
           "The same from blob centres: points[c] an (N, 2) array (or None) per camera, covariances (N, 2, 2) px^2 "
           "or sigma_px.")
+      .def(
+          "track_sequence",
+          [](Tracker& t, const std::string& images_dir, std::optional<std::string> frames_csv, double frame_rate_hz,
+             int threads) {
+            if (!(frame_rate_hz > 0)) Throw("argument 'frame_rate_hz': expected > 0, got ", frame_rate_hz);
+            if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+            SequenceInput in;
+            in.images_dir = images_dir;
+            if (frames_csv) in.frames_csv = *frames_csv;
+            in.frame_rate_hz = frame_rate_hz;
+            const ImageSequence seq = ScanImageSequence(in, t.rig());
+            py::gil_scoped_release release;
+            return TrackImageSequence(seq, t, {}, threads);
+          },
+          py::arg("images_dir"), py::arg("frames_csv") = py::none(), py::arg("frame_rate_hz") = 10.0,
+          py::arg("threads") = 1,
+          "Tracks a recording on disk (images_dir/<camera name>/<frame>.png, optional frames.csv), as `mcms "
+          "track`; returns the FrameResult of every frame.")
       .def_property_readonly("rig", &Tracker::rig)
       .def_property_readonly("target", &Tracker::target);
+
+  m.def(
+      "results_to_arrays",
+      [](const std::vector<FrameResult>& results) {
+        const py::ssize_t n = static_cast<py::ssize_t>(results.size());
+        std::vector<double> t, T, cov, rms;
+        std::vector<long> frame;
+        py::list status, reason;
+        for (const auto& r : results) {
+          frame.push_back(static_cast<long>(r.frame));
+          t.push_back(r.time_s);
+          status.append(ToString(r.status));
+          reason.append(r.reason);
+          Eigen::Matrix<double, 4, 4, Eigen::RowMajor> M = Eigen::Matrix<double, 4, 4, Eigen::RowMajor>::Constant(kNaN);
+          Eigen::Matrix<double, 6, 6, Eigen::RowMajor> C = Eigen::Matrix<double, 6, 6, Eigen::RowMajor>::Constant(kNaN);
+          if (r.T_rig_target) {
+            M.setIdentity();
+            M.topLeftCorner<3, 3>() = r.T_rig_target->R;
+            M.topRightCorner<3, 1>() = r.T_rig_target->t;
+            C = r.cov;
+          }
+          T.insert(T.end(), M.data(), M.data() + 16);
+          cov.insert(cov.end(), C.data(), C.data() + 36);
+          rms.push_back(r.rms_px);
+        }
+        py::dict d;
+        d["frame"] = py::array(py::cast(frame));
+        d["time_s"] = Array({n}, t.data());
+        d["status"] = status;
+        d["reason"] = reason;
+        d["T_rig_target"] = Array({n, 4, 4}, T.data());
+        d["cov"] = Array({n, 6, 6}, cov.data());
+        d["rms_px"] = Array({n}, rms.data());
+        return d;
+      },
+      py::arg("results"),
+      "The tracker's results as arrays: frame, time_s, status, reason, T_rig_target (N, 4, 4) and cov (N, 6, 6) "
+      "(NaN where lost), rms_px.");
+
+  m.def(
+      "write_pose_csv",
+      [](const std::string& path, const std::vector<FrameResult>& results) { WritePoseCsv(path, results); },
+      py::arg("path"), py::arg("results"), "The pose CSV of `mcms track` (read by `mcms fuse` and mcms.fuse).");
 
   m.def(
       "audit_cameras",
