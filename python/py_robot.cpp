@@ -228,6 +228,8 @@ void BindRobot(py::module_& m) {
       .def(
           "write", [](const RobotModel& r, const std::string& path) { r.Write(path); }, py::arg("path"))
       .def("to_yaml", &RobotModel::ToYaml)
+      .def(py::pickle([](const RobotModel& r) { return r.ToYaml(); },
+                      [](const std::string& yaml) { return RobotModel::Parse(yaml, "<pickle>"); }))
       .def_property_readonly("name", &RobotModel::Name)
       .def_property_readonly("num_joints", &RobotModel::NumJoints)
       .def_property_readonly("joint_names",

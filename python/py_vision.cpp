@@ -281,6 +281,16 @@ void BindVision(py::module_& m) {
             return r;
           },
           py::arg("p_cam"), py::arg("margin") = 0.0)
+      .def(py::pickle(
+          [](const CameraModel& c) {
+            return py::make_tuple(c.LensModelName(), c.Intrinsics(), c.Width(), c.Height(), PoseToArray(c.T_cam_rig()));
+          },
+          [](py::tuple t) {
+            if (t.size() != 5) throw std::runtime_error("mcms.CameraModel: bad pickle");
+            Eigen::VectorXd in = GetVector(t[1], "intrinsics");
+            return CameraModel(t[0].cast<std::string>(), std::vector<double>(in.data(), in.data() + in.size()),
+                               t[2].cast<int>(), t[3].cast<int>(), GetPose(t[4], "T_cam_rig"));
+          }))
       .def("__repr__", [](const CameraModel& c) {
         return "<mcms.CameraModel " + c.LensModelName() + " " + std::to_string(c.Width()) + "x" +
                std::to_string(c.Height()) + ">";
@@ -306,7 +316,15 @@ void BindVision(py::module_& m) {
       .def(
           "write", [](const CameraRig& r, const std::string& path) { r.Write(path); }, py::arg("path"))
       .def_readonly("names", &CameraRig::names)
-      .def_readonly("cameras", &CameraRig::cameras)
+      .def_readonly("cameras", &CameraRig::cameras, "Copies of the cameras (as rig[i] and rig[name]).")
+      .def(py::pickle([](const CameraRig& r) { return py::make_tuple(r.cameras, r.names); },
+                      [](py::tuple t) {
+                        if (t.size() != 2) throw std::runtime_error("mcms.CameraRig: bad pickle");
+                        CameraRig r;
+                        r.cameras = t[0].cast<std::vector<CameraModel>>();
+                        r.names = t[1].cast<std::vector<std::string>>();
+                        return r;
+                      }))
       .def("__len__", &CameraRig::size)
       .def(
           "__getitem__",
@@ -415,6 +433,15 @@ void BindVision(py::module_& m) {
           "read", [](const std::string& path) { return Target::Read(path); }, py::arg("path"))
       .def(
           "write", [](const Target& t, const std::string& path) { t.Write(path); }, py::arg("path"))
+      .def(py::pickle([](const Target& t) { return py::make_tuple(Vec3sToArray(t.balls_target), t.ball_radius, t.name); },
+                      [](py::tuple p) {
+                        if (p.size() != 3) throw std::runtime_error("mcms.Target: bad pickle");
+                        Target t;
+                        t.balls_target = GetPoints3(p[0], "balls");
+                        t.ball_radius = p[1].cast<double>();
+                        t.name = p[2].cast<std::string>();
+                        return t;
+                      }))
       .def_readonly("name", &Target::name)
       .def_readonly("ball_radius_m", &Target::ball_radius)
       .def_property_readonly("balls", [](const Target& t) { return Vec3sToArray(t.balls_target); });
@@ -495,7 +522,8 @@ void BindVision(py::module_& m) {
               mats[c] = cv::Mat(static_cast<int>(a.shape(0)), static_cast<int>(a.shape(1)), u8 ? CV_8UC1 : CV_16UC1,
                                 const_cast<void*>(a.data()));
             }
-            py::gil_scoped_release release;
+            // The GIL is kept: a Tracker carries state (its prediction) and must not run in two
+            // Python threads at once. Use one Tracker per thread or process.
             return t.ProcessFrame(frame, time_s, mats);
           },
           py::arg("images"), py::arg("frame") = 0, py::arg("time_s") = 0.0,
@@ -508,7 +536,6 @@ void BindVision(py::module_& m) {
             std::vector<std::string> problems(t.rig().size());
             for (size_t c = 0; c < pts.size(); ++c)
               if (!pts[c]) problems[c] = "no points given";
-            py::gil_scoped_release release;
             return t.ProcessPoints(frame, time_s, pts, problems);
           },
           py::arg("points"), py::arg("frame") = 0, py::arg("time_s") = 0.0, py::arg("covariances") = py::none(),
@@ -526,7 +553,6 @@ void BindVision(py::module_& m) {
             if (frames_csv) in.frames_csv = *frames_csv;
             in.frame_rate_hz = frame_rate_hz;
             const ImageSequence seq = ScanImageSequence(in, t.rig());
-            py::gil_scoped_release release;
             return TrackImageSequence(seq, t, {}, threads);
           },
           py::arg("images_dir"), py::arg("frames_csv") = py::none(), py::arg("frame_rate_hz") = 10.0,

@@ -189,6 +189,19 @@ class Rig(unittest.TestCase):
         self.assertEqual(back["cam1"].width, 1280)
         self.assertEqual(back[-1].height, 1024)
 
+    def test_pickle(self):
+        # Models cross process boundaries (multiprocessing, Dask) by pickle.
+        import pickle
+        from mcms_test_util import pinhole_rig
+        rig = pickle.loads(pickle.dumps(pinhole_rig(2)))
+        self.assertEqual(rig.names, ["cam0", "cam1"])
+        np.testing.assert_array_equal(rig[1].T_cam_rig, pinhole_rig(2)[1].T_cam_rig)
+        robot = pickle.loads(pickle.dumps(mcms.RobotModel.default()))
+        np.testing.assert_array_equal(robot.T_base_flange(np.zeros(6)),
+                                      mcms.RobotModel.default().T_base_flange(np.zeros(6)))
+        target = pickle.loads(pickle.dumps(mcms.Target.default()))
+        np.testing.assert_array_equal(target.balls, mcms.Target.default().balls)
+
 
 if __name__ == "__main__":
     unittest.main()
