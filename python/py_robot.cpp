@@ -407,6 +407,31 @@ void BindRobot(py::module_& m) {
       "a dict: robot (calibrated RobotModel), T_meas_base, parameters, covariance, errors_before/after, ...");
 
   m.def(
+      "cross_validate_robot",
+      [](const RobotModel& robot, py::handle q, py::handle p_meas, py::handle R_meas, py::handle T_meas_base_guess,
+         int folds, py::kwargs kw) {
+        const auto ms = GetMeasurements(robot, q, p_meas, R_meas);
+        const RobotCalibrationOptions o = GetCalibrationOptions(kw);
+        if (folds < 2 || folds > static_cast<int>(ms.size()))
+          Throw("argument 'folds': expected 2..", ms.size(), ", got ", folds);
+        const Pose guess =
+            T_meas_base_guess.is_none() ? InitialBaseGuess(robot, ms) : GetPose(T_meas_base_guess, "T_meas_base_guess");
+        CrossValidation cv;
+        {
+          py::gil_scoped_release release;
+          cv = CrossValidateRobot(robot, guess, ms, o, folds);
+        }
+        py::dict d;
+        d["calibrated"] = ErrorsDict(cv.calibrated);
+        d["nominal"] = ErrorsDict(cv.nominal);
+        return d;
+      },
+      py::arg("robot"), py::arg("q"), py::arg("p_meas"), py::arg("R_meas") = py::none(),
+      py::arg("T_meas_base_guess") = py::none(), py::arg("folds") = 5,
+      "k-fold held-out prediction errors of the calibrated model and of the nominal model registered on the same "
+      "folds (measurement i in fold i mod k). Options as calibrate_robot's.");
+
+  m.def(
       "iso9283_pose",
       [](py::handle commanded, py::handle attained) {
         return Iso(PoseAccuracyRepeatability(GetPose(commanded, "commanded"), GetPoses(attained, "attained")));
@@ -459,6 +484,23 @@ void BindRobot(py::module_& m) {
       .def_property_readonly("T_flange_target", [](const FusionSetup& s) { return PoseToArray(s.T_flange_target); })
       .def_readwrite("consistency_significance", &FusionSetup::consistency_significance)
       .def_readwrite("exclude_faults", &FusionSetup::exclude_faults);
+
+  m.def(
+      "camera_flange_pose",
+      [](const FusionSetup& setup, py::handle T_rig_target, py::handle cov) {
+        const auto r = CameraFlangePose(GetPose(T_rig_target, "T_rig_target"), GetCovariance(cov, "cov", 6), setup);
+        return py::make_tuple(PoseToArray(r.T), Mat6(r.covariance));
+      },
+      py::arg("setup"), py::arg("T_rig_target"), py::arg("cov"),
+      "The camera's measurement (T_base_flange, 6x6 covariance) of one tracked pose in the setup's cell.");
+  m.def(
+      "robot_flange_pose",
+      [](const FusionSetup& setup, py::handle q) {
+        const auto r = RobotFlangePose(GetVector(q, "q", setup.robot.NumJoints()), setup);
+        return py::make_tuple(PoseToArray(r.T), Mat6(r.covariance));
+      },
+      py::arg("setup"), py::arg("q"),
+      "The robot's measurement (T_base_flange by FK, encoder plus accuracy covariance) at joint values q.");
 
   m.def(
       "fuse",

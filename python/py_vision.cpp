@@ -651,6 +651,63 @@ void BindVision(py::module_& m) {
       "Predicted (Cramer-Rao) precision of the tracker at one target pose, with an isotropic blob-centre noise.");
 
   m.def(
+      "fov_map",
+      [](const CameraRig& rig, const Target& target, const std::string& grid, py::handle R_rig_target, int threads,
+         double threshold_mm, std::optional<std::string> output_dir) {
+        FovMapOptions o;
+        o.grid = FovGrid::Parse(grid, "argument 'grid'");
+        if (!R_rig_target.is_none()) {
+          Mat3 R = GetMatrix(R_rig_target, "R_rig_target", 3, 3);
+          if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-6 || R.determinant() < 0)
+            Throw("argument 'R_rig_target': not a rotation matrix");
+          o.R_rig_target = R;
+        }
+        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+        o.threads = threads;
+        o.threshold_mm = threshold_mm;
+        std::string why;
+        if (!o.IsValid(&why)) Throw("fov map options: ", why);
+        FovMap map;
+        {
+          py::gil_scoped_release release;
+          map = ComputeFovMap(rig, target, o);
+          if (output_dir) WriteFovMap(map, *output_dir);
+        }
+        const py::ssize_t n = static_cast<py::ssize_t>(map.points.size());
+        std::vector<Vec3> p;
+        std::vector<double> sp, sr, sd, cov;
+        std::vector<int> seeing;
+        std::vector<bool> trackable;
+        for (const auto& x : map.points) {
+          p.push_back(x.p_rig);
+          const Vec3 a = x.sigma_p(), b = x.sigma_r();
+          sp.insert(sp.end(), a.data(), a.data() + 3);
+          sr.insert(sr.end(), b.data(), b.data() + 3);
+          sd.push_back(x.sigma_d());
+          Eigen::Matrix<double, 6, 6, Eigen::RowMajor> C = x.prediction.cov;
+          cov.insert(cov.end(), C.data(), C.data() + 36);
+          seeing.push_back(x.prediction.CamerasSeeing());
+          trackable.push_back(x.prediction.trackable);
+        }
+        py::dict d;
+        d["shape"] = py::make_tuple(o.grid.n[2], o.grid.n[1], o.grid.n[0]);
+        d["positions"] = Vec3sToArray(p);
+        d["sigma_p"] = Array({n, 3}, sp.data());
+        d["sigma_r"] = Array({n, 3}, sr.data());
+        d["sigma_d"] = Array({n}, sd.data());
+        d["cov"] = Array({n, 6, 6}, cov.data());
+        d["cameras_seeing"] = py::array(py::cast(seeing));
+        d["trackable"] = py::array(py::cast(trackable));
+        d["summary"] = FovMapSummary(map);
+        return d;
+      },
+      py::arg("rig"), py::arg("target"), py::arg("grid"), py::arg("R_rig_target") = py::none(), py::arg("threads") = 1,
+      py::arg("threshold_mm") = 0.03, py::arg("output_dir") = py::none(),
+      "The field-of-view map of `mcms fov-map` over grid 'x0:x1:nx,y0:y1:ny,z0:z1:nz' (m, rig frame; x fastest): "
+      "arrays per grid point (reshape with 'shape' = (nz, ny, nx)), the summary text, and with output_dir the "
+      "map.csv and figures of the CLI.");
+
+  m.def(
       "predict_fov_points",
       [](const CameraRig& rig, const Target& target, py::handle positions, py::handle R_rig_target, int threads) {
         FovMapOptions o;

@@ -89,6 +89,10 @@ class Calibration(unittest.TestCase):
         names = [x["name"] for x in r["parameters"]]
         a2 = r["parameters"][names.index("A2.a")]
         self.assertAlmostEqual(a2["estimate"], 0.0012, delta=5 * a2["sigma"] + 1e-5)
+        # Held out: the calibrated model predicts unseen poses better than the registered nominal one.
+        cv = mcms.cross_validate_robot(nominal, q, p, folds=4, position_sigma_m=2e-5)
+        self.assertEqual(cv["calibrated"]["dp"].shape, (40, 3))
+        self.assertLess(cv["calibrated"]["rms_position_m"], 0.2 * cv["nominal"]["rms_position_m"])
 
     def test_bad_measurements_name_the_argument(self):
         robot = mcms.RobotModel.default()
@@ -221,6 +225,18 @@ robot_accuracy:
         w = mcms.fuse(setup, tracker, robot=joints_log, kalman=False, windows=[[-0.01, 1.0]])
         self.assertEqual(len(w["method"]), 1)
         self.assertLess(np.trace(w["cov"][0]), np.trace(r["cov"][0]))
+
+    def test_single_sensor_measurements(self):
+        setup = mcms.FusionSetup.parse(self.SETUP)
+        q = joints(setup.robot, 10)[0]
+        T_bf, C_robot = mcms.robot_flange_pose(setup, q)
+        np.testing.assert_allclose(T_bf, setup.robot.T_base_flange(q))
+        self.assertTrue(np.all(np.linalg.eigvalsh(C_robot) > 0))
+        T_rig_target = np.linalg.inv(setup.T_base_rig) @ T_bf @ setup.T_flange_target
+        T_cam, C_cam = mcms.camera_flange_pose(setup, T_rig_target, np.eye(6) * 1e-8)
+        np.testing.assert_allclose(T_cam, T_bf, atol=1e-12)
+        with self.assertRaisesRegex(mcms.InputError, "'cov'.*positive-definite"):
+            mcms.camera_flange_pose(setup, T_rig_target, -np.eye(6))
 
     def test_bad_streams_name_the_argument(self):
         setup = mcms.FusionSetup.parse(self.SETUP)

@@ -203,6 +203,22 @@ class FieldOfView(unittest.TestCase):
         self.assertFalse(away["trackable"])
         self.assertTrue(np.all(np.isnan(away["cov"])))
 
+    def test_grid_map_as_the_cli(self):
+        rig = pinhole_rig(4)
+        target = mcms.Target.default()
+        with tempfile.TemporaryDirectory() as d:
+            m = mcms.fov_map(rig, target, "-0.2:0.2:3,0:0.1:2,0:0:1", output_dir=os.path.join(d, "map"))
+            self.assertTrue(os.path.exists(os.path.join(d, "map", "map.csv")))
+        self.assertEqual(m["shape"], (1, 2, 3))
+        np.testing.assert_allclose(m["positions"][:4], [[-0.2, 0, 0], [0, 0, 0], [0.2, 0, 0], [-0.2, 0.1, 0]])
+        self.assertTrue(np.all(m["trackable"]))
+        self.assertIn("sigma_d", m["summary"])
+        # The same predictions as at arbitrary positions (each with a centre-noise table for its own range).
+        r = mcms.predict_fov_points(rig, target, m["positions"])
+        np.testing.assert_allclose(r["sigma_d"], m["sigma_d"], rtol=0.05)
+        with self.assertRaisesRegex(mcms.InputError, "'grid'"):
+            mcms.fov_map(rig, target, "0:1")
+
     def test_predict_points_with_the_detector_noise(self):
         rig = pinhole_rig(4)
         r = mcms.predict_fov_points(rig, mcms.Target.default(), [[0, 0, 0], [0.2, 0, 0], [9, 9, 9]])
