@@ -365,6 +365,8 @@ void BindVision(py::module_& m) {
           if (covariances.is_none()) {
             covs.append(py::none());
           } else {
+            if (!py::isinstance<py::sequence>(covariances))
+              Throw("argument 'covariances': expected a list with one (2, 2) covariance (or None) per camera");
             py::sequence cs = py::reinterpret_borrow<py::sequence>(covariances);
             if (cs.size() != rig.size())
               Throw("argument 'covariances': expected one entry per camera (", rig.size(), "), got ", cs.size());
