@@ -370,8 +370,12 @@ void BindVision(py::module_& m) {
             py::sequence cs = py::reinterpret_borrow<py::sequence>(covariances);
             if (cs.size() != rig.size())
               Throw("argument 'covariances': expected one entry per camera (", rig.size(), "), got ", cs.size());
-            Numbers C = GetNumbers(cs[c], "covariances[" + std::to_string(c) + "]", {{2, 2}});
-            covs.append(Array({1, 2, 2}, C.data()));
+            if (cs[c].is_none()) {
+              covs.append(py::none());
+            } else {
+              Numbers C = GetNumbers(cs[c], "covariances[" + std::to_string(c) + "]", {{2, 2}});
+              covs.append(Array({1, 2, 2}, C.data()));
+            }
           }
         }
         const auto pts = GetImagePoints(rig, lists, covs, sigma_px);

@@ -46,6 +46,11 @@ class Triangulation(unittest.TestCase):
         r2 = mcms.triangulate(self.rig, [q[0], q[1], None, None], sigma_px=0.1)
         self.assertGreater(np.trace(r2["cov"]), np.trace(r["cov"]))
         self.assertIsNone(mcms.triangulate(self.rig, [q[0], None, None, None]))
+        # Per-camera covariances: a camera with 4x the variance gets less weight; None = sigma_px.
+        r3 = mcms.triangulate(self.rig, q, covariances=[np.eye(2) * 0.04, None, None, None], sigma_px=0.1)
+        self.assertGreater(np.trace(r3["cov"]), np.trace(r["cov"]))
+        with self.assertRaisesRegex(mcms.InputError, r"'covariances\[1\]'.*\(2, 2\)"):
+            mcms.triangulate(self.rig, q, covariances=[None, np.eye(3), None, None])
 
     def test_matches_cv2_triangulate_points(self):
         if cv2 is None:
