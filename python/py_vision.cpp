@@ -8,6 +8,7 @@
 #include "synthetic/fov_map.h"
 #include "tracking/audit.h"
 #include "tracking/fov_prediction.h"
+#include "tracking/noise_estimate.h"
 #include "tracking/sequence.h"
 #include "tracking/target.h"
 #include "tracking/tracker.h"
@@ -567,6 +568,45 @@ void BindVision(py::module_& m) {
           "track`; returns the FrameResult of every frame.")
       .def_property_readonly("rig", &Tracker::rig)
       .def_property_readonly("target", &Tracker::target);
+
+  m.def(
+      "estimate_sequence_noise",
+      [](const CameraRig& rig, const std::string& images_dir, std::optional<std::string> frames_csv,
+         double frame_rate_hz, int frames, const std::string& polarity, int threads) {
+        if (!(frame_rate_hz > 0)) Throw("argument 'frame_rate_hz': expected > 0, got ", frame_rate_hz);
+        if (frames < 1) Throw("argument 'frames': expected >= 1, got ", frames);
+        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+        BlobDetectorOptions detector;
+        if (polarity == "dark")
+          detector.polarity = Polarity::kDark;
+        else if (polarity != "bright")
+          Throw("argument 'polarity': expected 'bright' or 'dark', got '", polarity, "'");
+        SequenceInput in;
+        in.images_dir = images_dir;
+        if (frames_csv) in.frames_csv = *frames_csv;
+        in.frame_rate_hz = frame_rate_hz;
+        const ImageSequence seq = ScanImageSequence(in, rig);
+        NoiseEstimateOptions o;
+        o.frames = static_cast<size_t>(frames);
+        SequenceNoiseModel n;
+        {
+          py::gil_scoped_release release;
+          n = EstimateSequenceNoise(seq, rig, detector, o, threads);
+        }
+        py::dict d;
+        d["cameras"] = n.cameras;
+        d["gain_e_per_dn"] = n.gain_e_per_dn;
+        d["cameras_differ"] = n.cameras_differ;
+        d["homogeneity_chi2"] = n.homogeneity_chi2;
+        d["homogeneity_dof"] = n.homogeneity_dof;
+        d["frames_used"] = n.frames_used;
+        d["description"] = n.Describe();
+        return d;
+      },
+      py::arg("rig"), py::arg("images_dir"), py::arg("frames_csv") = py::none(), py::arg("frame_rate_hz") = 10.0,
+      py::arg("frames") = 12, py::arg("polarity") = "bright", py::arg("threads") = 1,
+      "The pixel-noise model of a recording from its own images, as `mcms track` measures it: per-camera "
+      "gain_e_per_dn for Tracker(camera_gain_e_per_dn=...), and the description lines.");
 
   m.def(
       "results_to_arrays",

@@ -146,7 +146,12 @@ class Tracker(unittest.TestCase):
                 for name, img in zip(self.rig.names, self.draw(T)):
                     os.makedirs(os.path.join(d, "images", name), exist_ok=True)
                     cv2.imwrite(os.path.join(d, "images", name, "%04d.png" % (10 + k)), img)
-            tracker = mcms.Tracker(self.rig, self.target, read_noise_dn=2.0)
+            noise = mcms.estimate_sequence_noise(self.rig, os.path.join(d, "images"))
+            self.assertEqual(noise["cameras"], self.rig.names)
+            self.assertEqual(len(noise["gain_e_per_dn"]), 4)
+            self.assertTrue(noise["description"])
+            tracker = mcms.Tracker(self.rig, self.target, read_noise_dn=2.0,
+                                   camera_gain_e_per_dn=noise["gain_e_per_dn"])
             results = tracker.track_sequence(os.path.join(d, "images"), frame_rate_hz=5.0, threads=2)
             csv = os.path.join(d, "poses.csv")
             mcms.write_pose_csv(csv, results)
