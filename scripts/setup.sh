@@ -18,7 +18,7 @@ packages=(
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
-  mrcal python3-mrcal python3-opencv python3-numpy
+  mrcal python3-mrcal python3-opencv python3-numpy pybind11-dev python3-dev
   chromium  # the HTML report's test opens `mcms report` pages in headless Chromium (skipped without it)
 )
 missing=()
