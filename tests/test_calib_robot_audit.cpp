@@ -93,9 +93,9 @@ Hidden PickEffect(int kind, Rng& rng) {
   const double sign = rng.Uniform() < 0.5 ? -1.0 : 1.0;
   const double f = 1.0 + rng.Uniform();  // 1..2 times the base size
   switch (kind) {
-    case 0: {  // joint offset of joint 2..5: 0.004..0.008 deg
+    case 0: {  // joint offset of joint 2..5: 0.006..0.012 deg (2, 3), 0.02..0.04 deg (4, 5: short levers)
       const int j = 1 + static_cast<int>(rng.Uniform() * 4) % 4;
-      return {{Effect::kJointOffset, j, 0}, {sign * f * 0.004 * M_PI / 180}};
+      return {{Effect::kJointOffset, j, 0}, {sign * f * (j < 3 ? 0.006 : 0.02) * M_PI / 180}};
     }
     case 1: {  // link length: a2, a3 or d4, 0.03..0.06 mm
       const Extension choices[3] = {{Effect::kLinkLength, 1, 0}, {Effect::kLinkLength, 2, 0}, {Effect::kLinkLength, 3, 1}};
@@ -109,8 +109,8 @@ Hidden PickEffect(int kind, Rng& rng) {
       const int j = 1 + static_cast<int>(rng.Uniform() * 2) % 2;
       return {{Effect::kGravityCompliance, j, 0}, {sign * f * 0.003 * M_PI / 180 / 30.0}};
     }
-    case 4:  // thermal warm-up: 20..40 ppm, time constant 20 min
-      return {{Effect::kThermalDrift, -1, 0}, {f * 20e-6, 1200.0}};
+    case 4:  // thermal warm-up: 30..60 ppm, time constant 40 min
+      return {{Effect::kThermalDrift, -1, 0}, {f * 30e-6, 2400.0}};
     case 5: {  // backlash of joint 2 or 3: 0.006..0.012 deg
       const int j = 1 + static_cast<int>(rng.Uniform() * 2) % 2;
       return {{Effect::kBacklash, j, 0}, {f * 0.006 * M_PI / 180}};
