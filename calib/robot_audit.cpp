@@ -138,7 +138,8 @@ bool RobotAuditOptions::IsValid(std::string* why) const {
   for (const auto& n : only) {
     const auto e = EffectFromName(n);
     if (!e) return fail("'" + n + "' is not in the catalog of effects");
-    if (Info(*e).sensor != SensorKind::kRobot) return fail("'" + n + "' is not a robot effect");
+    if (Info(*e).sensor != SensorKind::kRobot && *e != Effect::kClockOffset)
+      return fail("'" + n + "' is not a robot effect (or clock_offset)");
   }
   return true;
 }
@@ -446,6 +447,9 @@ std::vector<Extension> Catalog(const RobotModel& robot, const RobotLog& log, con
     else notes->push_back("thermal_drift in time not tested: the log has no time span");
     if (log.has_temperature) c.push_back({Effect::kThermalDrift, -1, 1});
   }
+  bool moving = false;
+  for (const auto& r : log.rows) moving |= r.qdot.size() > 0 && r.qdot.norm() > 0;
+  if (wanted(Effect::kClockOffset) && moving) c.push_back({Effect::kClockOffset, -1, 0});
   return c;
 }
 
@@ -656,6 +660,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     r.c.reference_temperature_c = o.reference_temperature_c;
     r.c.move_direction = dir;
     r.c.gravity_torque = GravityTorquePerKg(robot, lr.q) * (log.has_payload ? lr.payload_kg : 1.0);
+    if (lr.qdot.size() == n) r.c.joint_velocity = lr.qdot;
     s.rows.push_back(r);
   }
   // Starting registration.
