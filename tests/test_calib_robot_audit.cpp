@@ -18,6 +18,7 @@
 #include "calib/robot_calibration.h"
 #include "core/error.h"
 #include "core/random.h"
+#include "positioner.h"
 #include "test_util.h"
 
 namespace mcms {
@@ -276,28 +277,10 @@ TEST(RobotAudit, RefusesBadLogs) {
 // wobble): the audit must name error motion of joint 2.
 TEST(RobotAudit, RealPositionerErrorMotion) {
   MCMS_REQUIRE_DATA(dir, "industrial-calibration-positioner");
-  std::vector<Joint> j(2);
-  j[0].name = "j1";
-  j[0].alpha = -M_PI / 2;
-  j[0].lower = -M_PI;
-  j[0].upper = M_PI;
-  j[1].name = "j2";
-  j[1].d = -0.475;
-  j[1].theta_offset = -M_PI / 2;
-  j[1].lower = -2 * M_PI;
-  j[1].upper = 2 * M_PI;
   const YAML::Node g = YAML::LoadFile((dir / "pose_initial_guesses.yaml").string());
-  const auto read = [](const YAML::Node& n) {
-    return Pose::FromQuaternion(
-        Eigen::Quaterniond(n["qw"].as<double>(), n["qx"].as<double>(), n["qy"].as<double>(), n["qz"].as<double>())
-            .normalized(),
-        Vec3(n["x"].as<double>(), n["y"].as<double>(), n["z"].as<double>()));
-  };
-  const RobotModel robot("two-axis positioner", DhConvention::kStandard, j,
-                         read(g["target_mount_to_target_guess"]));
-  const Pose T_world_base{Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix(), Vec3(2.2, 0.0, 1.6)};
+  const RobotModel robot = test::Positioner(test::ReadGuess(g["target_mount_to_target_guess"]));
   RobotAuditOptions o;
-  o.base_guess = read(g["camera_mount_to_camera_guess"]).Inverse() * T_world_base;
+  o.base_guess = test::PositionerBaseGuess(g);
   const RobotLog log = ReadRobotLog(dir / "measurements.yaml", robot);
   const RobotAuditResult res = AuditRobot(robot, log, o);
   std::printf("%s", res.report.Text().c_str());
