@@ -2,6 +2,7 @@
 // `audit` command (app/cmd_audit.cpp) and returns it with its runner.
 //   audit cameras DIR      app/cmd_audit_cameras.cpp
 //   audit robot LOG.csv    app/cmd_audit_robot.cpp
+//   audit fusion --tracker .. --robot .. --setup ..   app/cmd_audit_fusion.cpp
 #pragma once
 
 #include "app/commands.h"
@@ -10,5 +11,6 @@ namespace mcms::app {
 
 std::pair<CLI::App*, Runner> AddAuditCameras(CLI::App& audit);
 std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit);
+std::pair<CLI::App*, Runner> AddAuditFusion(CLI::App& audit);
 
 }  // namespace mcms::app

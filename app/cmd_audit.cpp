@@ -20,6 +20,7 @@ McmsCommand audit_command([](CLI::App& app) {
   auto modes = std::make_shared<std::vector<std::pair<CLI::App*, Runner>>>();
   modes->push_back(AddAuditCameras(*cmd));
   modes->push_back(AddAuditRobot(*cmd));
+  modes->push_back(AddAuditFusion(*cmd));
   return std::make_pair(cmd, Runner([modes] {
                           for (auto& [sub, run] : *modes)
                             if (sub->parsed()) return run();

@@ -138,7 +138,8 @@ bool RobotAuditOptions::IsValid(std::string* why) const {
   for (const auto& n : only) {
     const auto e = EffectFromName(n);
     if (!e) return fail("'" + n + "' is not in the catalog of effects");
-    if (Info(*e).sensor != SensorKind::kRobot) return fail("'" + n + "' is not a robot effect");
+    if (Info(*e).sensor != SensorKind::kRobot && *e != Effect::kClockOffset)
+      return fail("'" + n + "' is not a robot effect (or clock_offset)");
   }
   return true;
 }
@@ -162,6 +163,7 @@ struct Setup {
   Pose base0, tool0;
   bool six = false;
   int m = 3;  // residuals per row
+  double time_span = 1.0;  // s, last - first row
   std::vector<RowData> rows;
 };
 
@@ -300,7 +302,12 @@ FitOut Fit(const Setup& s, const std::vector<Extension>& ext, State st, const st
       problem.SetManifold(b[2 + k], new ceres::SubsetManifold(np, held));
     }
     if (ext[k].effect == Effect::kThermalDrift && ext[k].variant == 0 && !st.held[k][1])
+    {
+      // A time constant far beyond the log is a linear drift: bounded, so that the growth
+      // stays a size one can read.
       problem.SetParameterLowerBound(b[2 + k], 1, 1.0);
+      problem.SetParameterUpperBound(b[2 + k], 1, 10.0 * s.time_span);
+    }
   }
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -435,10 +442,14 @@ std::vector<Extension> Catalog(const RobotModel& robot, const RobotLog& log, con
     }
   if (wanted(Effect::kThermalDrift)) {
     const double span = log.rows.back().time_s - log.rows.front().time_s;
-    if (span > 0) c.push_back({Effect::kThermalDrift, -1, 0});
+    if (!log.has_time) notes->push_back("thermal_drift in time not tested: the log has no time column");
+    else if (span > 0) c.push_back({Effect::kThermalDrift, -1, 0});
     else notes->push_back("thermal_drift in time not tested: the log has no time span");
     if (log.has_temperature) c.push_back({Effect::kThermalDrift, -1, 1});
   }
+  bool moving = false;
+  for (const auto& r : log.rows) moving |= r.qdot.size() > 0 && r.qdot.norm() > 0;
+  if (wanted(Effect::kClockOffset) && moving) c.push_back({Effect::kClockOffset, -1, 0});
   return c;
 }
 
@@ -631,6 +642,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   s.tool0 = robot.T_flange_tool();
   const int N = log.rows.size(), n = robot.NumJoints();
   const double t0 = log.rows.front().time_s;
+  s.time_span = std::max(1.0, log.rows.back().time_s - t0);
   Eigen::VectorXd dir = Eigen::VectorXd::Zero(n);
   for (int i = 0; i < N; ++i) {
     const RobotLogRow& lr = log.rows[i];
@@ -648,6 +660,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     r.c.reference_temperature_c = o.reference_temperature_c;
     r.c.move_direction = dir;
     r.c.gravity_torque = GravityTorquePerKg(robot, lr.q) * (log.has_payload ? lr.payload_kg : 1.0);
+    if (lr.qdot.size() == n) r.c.joint_velocity = lr.qdot;
     s.rows.push_back(r);
   }
   // Starting registration.

@@ -59,6 +59,9 @@ struct RobotLogRow {
   std::optional<Mat3> R_meas_tool;
   double temperature_c = std::nan("");
   double payload_kg = std::nan("");
+  // Joint velocities at the measurement (empty = at rest): with them the audit tests a
+  // clock offset between the joint log and the instrument (`audit fusion`).
+  Eigen::VectorXd qdot;
   int line = 0;  // 1-based line in the file (0 when made in code)
 };
 

@@ -95,6 +95,9 @@ struct MeasurementContext {
   // gravity torque of the flange load (GravityTorquePerKg times the load, N m).
   Eigen::VectorXd move_direction;
   Eigen::VectorXd gravity_torque;
+  // Per joint: the joint velocity at the measurement (rad/s or m/s; empty = at rest), for
+  // a clock offset between the robot's log and the measuring instrument.
+  Eigen::VectorXd joint_velocity;
 };
 
 // Torque (N m) that 1 kg at the flange origin puts on each joint by gravity (base z up,
@@ -135,6 +138,17 @@ void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p
         dh[kDhParamsPerJoint * k + 1] += s * j.d;
         dh[kDhParamsPerJoint * k + 2] += s * j.a;
       }
+      break;
+    }
+    case Effect::kClockOffset:
+    case Effect::kClockDrift: {
+      // The robot's time stamp t is t + dt on the instrument's clock (ReferenceTimeT): the
+      // pose at the measurement's time T was logged at T - dt, q(T - dt) = q - dt qdot to
+      // first order in the motion (dt < 0: the robot's stamps are late).
+      if (c.joint_velocity.size() != robot.NumJoints()) break;
+      T dt = p[0];
+      if (e.effect == Effect::kClockDrift) dt += p[1] * c.time_s;
+      for (int k = 0; k < robot.NumJoints(); ++k) dq[k] -= dt * c.joint_velocity[k];
       break;
     }
     default: break;

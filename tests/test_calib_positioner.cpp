@@ -22,6 +22,7 @@
 
 #include "calib/robot_calibration.h"
 #include "core/random.h"
+#include "positioner.h"
 #include "test_util.h"
 
 namespace mcms {
@@ -43,26 +44,8 @@ constexpr double kMinImprovement = 0.10;
 // Measured: 9 % (position mean) and 2 % (rotation mean) better; asserted:
 constexpr double kMinPositionImprovementOverRegistered = 0.05;
 
-RobotModel Positioner(const Pose& tool) {
-  std::vector<Joint> j(2);
-  j[0].name = "j1";
-  j[0].alpha = -M_PI / 2;
-  j[0].lower = -M_PI;
-  j[0].upper = M_PI;
-  j[1].name = "j2";
-  j[1].d = -0.475;
-  j[1].theta_offset = -M_PI / 2;
-  j[1].lower = -2 * M_PI;
-  j[1].upper = 2 * M_PI;
-  return RobotModel("two-axis positioner", DhConvention::kStandard, j, tool);
-}
-
-Pose ReadGuess(const YAML::Node& n) {
-  return Pose::FromQuaternion(
-      Eigen::Quaterniond(n["qw"].as<double>(), n["qx"].as<double>(), n["qy"].as<double>(), n["qz"].as<double>())
-          .normalized(),
-      Vec3(n["x"].as<double>(), n["y"].as<double>(), n["z"].as<double>()));
-}
+using test::Positioner;
+using test::ReadGuess;
 
 struct Stats {
   double pos_mean, pos_std, rot_mean, rot_std;
