@@ -168,7 +168,9 @@ TEST_P(HiddenEffect, IsNamedWhereItIsWithItsSizeAndAHeldOutGain) {
     if (e.name != h.name) continue;
     for (size_t k = 0; k < h.p.size(); ++k)
       EXPECT_NEAR(e.parameters[k].second, h.p[k], 3 * e.sigma[k].second) << e.parameters[k].first;
-    if (h.name != "pixel_noise_scale") EXPECT_LT(e.heldout_rms_after, e.heldout_rms_before);
+    if (h.name != "pixel_noise_scale") {
+      EXPECT_LT(e.heldout_rms_after, e.heldout_rms_before);
+    }
   }
 }
 

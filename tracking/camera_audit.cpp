@@ -88,7 +88,23 @@ struct Sample {
   Pose T;  // leave-one-out pose
   Vec6 twist;
   Vec2 q, bias;
-  Mat2 W;  // whitening of blob cov + pose part / s_c^2: residual / s_c is then standard
+};
+
+// The samples of one unit in one frame, whitened together: they share the error of the
+// leave-one-out pose. W = L^-1 for S = L L^T, S = blockdiag(blob covariances) + J C_pose J^T
+// (camera units: with the pose part / s_c^2, the whitened residual then divided by s_c;
+// ball units: the cameras' s_c^2 built in).
+struct Group {
+  int begin = 0, n = 0, block = 0;
+  int camera = -1;  // camera units: the camera whose s divides the residual; -1: built in
+  Eigen::MatrixXd W;
+};
+
+struct UnitData {
+  std::vector<Sample> s;
+  std::vector<Group> g;
+  bool empty() const { return s.empty(); }
+  size_t size() const { return s.size(); }
 };
 
 // Prediction of a sample's ball image through the extension units.
@@ -121,14 +137,15 @@ Vec2 Predict(const CameraRig& rig, const Target& target, const Sample& s, const 
 }
 
 // One sample's whitened residual as a function of the free terms' parameter blocks.
-struct SampleResidual {
+struct GroupResidual {
   const CameraRig* rig;
   const Target* target;
-  const Sample* s;
+  const Sample* s;  // the group's first sample
+  const Group* g;
   const std::vector<CameraModelTerm>* terms;
   std::vector<int> free;
   double inv_scale;
-  mutable CameraModel cam;
+  mutable std::vector<CameraModel> cams;
   mutable std::vector<CameraModelTerm> work;
   bool operator()(double const* const* p, double* r) const {
     work = *terms;
@@ -136,10 +153,14 @@ struct SampleResidual {
       auto& v = work[free[k]].parameters;
       std::copy(p[k], p[k] + v.size(), v.begin());
     }
-    const Vec2 e = inv_scale * (s->W * (s->q - Predict(*rig, *target, *s, work, &cam)));
-    r[0] = e[0];
-    r[1] = e[1];
-    return std::isfinite(r[0]) && std::isfinite(r[1]);
+    Eigen::VectorXd d(2 * g->n);
+    for (int i = 0; i < g->n; ++i) d.segment<2>(2 * i) = s[i].q - Predict(*rig, *target, s[i], work, &cams[s[i].camera]);
+    const Eigen::VectorXd e = inv_scale * (g->W * d);
+    for (int i = 0; i < 2 * g->n; ++i) {
+      r[i] = e[i];
+      if (!std::isfinite(r[i])) return false;
+    }
+    return true;
   }
 };
 
@@ -185,8 +206,8 @@ class Auditor {
   }
 
   size_t NumFrames() const { return frames_.size(); }
-  const std::vector<Sample>& CameraSamples(int c) const { return cam_samples_[c]; }
-  const std::vector<Sample>& BallSamples(int b) const { return ball_samples_[b]; }
+  const UnitData& CameraSamples(int c) const { return cam_samples_[c]; }
+  const UnitData& BallSamples(int b) const { return ball_samples_[b]; }
 
   // Associates every camera's blobs with the balls and re-fits the leave-one-out poses
   // under the model (terms, per-camera noise scales).
@@ -247,6 +268,13 @@ class Auditor {
           }
           if (!any || balls.size() < 3) continue;
           const PoseRefinement pr = RefinePose(rig_x, target_x, f.T, others, po);
+          UnitData& ud = pass == 0 ? cam_samples_[u] : ball_samples_[u];
+          Group grp;
+          grp.begin = static_cast<int>(ud.s.size());
+          grp.block = f.block;
+          grp.camera = pass == 0 ? u : -1;
+          std::vector<Mat2> blob;
+          std::vector<Eigen::Matrix<double, 2, 6>> Js;
           for (const Obs& x : obs) {
             if ((pass == 0 ? x.camera : x.ball) != u) continue;
             // Undo this camera's own time-offset correction: its prediction applies it.
@@ -268,11 +296,22 @@ class Auditor {
             dp.rightCols<3>() = Mat3::Identity();
             const Eigen::Matrix<double, 2, 6> J = dq * cam.T_cam_rig().R * dp;
             const double s2 = scale[x.camera] * scale[x.camera];
-            const Mat2 S = x.cov + J * pr.cov * J.transpose() / s2;
-            Sample smp{x.camera, x.ball, f.block, f.t, pr.T_rig_target, f.twist, q,
-                       SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), WhiteningOf(S)};
-            (pass == 0 ? cam_samples_[u] : ball_samples_[u]).push_back(smp);
+            blob.push_back(pass == 0 ? x.cov : Mat2(x.cov * s2));
+            Js.push_back(pass == 0 ? Eigen::Matrix<double, 2, 6>(J / scale[x.camera]) : J);
+            ud.s.push_back({x.camera, x.ball, f.block, f.t, pr.T_rig_target, f.twist, q,
+                            SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32)});
           }
+          grp.n = static_cast<int>(blob.size());
+          Eigen::MatrixXd S = Eigen::MatrixXd::Zero(2 * grp.n, 2 * grp.n);
+          Eigen::MatrixXd Jall(2 * grp.n, 6);
+          for (int i = 0; i < grp.n; ++i) {
+            S.block<2, 2>(2 * i, 2 * i) = blob[i];
+            Jall.middleRows<2>(2 * i) = Js[i];
+          }
+          S += Jall * pr.cov * Jall.transpose();
+          const Eigen::LLT<Eigen::MatrixXd> llt(S);
+          grp.W = llt.matrixL().solve(Eigen::MatrixXd::Identity(2 * grp.n, 2 * grp.n));
+          ud.g.push_back(std::move(grp));
         }
       }
     }
@@ -280,23 +319,23 @@ class Auditor {
 
   // Log-likelihood (up to a constant) of the samples outside (fold < 0: all) or inside
   // block `fold` (inside = true), and the raw squared residuals (px^2).
-  Eval Evaluate(const std::vector<Sample>& s, const std::vector<CameraModelTerm>& terms,
-                const std::vector<double>& scale, int fold, bool inside) const {
+  Eval Evaluate(const UnitData& u, const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale,
+                int fold, bool inside) const {
     Eval e;
-    CameraModel cam;
-    int cam_of = -1;
-    for (const Sample& x : s) {
-      if (fold >= 0 && (x.block == fold) != inside) continue;
-      if (x.camera != cam_of) {
-        cam = rig_.cameras[x.camera];
-        cam_of = x.camera;
+    std::vector<CameraModel> cams = rig_.cameras;
+    for (const Group& g : u.g) {
+      if (fold >= 0 && (g.block == fold) != inside) continue;
+      Eigen::VectorXd d(2 * g.n);
+      for (int i = 0; i < g.n; ++i) {
+        const Sample& x = u.s[g.begin + i];
+        d.segment<2>(2 * i) = x.q - Predict(rig_, target_, x, terms, &cams[x.camera]);
+        e.sq += d.segment<2>(2 * i).squaredNorm();
       }
-      const Vec2 d = x.q - Predict(rig_, target_, x, terms, &cam);
-      const double c2 = (x.W * d).squaredNorm(), sc = scale[x.camera];
-      e.chi2 += c2 / (sc * sc);
-      e.ll += -0.5 * c2 / (sc * sc) - 2 * std::log(sc);
-      e.sq += d.squaredNorm();
-      ++e.n;
+      const double sc = g.camera >= 0 ? scale[g.camera] : 1.0;
+      const double c2 = (g.W * d).squaredNorm() / (sc * sc);
+      e.chi2 += c2;
+      e.ll += -0.5 * c2 - 2 * g.n * std::log(sc);
+      e.n += g.n;
     }
     return e;
   }
@@ -305,13 +344,12 @@ class Auditor {
   // `fold` (-1: all): Ceres least squares, then the camera's noise scale (camera units) by
   // maximum likelihood, free or within the tolerance band. *cov (optional) receives the
   // covariance of the free parameters, in order.
-  UnitFit Fit(const std::vector<Sample>& s, int camera, std::vector<CameraModelTerm> terms,
+  UnitFit Fit(const UnitData& s, int camera, std::vector<CameraModelTerm> terms,
               const std::vector<int>& free, std::vector<double> scale, ScaleMode mode, int fold,
               Eigen::MatrixXd* cov = nullptr) const {
     std::vector<int> geo;
     for (int k : free)
       if (terms[k].extension.effect != Effect::kPixelNoiseScale) geo.push_back(k);
-    const double fixed_scale = camera >= 0 ? 1.0 : 0.0;
     if (!geo.empty()) {
       ceres::Problem::Options po;
       po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
@@ -319,13 +357,13 @@ class Auditor {
       std::vector<double*> blocks;
       for (int k : geo) blocks.push_back(terms[k].parameters.data());
       std::vector<CameraModelTerm> frozen = terms;  // the functors' copy; free blocks overwrite
-      for (const Sample& x : s) {
-        if (fold >= 0 && x.block == fold) continue;
-        auto* f = new SampleResidual{&rig_, &target_, &x, &frozen, geo,
-                                     fixed_scale > 0 ? 1.0 : 1.0 / scale[x.camera], rig_.cameras[x.camera], {}};
-        auto* cost = new ceres::DynamicNumericDiffCostFunction<SampleResidual, ceres::CENTRAL>(f);
+      for (const Group& g : s.g) {
+        if (fold >= 0 && g.block == fold) continue;
+        const Sample& x = s.s[g.begin];
+        auto* f = new GroupResidual{&rig_, &target_, &x, &g, &frozen, geo, 1.0, rig_.cameras, {}};
+        auto* cost = new ceres::DynamicNumericDiffCostFunction<GroupResidual, ceres::CENTRAL>(f);
         for (int k : geo) cost->AddParameterBlock(static_cast<int>(terms[k].parameters.size()));
-        cost->SetNumResiduals(2);
+        cost->SetNumResiduals(2 * g.n);
         problem.AddResidualBlock(cost, nullptr, blocks);
       }
       if (problem.NumResidualBlocks() > 0) {
@@ -369,7 +407,7 @@ class Auditor {
   const std::vector<FrameResult>& results_;
   const CameraAuditOptions& o_;
   std::vector<Frame> frames_;
-  std::vector<std::vector<Sample>> cam_samples_, ball_samples_;
+  std::vector<UnitData> cam_samples_, ball_samples_;
 };
 
 struct Candidate {
@@ -565,7 +603,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       // A part-way move: the change time that fits all data best, among the candidates.
       if (x.step) {
         std::vector<double> times;
-        for (const auto& smp : s) times.push_back(smp.t);
+        for (const auto& smp : s.s) times.push_back(smp.t);
         std::sort(times.begin(), times.end());
         times.erase(std::unique(times.begin(), times.end()), times.end());
         double best_ll = -std::numeric_limits<double>::infinity(), best_t = 0;
