@@ -47,14 +47,17 @@ void ApplyIntrinsics(const std::vector<CameraModelTerm>& terms, int c, std::vect
       ExtendIntrinsicsT<double>(t.extension, t.parameters.data(), in->data(), static_cast<int>(in->size()));
 }
 
-CameraRig ExtendRig(const CameraRig& rig, const std::vector<CameraModelTerm>& terms) {
+// At time `t`: a camera moved from a change time on has its old pose before it.
+CameraRig ExtendRig(const CameraRig& rig, const std::vector<CameraModelTerm>& terms,
+                    double t = std::numeric_limits<double>::infinity()) {
   CameraRig out = rig;
   for (size_t c = 0; c < rig.size(); ++c) {
     ApplyIntrinsics(terms, static_cast<int>(c), &out.cameras[c].MutableIntrinsics());
     Pose T_rig_cam = rig.cameras[c].T_cam_rig().Inverse();
-    for (const auto& t : terms)
-      if (t.extension.effect == Effect::kCameraMoved && t.extension.index == static_cast<int>(c))
-        T_rig_cam = ToPose(MovedCameraT<double>(T_rig_cam, t.parameters.data()));
+    for (const auto& m : terms)
+      if (m.extension.effect == Effect::kCameraMoved && m.extension.index == static_cast<int>(c) &&
+          t >= m.from_time_s)
+        T_rig_cam = ToPose(MovedCameraT<double>(T_rig_cam, m.parameters.data()));
     out.cameras[c].SetT_cam_rig(T_rig_cam.Inverse());
   }
   return out;
@@ -212,7 +215,6 @@ class Auditor {
   // Associates every camera's blobs with the balls and re-fits the leave-one-out poses
   // under the model (terms, per-camera noise scales).
   void Rebuild(const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale) {
-    const CameraRig rig_x = ExtendRig(rig_, terms);
     const Target target_x = ExtendTarget(target_, terms);
     const int nc = static_cast<int>(rig_.size()), nb = static_cast<int>(target_.balls_target.size());
     cam_samples_.assign(nc, {});
@@ -221,6 +223,7 @@ class Auditor {
     po.outlier_sigma = 1e9;
     for (const Frame& f : frames_) {
       const FrameResult& r = results_[f.result];
+      const CameraRig rig_x = ExtendRig(rig_, terms, f.t);
       std::vector<Obs> obs;
       for (int c = 0; c < nc && c < static_cast<int>(r.image_points.size()); ++c) {
         const CameraModel& cam = rig_x.cameras[c];
@@ -682,15 +685,24 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       const Candidate& o = *ok[i];
       const bool same = o.term.extension.effect == best.term.extension.effect &&
                         o.term.extension.index == best.term.extension.index;
-      if (!same && o.heldout_gain >= best.heldout_gain - options.undecided_nats) tie.push_back(&o);
+      // Equal on held-out data and in BIC (which counts the parameters: a simpler
+      // candidate that fits as well is preferred, not a tie).
+      if (!same && o.heldout_gain >= best.heldout_gain - options.undecided_nats &&
+          o.bic_gain >= best.bic_gain - 2 * options.undecided_nats)
+        tie.push_back(&o);
     }
     if (tie.size() > 1) {
       std::vector<std::string> group;
-      for (const Candidate* c : tie) {
-        group.push_back(c->term.extension.Label(rig.names));
-        blocked.insert({c->camera_unit, c->unit});
-      }
+      for (const Candidate* c : tie) group.push_back(c->term.extension.Label(rig.names));
       rep.undecided.push_back(group);
+      // The best of the group stays in the model, unnamed, so that its residual does not
+      // leak into the other cameras' leave-one-out poses; the group's places are not
+      // searched further.
+      for (const Candidate* c : tie) blocked.insert({c->camera_unit, c->unit});
+      terms = best.fitted;
+      terms.back().undecided = true;
+      if (best.camera_unit) scale[best.unit] = best.scale;
+      a.Rebuild(terms, scale);
       continue;
     }
     // Name it: the unit's terms as fitted with it, the noise scale, and re-fit the poses.
@@ -716,6 +728,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
   }
   // The named terms with their sigmas (the last fit of each unit is in `terms`).
   for (const auto& t : terms) {
+    if (t.undecided) continue;
     CameraModelTerm out = t;
     for (const auto& e : rep.effects)
       if (e.name == Name(t.extension.effect) && e.where == t.extension.Where(rig.names))

@@ -27,7 +27,9 @@
 // Greedy forward selection adds the best by BIC gain, re-fits the leave-one-out poses with
 // the extended model, and repeats. When another candidate at a different place or of a
 // different kind is within `undecided_nats` of the best's held-out gain, neither is named:
-// the group is reported as undecided and their places are not searched further.
+// the group is reported as undecided (the best of it is kept in the model, unnamed, so that
+// its residual does not leak into the other cameras' poses) and their places are not
+// searched further. A simpler candidate that fits as well wins on BIC and is no tie.
 #pragma once
 
 #include <functional>
@@ -61,6 +63,7 @@ struct CameraModelTerm {
   // camera_moved only: the move applies from this time on (a camera bumped part-way);
   // -infinity: the whole recording.
   double from_time_s = -std::numeric_limits<double>::infinity();
+  bool undecided = false;  // in an undecided group: kept in the audit's model, not named
 };
 
 struct CameraAuditResult {
