@@ -726,7 +726,42 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     if (best.term.extension.effect == Effect::kPixelNoiseScale) noise_named[best.unit] = true;
     a.Rebuild(terms, scale);
   }
-  // The named terms with their sigmas (the last fit of each unit is in `terms`).
+  // A last fit of every unit with named effects on the poses re-fitted with all of them
+  // (the noise scale, in particular, whitens with the pose covariances of its own value).
+  {
+    std::set<std::pair<bool, int>> units;
+    for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
+    for (const auto& [cam_unit, u] : units) {
+      std::vector<int> free;
+      for (size_t k = 0; k < terms.size(); ++k)
+        if ((terms[k].extension.effect != Effect::kTargetGeometry) == cam_unit && terms[k].extension.index == u)
+          free.push_back(static_cast<int>(k));
+      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+      Eigen::MatrixXd cov;
+      const ScaleMode mode = !cam_unit ? ScaleMode::kFixed : noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
+      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, mode, -1, &cov);
+      if (cam_unit) scale[u] = fit.scale;
+      int j = 0;
+      for (int k : free) {
+        terms[k].parameters = fit.terms[k].parameters;
+        const Extension& x = terms[k].extension;
+        std::vector<double> sg;
+        if (x.effect == Effect::kPixelNoiseScale) {
+          sg.push_back(fit.scale / std::sqrt(4.0 * s.size()));
+        } else {
+          for (int i = 0; i < x.NumParameters(); ++i, ++j)
+            sg.push_back(j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+        }
+        for (auto& e : rep.effects)
+          if (!terms[k].undecided && e.name == Name(x.effect) && e.where == x.Where(rig.names))
+            for (size_t i = 0; i < sg.size(); ++i) {
+              e.parameters[i].second = terms[k].parameters[i];
+              e.sigma[i].second = sg[i];
+            }
+      }
+    }
+  }
+  // The named terms with their sigmas.
   for (const auto& t : terms) {
     if (t.undecided) continue;
     CameraModelTerm out = t;
