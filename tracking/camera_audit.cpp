@@ -726,6 +726,53 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     if (best.term.extension.effect == Effect::kPixelNoiseScale) noise_named[best.unit] = true;
     a.Rebuild(terms, scale);
   }
+  // Backward pruning: an effect named early (e.g. the noise scale, taking up the residual of
+  // a large effect named later) must still earn its place once the others are in: each
+  // named effect is removed in turn when the likelihood ratio for it, on the poses
+  // re-fitted with every effect, no longer passes the test or its BIC gain is <= 0.
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (size_t k = terms.size(); k-- > 0;) {
+      if (terms[k].undecided) continue;
+      const Extension x = terms[k].extension;
+      const bool cam_unit = x.effect != Effect::kTargetGeometry;
+      const auto& s = cam_unit ? a.CameraSamples(x.index) : a.BallSamples(x.index);
+      std::vector<CameraModelTerm> without = terms;
+      without.erase(without.begin() + static_cast<long>(k));
+      auto free_of = [&](const std::vector<CameraModelTerm>& t) {
+        std::vector<int> f;
+        for (size_t i = 0; i < t.size(); ++i)
+          if ((t[i].extension.effect != Effect::kTargetGeometry) == cam_unit && t[i].extension.index == x.index)
+            f.push_back(static_cast<int>(i));
+        return f;
+      };
+      const bool noise = x.effect == Effect::kPixelNoiseScale;
+      const ScaleMode with_mode = !cam_unit ? ScaleMode::kFixed : noise_named[x.index] ? ScaleMode::kFree : ScaleMode::kBand;
+      const ScaleMode without_mode = noise ? ScaleMode::kBand : with_mode;
+      const UnitFit f1 = a.Fit(s, cam_unit ? x.index : -1, terms, free_of(terms), scale, with_mode, -1);
+      const UnitFit f0 = a.Fit(s, cam_unit ? x.index : -1, without, free_of(without), scale, without_mode, -1);
+      std::vector<double> s1 = scale, s0 = scale;
+      if (cam_unit) s1[x.index] = f1.scale, s0[x.index] = f0.scale;
+      const double lr = 2 * (a.Evaluate(s, f1.terms, s1, -1, false).ll - a.Evaluate(s, f0.terms, s0, -1, false).ll);
+      const int kp = x.NumParameters() + (terms[k].from_time_s > -std::numeric_limits<double>::infinity() ? 1 : 0);
+      const double m = static_cast<double>(nc * 7 + nb);
+      if (ChiSquareUpper(lr, kp) < options.false_alarm / (2 * m) && lr - kp * ln_n > 0) continue;
+      const std::string label = x.Label(rig.names);
+      rep.notes.push_back(label + " was named, then no longer earned its place once the other effects were in " +
+                          "(likelihood ratio " + std::to_string(lr) + "): removed");
+      for (size_t e = 0; e < rep.effects.size(); ++e)
+        if (rep.effects[e].name == Name(x.effect) && rep.effects[e].where == x.Where(rig.names)) {
+          rep.effects.erase(rep.effects.begin() + static_cast<long>(e));
+          break;
+        }
+      if (noise) noise_named[x.index] = false;
+      terms = f0.terms;
+      if (cam_unit) scale[x.index] = f0.scale;
+      a.Rebuild(terms, scale);
+      changed = true;
+      break;
+    }
+  }
   // A last fit of every unit with named effects on the poses re-fitted with all of them
   // (the noise scale, in particular, whitens with the pose covariances of its own value).
   {
