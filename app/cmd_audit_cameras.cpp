@@ -46,6 +46,10 @@ int RunAudit(const AuditArgs& a) {
   std::printf("%s", audit.report.Text().c_str());
   if (audit.report.effects.empty() && audit.report.undecided.empty())
     std::printf("every camera is consistent with the rest of the rig\n");
+  if (!a.json.empty()) {
+    audit.report.WriteJson(a.json);
+    std::printf("wrote the audit report to %s\n", a.json.c_str());
+  }
   bool noise = false;
   for (const auto& t : audit.terms) noise = noise || t.extension.effect == Effect::kPixelNoiseScale;
   if (!a.repaired.empty() && !audit.report.effects.empty()) {
@@ -56,10 +60,6 @@ int RunAudit(const AuditArgs& a) {
               "repaired rig written");
       Throw("the effects found (time offset, target geometry) cannot be written into a rig; no repaired rig written");
     }
-  }
-  if (!a.json.empty()) {
-    audit.report.WriteJson(a.json);
-    std::printf("wrote the audit report to %s\n", a.json.c_str());
   }
   if (!a.repaired.empty() && audit.ChangesRig()) {
     audit.ExtendedRig(rig).Write(a.repaired);

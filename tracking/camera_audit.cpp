@@ -685,6 +685,9 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       const Candidate& o = *ok[i];
       const bool same = o.term.extension.effect == best.term.extension.effect &&
                         o.term.extension.index == best.term.extension.index;
+      // Only candidates on the same data (the same camera, or the same ball) explain the same
+      // residual; candidates elsewhere are each taken in their turn.
+      if (o.camera_unit != best.camera_unit || o.unit != best.unit) continue;
       // Equal on held-out data and in BIC (which counts the parameters: a simpler
       // candidate that fits as well is preferred, not a tie).
       if (!same && o.heldout_gain >= best.heldout_gain - options.undecided_nats &&
