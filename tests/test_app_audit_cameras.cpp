@@ -25,7 +25,11 @@
 namespace mcms {
 namespace {
 
-constexpr int kFrames = 40;
+// Frames per recording (at 5 Hz); MCMS_AUDIT_FRAMES overrides it (the speed benchmark).
+int Frames() {
+  const char* e = std::getenv("MCMS_AUDIT_FRAMES");
+  return e ? std::atoi(e) : 40;
+}
 constexpr double kSigmaPx = 0.1;  // the blobs' claimed noise (px)
 // Seeds per effect; MCMS_AUDIT_SEEDS overrides it (to measure detection rates).
 uint64_t SeedsPerEffect() {
@@ -40,7 +44,7 @@ Scenario Motion(double start_s) {
     ASSERT_NE(at, std::string::npos) << a;
     text.replace(at, a.size(), b);
   };
-  replace("frames: 120", "frames: " + std::to_string(kFrames));
+  replace("frames: 120", "frames: " + std::to_string(Frames()));
   char s[64];
   std::snprintf(s, sizeof s, "  rate_hz: 5\n  start_s: %.6f\n", start_s);
   replace("  rate_hz: 10\n", s);
