@@ -1,6 +1,7 @@
 // mcms audit cameras: track a recording, test every camera against the rest of the rig and
 // name what the camera model gets wrong from the catalog of model/extensions.h
 // (tracking/camera_audit.h); optionally write the report as JSON and the extended rig.
+#include <cmath>
 #include <cstdio>
 
 #include "app/audit_modes.h"
@@ -64,6 +65,14 @@ int RunAudit(const AuditArgs& a) {
   if (!a.repaired.empty() && audit.ChangesRig()) {
     audit.ExtendedRig(rig).Write(a.repaired);
     std::printf("wrote the rig extended by the effects found to %s\n", a.repaired.c_str());
+    for (const auto& t : audit.terms) {
+      const Effect e = t.extension.effect;
+      if (e == Effect::kCameraTimeOffset || e == Effect::kPixelNoiseScale || e == Effect::kTargetGeometry)
+        std::printf("  not in the rig file: %s\n", t.extension.Label(rig.names).c_str());
+      if (e == Effect::kCameraMoved && std::isfinite(t.from_time_s))
+        std::printf("  %s: the rig has its pose after the move (from t = %.3f s)\n", rig.names[t.extension.index].c_str(),
+                    t.from_time_s);
+    }
   }
   return 0;
 }
