@@ -498,7 +498,8 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     sc[c] = f.scale;
     const double lr = 2 * (a.Evaluate(s, terms, sc, -1, false).ll - a.Evaluate(s, terms, scale, -1, false).ll);
     rep.tests.push_back({"pixel noise scale of " + rig.names[c] + " (estimated factor on sigma; p against the band)",
-                         f.scale, ChiSquareUpper(lr, 1), false});
+                         f.scale, ChiSquareUpper(lr, 1),
+                         ChiSquareUpper(lr, 1) < options.false_alarm / (2.0 * (7 * nc + nb))});
   }
 
   std::set<std::pair<bool, int>> blocked;  // units in an undecided group
