@@ -25,11 +25,16 @@
 // is flagged with probability <= alpha together with the chi-square tests at
 // alpha / (2 cameras)), its BIC gain is > 0, and its held-out log-likelihood gain is > 0.
 // Greedy forward selection adds the best by BIC gain, re-fits the leave-one-out poses with
-// the extended model, and repeats. When another candidate at a different place or of a
-// different kind is within `undecided_nats` of the best's held-out gain, neither is named:
-// the group is reported as undecided (the best of it is kept in the model, unnamed, so that
-// its residual does not leak into the other cameras' poses) and their places are not
-// searched further. A simpler candidate that fits as well wins on BIC and is no tie.
+// the extended model, and repeats; at the end an effect that no longer earns its place
+// with the others in is removed (backward pruning, said in the notes). When a candidate of
+// another kind on the same data (the same camera, or the same ball) is within
+// `undecided_nats` of the best's held-out gain and of its BIC gain, neither is named: the
+// group is reported as undecided (the best of it is kept in the model, unnamed, so that
+// its residual does not leak into the other cameras' poses) and that place is not searched
+// further. A simpler candidate that fits as well wins on BIC and is no tie (a small tilt
+// of a camera and a principal-point shift are the same image shift: principal_point).
+// A late camera's effect on the other cameras' poses is removed by moving its blobs back
+// by the named offset; target_geometry is not written into the rig (ExtendedTarget).
 #pragma once
 
 #include <functional>
