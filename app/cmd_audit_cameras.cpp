@@ -1,5 +1,7 @@
-// mcms audit cameras: track a recording and test every camera against the rest of the rig;
-// name an inconsistent camera and the cause, and optionally write the repaired rig.
+// mcms audit cameras: track a recording, test every camera against the rest of the rig and
+// name what the camera model gets wrong from the catalog of model/extensions.h
+// (tracking/camera_audit.h); optionally write the report as JSON and the extended rig.
+#include <cmath>
 #include <cstdio>
 
 #include "app/audit_modes.h"
@@ -7,6 +9,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "tracking/audit.h"
+#include "tracking/camera_audit.h"
 #include "tracking/noise_estimate.h"
 #include "tracking/sequence.h"
 
@@ -14,7 +17,8 @@ namespace mcms::app {
 namespace {
 
 struct AuditArgs {
-  std::string dir, repaired;
+  std::string dir, repaired, json;
+  CameraAuditOptions audit;
   double rate = 10.0;
   bool quiet = false;
   TrackerCli tracker;
@@ -24,6 +28,7 @@ int RunAudit(const AuditArgs& a) {
   namespace fs = std::filesystem;
   const fs::path dir = a.dir;
   if (!a.repaired.empty()) RequireWritableFile(a.repaired, "audit --repaired-rig");
+  if (!a.json.empty()) RequireWritableFile(a.json, "audit --json");
   const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
   const Target target = Target::Read(dir / "target.yaml");
   const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate}, rig);
@@ -36,22 +41,38 @@ int RunAudit(const AuditArgs& a) {
       seq, tracker, [&](size_t d, size_t) { progress.Update(d); }, a.tracker.Threads());
   progress.Finish();
   std::printf("%s\n", CheckPoseResiduals(results).Describe().c_str());
-  const SequenceAudit audit = AuditCameras(rig, target, results);
-  std::printf("%s", audit.Report().c_str());
-  if (audit.worst < 0) {
+  const CameraAuditResult audit = AuditCameraModel(rig, target, results, a.audit, [&](const std::string& line) {
+    if (!a.quiet) std::fprintf(stderr, "audit: %s\n", line.c_str());
+  });
+  std::printf("%s", audit.report.Text().c_str());
+  if (audit.report.effects.empty() && audit.report.undecided.empty())
     std::printf("every camera is consistent with the rest of the rig\n");
-  } else if (!a.repaired.empty()) {
-    if (audit.cameras[audit.worst].cause == "noise model")
-      Throw("camera ", audit.cameras[audit.worst].name,
-            "'s residuals are larger than the pixel noise model predicts and neither a camera move nor lens distortion "
-            "explains them: check --gain and --read-noise (or leave them out to measure the noise); no repaired rig "
-            "written");
-    if (audit.cameras[audit.worst].cause != "camera moved")
-      Throw("camera ", audit.cameras[audit.worst].name, " is inconsistent (", audit.cameras[audit.worst].cause,
-            "): re-calibrate its lens (mcms calib-rig); no repaired rig written");
-    RepairRig(rig, audit).Write(a.repaired);
-    std::printf("wrote the rig with %s's re-estimated pose to %s\n", audit.cameras[audit.worst].name.c_str(),
-                a.repaired.c_str());
+  if (!a.json.empty()) {
+    audit.report.WriteJson(a.json);
+    std::printf("wrote the audit report to %s\n", a.json.c_str());
+  }
+  bool noise = false;
+  for (const auto& t : audit.terms) noise = noise || t.extension.effect == Effect::kPixelNoiseScale;
+  if (!a.repaired.empty() && !audit.report.effects.empty()) {
+    if (!audit.ChangesRig()) {
+      if (noise)
+        Throw("the residuals are larger than the pixel noise model predicts (pixel_noise_scale) and no change of the "
+              "rig explains them: check --gain and --read-noise (or leave them out to measure the noise); no "
+              "repaired rig written");
+      Throw("the effects found (time offset, target geometry) cannot be written into a rig; no repaired rig written");
+    }
+  }
+  if (!a.repaired.empty() && audit.ChangesRig()) {
+    audit.ExtendedRig(rig).Write(a.repaired);
+    std::printf("wrote the rig extended by the effects found to %s\n", a.repaired.c_str());
+    for (const auto& t : audit.terms) {
+      const Effect e = t.extension.effect;
+      if (e == Effect::kCameraTimeOffset || e == Effect::kPixelNoiseScale || e == Effect::kTargetGeometry)
+        std::printf("  not in the rig file: %s\n", t.extension.Label(rig.names).c_str());
+      if (e == Effect::kCameraMoved && std::isfinite(t.from_time_s))
+        std::printf("  %s: the rig has its pose after the move (from t = %.3f s)\n", rig.names[t.extension.index].c_str(),
+                    t.from_time_s);
+    }
   }
   return 0;
 }
@@ -62,12 +83,28 @@ std::pair<CLI::App*, Runner> AddAuditCameras(CLI::App& audit) {
   auto args = std::make_shared<AuditArgs>();
   CLI::App* cmd = audit.add_subcommand(
       "cameras",
-      "Track a recording (as `mcms track`) and test every camera against the rest of the rig: leave-one-camera-out "
-      "residuals against chi-square. An inconsistent camera is named with the cause that explains its residuals "
-      "(camera moved, lens distortion, or a pixel noise model that is too optimistic), and a moved camera's pose is "
-      "re-estimated. The pixel noise model is measured from the images unless --gain is given (as in `mcms track`).");
+      "Track a recording (as `mcms track`) and audit the camera model: every camera is tested against the rest of the "
+      "rig (leave-one-camera-out residuals, chi-square), then the catalog of model extensions is fitted camera by "
+      "camera and ball by ball (pixel_noise_scale first, camera_moved, also from a change time on, focal_length, "
+      "principal_point, radial_distortion, camera_time_offset, target_geometry), scored on held-out blocks of time "
+      "and by BIC; greedy forward selection names the effects that earn their place, with size, sigma and held-out "
+      "gain, and says when two candidates explain the residuals equally. The pixel noise model is measured from the "
+      "images unless --gain is given (as in `mcms track`).");
   cmd->add_option("DIR", args->dir, "recording folder (images/, rig.yaml, target.yaml, optional frames.csv)")->required();
-  cmd->add_option("--repaired-rig", args->repaired, "write the rig with the re-estimated camera pose here");
+  cmd->add_option("--repaired-rig", args->repaired,
+                  "write the rig extended by the effects found here (moved poses, focal length, principal point, k1)");
+  cmd->add_option("--json", args->json, "write the audit report as JSON here (mode, nominal, clean, effects, undecided)");
+  cmd->add_option("--false-alarm", args->audit.false_alarm,
+                  "designed probability of naming an effect on a recording without one")
+      ->check(CLI::Range(1e-6, 0.5))
+      ->capture_default_str();
+  cmd->add_option("--noise-tolerance", args->audit.noise_tolerance,
+                  "relative error of the pixel noise sigma accepted before pixel_noise_scale is named")
+      ->check(CLI::Range(0.0, 0.99))
+      ->capture_default_str();
+  cmd->add_option("--folds", args->audit.folds, "k of the k-fold cross-validation (blocks of time)")
+      ->check(CLI::Range(2, 50))
+      ->capture_default_str();
   cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames.csv")->check(CLI::PositiveNumber);
   args->tracker.Add(cmd);
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");

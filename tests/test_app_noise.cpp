@@ -185,19 +185,25 @@ TEST(HonestDefaults, AuditNamesNoCameraOnCleanRecordings) {
 }
 
 // Photon noise far above the read noise (gain 0.5, read noise 1 DN): with --gain 0 the
-// audit finds every camera's residuals too large for the noise model and no camera move
-// or lens term to explain them, and refuses to write a "repaired" rig; by default it
-// finds nothing.
+// audit names pixel_noise_scale (the noise model), no camera move or lens term, and
+// refuses to write a "repaired" rig; by default it finds nothing.
 TEST(HonestDefaults, AuditBlamesTheNoiseModelNotTheCameras) {
   const fs::path rec = Recording({0.5, 1.0, 7, 100});
   const fs::path dir = test::ScratchDir("noise_audit_blame_" + std::to_string(::getpid()));
-  const CliRun bad = Mcms("audit cameras -q --gain 0 --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
+  const CliRun bad = Mcms("audit cameras -q --gain 0 --json " + (dir / "audit.json").string() + " --repaired-rig " +
+                              (dir / "rig.yaml").string() + " " + rec.string(),
+                          dir);
   std::printf("%s%s", bad.out.c_str(), bad.err.c_str());
   EXPECT_NE(bad.code, 0);
-  EXPECT_NE(bad.out.find("INCONSISTENT: noise model"), std::string::npos) << bad.out;
-  EXPECT_EQ(bad.out.find("camera moved"), std::string::npos) << bad.out;
+  EXPECT_NE(bad.out.find("effect pixel_noise_scale"), std::string::npos) << bad.out;
+  EXPECT_EQ(bad.out.find("camera_moved"), std::string::npos) << bad.out;
   EXPECT_NE(bad.err.find("larger than the pixel noise model predicts"), std::string::npos) << bad.err;
   EXPECT_FALSE(fs::exists(dir / "rig.yaml"));
+  // The report is written all the same (the rig is what cannot be repaired).
+  const std::string json = Slurp(dir / "audit.json");
+  EXPECT_NE(json.find("\"mode\": \"cameras\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"name\": \"pixel_noise_scale\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"clean\": false"), std::string::npos) << json;
   const CliRun good = Mcms("audit cameras -q --repaired-rig " + (dir / "rig.yaml").string() + " " + rec.string(), dir);
   std::printf("%s", good.out.c_str());
   EXPECT_EQ(good.code, 0) << good.err;
