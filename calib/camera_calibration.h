@@ -57,6 +57,30 @@ struct CameraCalibrationInput {
   std::vector<std::string> camera_names;  // one per camera
   std::vector<int> widths, heights;       // image size per camera
   std::vector<BoardObservation> observations;
+  // The numberings the detector may have given one placement of the board, as rigid
+  // motions of the board frame mapping its points onto each other
+  // (CalibrationBoard::NumberingSymmetries; empty: the numbering is unique). With
+  // them, the observations of a frame seen by several cameras are renumbered to agree
+  // (see CameraCalibrationResult::renumbered); without them a symmetric board whose
+  // numbering differs between cameras gives a wrong rig.
+  std::vector<Pose> board_symmetries;
+};
+
+// One observation renumbered to agree with the other cameras of its frame: its board
+// points were replaced by S * P (S one of the input's board_symmetries, a turn by
+// angle_deg about the board normal). rms_px: the initial rig's reprojection error
+// (per coordinate) of the observation's pixels with the board pose the frame's other
+// cameras saw, under the chosen numbering; next_rms_px: under the next best one.
+struct BoardRenumbering {
+  int camera = 0, frame = 0;
+  double angle_deg = 0.0;
+  double rms_px = 0.0, next_rms_px = 0.0;
+};
+
+// An observation left out of the solve, and why.
+struct DroppedObservation {
+  int camera = 0, frame = 0;
+  std::string reason;
 };
 
 struct CameraCalibrationOptions {
@@ -170,6 +194,15 @@ struct CameraCalibrationResult {
   // pose), and per observation and point whether it stayed an inlier.
   std::vector<BoardObservation> observations;
   std::vector<std::vector<bool>> observation_inliers;
+  // The noise floor of the views: every observation's board pose solved on its own with
+  // the solved intrinsics (inlier points), sum |e|^2 / sum (2 n - 6) over them. Views
+  // that agree with one rig give residual_variance_px2 close to it; a view numbered
+  // differently, taken at another moment or by a moved camera raises the ratio.
+  double views_alone_variance_px2 = 0.0;
+  // Symmetric boards (input.board_symmetries): the observations renumbered to agree
+  // with their frame's other cameras, and those whose numbering could not be matched.
+  std::vector<BoardRenumbering> renumbered;
+  std::vector<DroppedObservation> dropped;
   // Covariance of each camera's intrinsics (NumIntrinsics square, in the units of
   // the intrinsics; zero when they were held fixed) and std of rt_cam_rig (rad, m; zero for camera 0, which
   // defines the rig frame). Board poses are marginalised (Schur complement).
@@ -184,6 +217,25 @@ struct CameraCalibrationResult {
   // Every solved parameter's covariance (what ProjectionCovarianceMeanFrames needs).
   CalibrationCovariance covariance;
 };
+
+// When a solution must not be used without a loud warning (calib-rig refuses to write it).
+struct CalibrationQualityLimits {
+  // sqrt(residual_variance_px2 / views_alone_variance_px2): how far the joint residual
+  // is above the views' own noise floor.
+  double max_noise_ratio = 1.5;
+  double max_rms_px = 1.0;               // per coordinate, inliers, absolute
+  double max_outlier_fraction = 0.05;    // rejected points / observed points
+  bool IsValid(std::string* why) const;
+};
+
+// Why the solution is not trustworthy, one sentence each with the figures (empty: none):
+// the last solve did not converge; the residual is above max_rms_px or far above the
+// views' noise floor (max_noise_ratio); more than max_outlier_fraction of the points
+// were rejected; a parameter's standard deviation is zero, infinite or not a number
+// (the covariance is singular or not positive definite); camera 0 is not among the
+// cameras (a result not from CalibrateCameras).
+std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& result,
+                                             const CalibrationQualityLimits& limits);
 
 // Solves. InputError when a camera has no usable observation or is not connected to
 // camera 0 through shared frames (message names the camera and the remedy), when the
