@@ -154,7 +154,7 @@ int RunCalibRig(const CalibRigArgs& a) {
                 d.reason.c_str());
   // Is the solution trustworthy? Residual against its noise, outliers, covariance,
   // projection uncertainty; all computed before anything is written.
-  std::vector<std::string> problems = CalibrationProblems(r, a.limits);
+  std::vector<std::string> problems = CalibrationProblems(r, a.limits, frame_names);
   std::vector<UncertaintyGrid> grids;
   for (size_t c = 0; c < r.rig.size(); ++c) {
     grids.push_back(ProjectionUncertaintyGrid(r, static_cast<int>(c), a.range_m));
@@ -269,7 +269,8 @@ McmsCommand calib_rig_command([](CLI::App& app) {
                   "not agree with one rig")
       ->check(CLI::Range(1.0, 1e9));
   cmd->add_option("--max-outlier-fraction", args->limits.max_outlier_fraction,
-                  "refuse a solution that rejected more than this fraction of the points (default 0.05)")
+                  "refuse a solution that rejected more than this fraction of the points (default 0.1; and, always, "
+                  "one where a view lost more than half of its points: that view disagrees with the others)")
       ->check(CLI::Range(0.0, 1.0));
   cmd->add_flag("--allow-poor-fit", args->allow_poor_fit,
                 "write a solution that fails these checks (or has a singular covariance) anyway, with a warning on "

@@ -956,11 +956,14 @@ bool CalibrationQualityLimits::IsValid(std::string* why) const {
   else if (!(max_rms_px > 0.0)) s << "max_rms_px must be > 0 px (got " << max_rms_px << ")";
   else if (!(max_outlier_fraction >= 0.0 && max_outlier_fraction <= 1.0))
     s << "max_outlier_fraction must be within 0..1 (got " << max_outlier_fraction << ")";
+  else if (!(max_view_outlier_fraction >= 0.0 && max_view_outlier_fraction <= 1.0))
+    s << "max_view_outlier_fraction must be within 0..1 (got " << max_view_outlier_fraction << ")";
   if (why) *why = s.str();
   return s.str().empty();
 }
 
-std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& r, const CalibrationQualityLimits& limits) {
+std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& r, const CalibrationQualityLimits& limits,
+                                             const std::vector<std::string>& frame_names) {
   std::string why;
   if (!limits.IsValid(&why)) Throw("calibration quality limits: ", why);
   std::vector<std::string> out;
@@ -993,6 +996,20 @@ std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& r, c
       per << (c ? ", " : "") << r.rig.names[c] << " " << r.residuals[c].num_outliers << "/" << r.residuals[c].num_points;
     add(r.num_outliers, " of ", total, " points (", std::setprecision(1), 100.0 * r.num_outliers / total,
         " %) were rejected as outliers (", per.str(), "), more than ", 100.0 * limits.max_outlier_fraction, " %");
+  }
+  for (size_t i = 0; i < r.observations.size() && i < r.observation_inliers.size(); ++i) {
+    const auto& inl = r.observation_inliers[i];
+    const int n = static_cast<int>(inl.size());
+    const int rejected = static_cast<int>(std::count(inl.begin(), inl.end(), false));
+    if (n > 0 && rejected > limits.max_view_outlier_fraction * n)
+      add("frame ",
+          r.observations[i].frame < static_cast<int>(frame_names.size()) ? frame_names[r.observations[i].frame]
+                                                                         : std::to_string(r.observations[i].frame),
+          ", ", r.rig.names[r.observations[i].camera], ": ", rejected, " of ", n,
+          " points were rejected as outliers (more than ", std::setprecision(0),
+          100.0 * limits.max_view_outlier_fraction, std::setprecision(3),
+          " %): the view as a whole disagrees with the others (numbered differently, taken at another moment, or "
+          "of another board)");
   }
   for (size_t c = 0; c < r.rig.size(); ++c) {
     const Eigen::VectorXd& sd = r.intrinsics_std[c];

@@ -224,18 +224,25 @@ struct CalibrationQualityLimits {
   // is above the views' own noise floor.
   double max_noise_ratio = 1.5;
   double max_rms_px = 1.0;               // per coordinate, inliers, absolute
-  double max_outlier_fraction = 0.05;    // rejected points / observed points
+  double max_outlier_fraction = 0.10;    // rejected points / observed points, overall
+  // ... and in any one view (one camera's observation of one frame): most of a view's
+  // points rejected means the view disagrees with the rest as a whole (a wrong view,
+  // not noisy corners, which spread their outliers over all views).
+  double max_view_outlier_fraction = 0.5;
   bool IsValid(std::string* why) const;
 };
 
 // Why the solution is not trustworthy, one sentence each with the figures (empty: none):
 // the last solve did not converge; the residual is above max_rms_px or far above the
 // views' noise floor (max_noise_ratio); more than max_outlier_fraction of the points
-// were rejected; a parameter's standard deviation is zero, infinite or not a number
+// were rejected, or more than max_view_outlier_fraction of one view's (named by camera
+// and frame index); a parameter's standard deviation is zero, infinite or not a number
 // (the covariance is singular or not positive definite); camera 0 is not among the
 // cameras (a result not from CalibrateCameras).
+// frame_names (optional, by frame index) name the frames in the sentences.
 std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& result,
-                                             const CalibrationQualityLimits& limits);
+                                             const CalibrationQualityLimits& limits,
+                                             const std::vector<std::string>& frame_names = {});
 
 // Solves. InputError when a camera has no usable observation or is not connected to
 // camera 0 through shared frames (message names the camera and the remedy), when the
