@@ -292,19 +292,18 @@ std::vector<Pose> PlaceCameras(const CameraCalibrationInput& input, Observations
   std::vector<std::optional<Pose>> T_cam_rig(ncam);
   T_cam_rig[0] = Pose::Identity();
   for (int placed = 1; placed < ncam; ++placed) {
-    // The unplaced camera sharing the most frames with placed cameras.
+    // The unplaced camera with the most views shared with placed cameras (a frame
+    // counts once per placed camera in it).
     int c = -1;
-    size_t best_frames = 0;
+    size_t best_views = 0;
     for (int k = 0; k < ncam; ++k) {
       if (T_cam_rig[k]) continue;
       size_t n = 0;
       for (const auto& frame : obs_of_frame) {
         if (!frame.count(k)) continue;
-        bool shared = false;
-        for (const auto& [j, oj] : frame) shared |= j != k && T_cam_rig[j].has_value();
-        n += shared;
+        for (const auto& [j, oj] : frame) n += j != k && T_cam_rig[j].has_value();
       }
-      if (n > best_frames) c = k, best_frames = n;
+      if (n > best_views) c = k, best_views = n;
     }
     if (c < 0) {
       std::ostringstream s;
@@ -797,7 +796,19 @@ void ComputeCovariance(RigProblem& rp, const CameraCalibrationOptions& options, 
 }
 
 // The views' noise floor (CameraCalibrationResult::views_alone_variance_px2).
+// The board points carry the solved warp (RigProblem's shape over the same extent), so
+// that a warped board's views are compared like with like.
 double ViewsAloneVariance(const CameraCalibrationResult& res) {
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const BoardObservation& o : res.observations)
+    for (const Vec3& P : o.points_board) lo = lo.cwiseMin(P.head<2>()), hi = hi.cwiseMax(P.head<2>());
+  auto warped = [&](Vec3 P) {
+    for (int d = 0; d < 2; ++d) {
+      const double u = hi[d] > lo[d] ? 2.0 * (P[d] - lo[d]) / (hi[d] - lo[d]) - 1.0 : 0.0;
+      P.z() += res.board_warp_m[d] * (1.0 - u * u);
+    }
+    return P;
+  };
   double ss = 0.0;
   int dof = 0;
   for (size_t i = 0; i < res.observations.size(); ++i) {
@@ -808,7 +819,7 @@ double ViewsAloneVariance(const CameraCalibrationResult& res) {
     in.weights.clear();
     for (size_t k = 0; k < o.pixels.size(); ++k)
       if (res.observation_inliers[i][k]) {
-        in.points_board.push_back(o.points_board[k]);
+        in.points_board.push_back(warped(o.points_board[k]));
         in.pixels.push_back(o.pixels[k]);
         if (!o.weights.empty()) in.weights.push_back(o.weights[k]);
       }

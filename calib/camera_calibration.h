@@ -11,7 +11,17 @@
 // ComputeCovariance; "auto" runs these per candidate model and SelectLensModel picks.
 //
 // Initialisation: cv::calibrateCamera per camera, cv::solvePnP per observation,
-// extrinsics from the board poses of frames that two cameras share. Outliers are
+// extrinsics from the board poses of frames that two cameras share. A board whose
+// numbering is symmetric (CameraCalibrationInput::board_symmetries, e.g. a 10 x 10
+// chessboard, which OpenCV may number turned by 90, 180 or 270 deg in each image) is
+// renumbered there, per frame and camera, to agree with the frame's other cameras:
+// each camera's extrinsics from the candidate (one per shared frame and numbering) that
+// most frames agree with, each observation's numbering from the reprojection error
+// with the board pose the other cameras saw (PlaceCameras; see
+// CameraCalibrationResult::renumbered and dropped). A single camera's calibration does
+// not depend on the numbering. CalibrationProblems then says whether the solution may
+// be trusted (convergence, residual against the views' own noise, outliers per view
+// and overall, a positive-definite covariance). Outliers are
 // rejected mrcal-style, with hysteresis: after each solve, when some inlier has a
 // coordinate error beyond (k + 1) sigma (sigma: inlier RMS per coordinate), every
 // point with a coordinate beyond k sigma is dropped and the problem re-solved. Without

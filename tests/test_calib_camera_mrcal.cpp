@@ -222,6 +222,9 @@ TEST(CalibCameraMrcal, FigueroaPassesTheQualityChecks) {
                 r.num_outliers + r.num_inliers, r.covariance_singular ? "SINGULAR" : "positive definite",
                 problems.size());
     for (const auto& p : problems) std::printf("  - %s\n", p.c_str());
+    // The views' own noise floor is the residual's scale (like with like: same lens,
+    // same warp), not merely a bound.
+    EXPECT_NEAR(std::sqrt(r.residual_variance_px2 / r.views_alone_variance_px2), 1.0, 0.1) << what;
   };
   const std::vector<std::string> problems = CalibrationProblems(fig.r, limits);
   report("mrcal's inliers", fig.r, problems);
