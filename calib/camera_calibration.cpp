@@ -1022,23 +1022,26 @@ std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& r, c
           " %): the view as a whole disagrees with the others (numbered differently, taken at another moment, or "
           "of another board)");
   }
+  bool any_bad_std = false;
   for (size_t c = 0; c < r.rig.size(); ++c) {
     const Eigen::VectorXd& sd = r.intrinsics_std[c];
     bool bad = false;
     for (int i = 0; i < sd.size(); ++i) bad |= !(sd[i] > 0.0 && std::isfinite(sd[i]));
     const bool fixed = sd.size() > 0 && sd.isZero(0.0);  // intrinsics held fixed
+    any_bad_std |= bad && !fixed;
     if (bad && !fixed)
       add(r.rig.names[c], ": an intrinsic parameter's standard deviation is zero, infinite or not a number (the "
                           "normal matrix is singular or not positive definite: the views do not determine it)");
     if (c > 0) {
       bool bad_ext = false;
       for (int i = 0; i < 6; ++i) bad_ext |= !(r.extrinsics_std[c][i] > 0.0 && std::isfinite(r.extrinsics_std[c][i]));
+      any_bad_std |= bad_ext;
       if (bad_ext)
         add(r.rig.names[c], ": a standard deviation of its pose in the rig is zero, infinite or not a number (the "
                             "normal matrix is singular or not positive definite)");
     }
   }
-  if (r.covariance_singular)
+  if (r.covariance_singular && !any_bad_std)
     add("the parameter covariance is singular or not positive definite: some parameters of ", r.lensmodel,
         " are not determined by the views (their standard deviations and the projection uncertainty mean nothing)");
   return out;
