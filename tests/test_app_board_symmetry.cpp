@@ -381,6 +381,53 @@ TEST(BoardSymmetry, SingleCameraKeepsItsNumbering) {
   EXPECT_LT(std::abs(fx - v.rig.cameras[1].Intrinsics()[0]), std::max(kSigmas * sd, kRelTol * kTrueFx));
 }
 
+// CalibrationProblems names each fault of a solution, one sentence each: taken from a
+// good solve (no problem) and spoiled one fault at a time.
+TEST(BoardSymmetry, CalibrationProblemsNamesEachFault) {
+  const RenderedViews& v = SquareBoardViews();
+  CameraCalibrationInput in;
+  in.camera_names = {"cam0"};
+  in.widths = {kWidth};
+  in.heights = {kHeight};
+  for (int f = 0; f < static_cast<int>(v.T_rig_board.size()); ++f) in.observations.push_back(Observation(v, 0, f, Pose::Identity()));
+  CameraCalibrationOptions opt;
+  opt.lensmodel = "LENSMODEL_OPENCV4";
+  const CameraCalibrationResult good = CalibrateCameras(in, opt);
+  const CalibrationQualityLimits limits;
+  ASSERT_TRUE(CalibrationProblems(good, limits).empty());
+  auto expect = [&](const char* what, const CameraCalibrationResult& r, const std::string& needle) {
+    const std::vector<std::string> p = CalibrationProblems(r, limits, {"a", "b", "c", "d", "e", "f", "g"});
+    ASSERT_FALSE(p.empty()) << what;
+    bool found = false;
+    for (const auto& s : p) found |= s.find(needle) != std::string::npos;
+    EXPECT_TRUE(found) << what << ": no '" << needle << "' in " << p[0];
+  };
+  CameraCalibrationResult r = good;
+  r.converged = false;
+  expect("not converged", r, "did not converge");
+  r = good;
+  r.rms_px = 1.5;
+  expect("rms", r, "above the limit of 1.000 px");
+  r = good;
+  r.residual_variance_px2 = 4.0 * r.views_alone_variance_px2;
+  expect("noise floor", r, "2.00 times the views' own noise floor");
+  r = good;
+  r.num_outliers = r.num_inliers / 5;
+  expect("outliers", r, "were rejected as outliers");
+  r = good;
+  r.observation_inliers[3].assign(r.observation_inliers[3].size(), false);
+  expect("a rejected view", r, "frame d, cam0: 100 of 100 points were rejected");
+  r = good;
+  r.intrinsics_std[0][1] = 0.0;
+  expect("a zero sigma", r, "standard deviation is zero, infinite or not a number");
+  r = good;
+  r.covariance_singular = true;
+  expect("singular", r, "singular or not positive definite");
+  CalibrationQualityLimits bad;
+  bad.max_noise_ratio = 0.5;
+  EXPECT_THROW(CalibrationProblems(good, bad), InputError);
+}
+
 // Two cameras that share a single frame: with a symmetric board that frame cannot show
 // which numbering of camera 1 matches camera 0's; refused with the reason.
 TEST(BoardSymmetry, OneSharedFrameIsRefusedWithTheReason) {
