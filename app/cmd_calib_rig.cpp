@@ -2,8 +2,11 @@
 // and pose in the rig (camera 0 = rig frame), as mrcal .cameramodel (with mrcal's
 // optimization_inputs for chessboards), OpenCV YAML and rig.yaml, with a residual
 // summary and per-camera residual plots. The lens model is chosen by the data unless
-// given; a solve that did not converge writes nothing.
+// given; a solve that did not converge writes nothing, nor (without --allow-poor-fit)
+// one that CalibrationProblems finds untrustworthy. Symmetric chessboards are
+// renumbered per frame to agree across the cameras, and every renumbering is printed.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <map>
 #include <set>
@@ -30,7 +33,13 @@ struct CalibRigArgs {
   double range_m = 10.0;
   bool board_warp = false;
   bool quiet = false;
+  CalibrationQualityLimits limits;
+  bool allow_poor_fit = false;
 };
+
+// Projection uncertainties that cannot come from a sound covariance: exactly zero, or
+// beyond this (px; larger than any image: the lens is not determined there).
+constexpr double kMaxMeaningfulUncertaintyPx = 1000.0;
 
 bool IsImage(const std::filesystem::path& p) {
   std::string e = p.extension().string();
@@ -113,6 +122,9 @@ int RunCalibRig(const CalibRigArgs& a) {
                    images[c].size());
   }
   progress.Finish();
+  // A symmetric chessboard may be numbered differently by two cameras in one frame:
+  // the calibration renumbers such views to agree (and says so below).
+  input.board_symmetries = board.NumberingSymmetries();
 
   const CameraCalibrationResult r = CalibrateCameras(input, options);
   if (!r.lens_model_trials.empty()) {
@@ -128,6 +140,44 @@ int RunCalibRig(const CalibRigArgs& a) {
     Throw("calib-rig: the bundle adjustment with ", r.lensmodel, " did not converge in ", r.iterations,
           " iterations (Ceres: ", r.solver_message, "); its parameters are not a solution. Raise --max-iterations "
           "(now ", a.max_iterations, ") or choose a simpler --lensmodel (or auto); no output written");
+  if (!r.renumbered.empty() || !r.dropped.empty())
+    std::printf("the board's numbering is symmetric (%s: the detector may number it turned by %s); each frame's "
+                "views were matched across the cameras:\n",
+                board.Describe().c_str(), board.cols == board.rows ? "90, 180 or 270 deg" : "180 deg");
+  for (const BoardRenumbering& n : r.renumbered)
+    std::printf("  frame %s: %s renumbered (its numbering was turned by %.0f deg against the other cameras'; "
+                "reprojection %.2f px renumbered, %.2f px under the next best numbering)\n",
+                frame_names[n.frame].c_str(), input.camera_names[n.camera].c_str(), 360.0 - n.angle_deg, n.rms_px,
+                n.next_rms_px);
+  for (const DroppedObservation& d : r.dropped)
+    std::printf("  frame %s: %s left out: %s\n", frame_names[d.frame].c_str(), input.camera_names[d.camera].c_str(),
+                d.reason.c_str());
+  // Is the solution trustworthy? Residual against its noise, outliers, covariance,
+  // projection uncertainty; all computed before anything is written.
+  std::vector<std::string> problems = CalibrationProblems(r, a.limits, frame_names);
+  std::vector<UncertaintyGrid> grids;
+  for (size_t c = 0; c < r.rig.size(); ++c) {
+    grids.push_back(ProjectionUncertaintyGrid(r, static_cast<int>(c), a.range_m));
+    int bad = 0;
+    for (double s : grids.back().sigma_px) bad += std::isfinite(s) && !(s > 0.0 && s < kMaxMeaningfulUncertaintyPx);
+    if (bad > 0)
+      problems.push_back(r.rig.names[c] + ": " + std::to_string(bad) + " of " +
+                         std::to_string(grids.back().sigma_px.size()) +
+                         " projection uncertainties are 0 px or above " +
+                         std::to_string(static_cast<int>(kMaxMeaningfulUncertaintyPx)) +
+                         " px, which no sound covariance gives");
+  }
+  if (!problems.empty()) {
+    std::string list;
+    for (const std::string& p : problems) list += "\n  - " + p;
+    if (!a.allow_poor_fit)
+      Throw("calib-rig: the calibration is not trustworthy:", list,
+            "\nno output written (--allow-poor-fit writes it anyway, with this warning; the limits are "
+            "--max-rms, --max-noise-ratio and --max-outlier-fraction)");
+    std::fprintf(stderr, "calib-rig: WARNING: the calibration is not trustworthy (written because of --allow-poor-fit):%s\n",
+                 list.c_str());
+    std::printf("WARNING: the calibration is not trustworthy (written because of --allow-poor-fit):%s\n", list.c_str());
+  }
   // mrcal's optimization_inputs need the board as a regular grid: chessboards only.
   std::string optimization_inputs, no_inputs_why;
   if (board.type == CalibrationBoard::Type::kChessboard)
@@ -158,8 +208,12 @@ int RunCalibRig(const CalibRigArgs& a) {
   if (a.board_warp)
     std::printf("board warp: %.3f +- %.3f mm (x), %.3f +- %.3f mm (y)\n", r.board_warp_m[0] * 1e3,
                 r.board_warp_std_m[0] * 1e3, r.board_warp_m[1] * 1e3, r.board_warp_std_m[1] * 1e3);
+  std::printf("residual against the views' own noise floor (each view's board pose fitted alone): %.4f / %.4f px "
+              "per coordinate = %.2f\n",
+              std::sqrt(r.residual_variance_px2), std::sqrt(r.views_alone_variance_px2),
+              std::sqrt(r.residual_variance_px2 / r.views_alone_variance_px2));
   for (size_t c = 0; c < r.rig.size(); ++c) {
-    const UncertaintyGrid g = ProjectionUncertaintyGrid(r, static_cast<int>(c), a.range_m);
+    const UncertaintyGrid& g = grids[c];
     std::printf("%s: projection uncertainty (worst direction, 1 sigma, px; mrcal's mean-frames method) at %.2f m, "
                 "%dx%d grid over the image:\n",
                 r.rig.names[c].c_str(), a.range_m, g.nx, g.ny);
@@ -206,6 +260,21 @@ McmsCommand calib_rig_command([](CLI::App& app) {
   cmd->add_option("--range", args->range_m, "range in metres for the projection-uncertainty report")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--board-warp", args->board_warp, "also solve the board's out-of-plane warp (mrcal's calobject_warp)");
+  cmd->add_option("--max-rms", args->limits.max_rms_px,
+                  "refuse a solution whose residual RMS exceeds this (px per coordinate; default 1)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--max-noise-ratio", args->limits.max_noise_ratio,
+                  "refuse a solution whose residual exceeds the views' own noise floor (each view's board pose "
+                  "fitted alone with the solved lens) by more than this factor (default 1.5): the views then do "
+                  "not agree with one rig")
+      ->check(CLI::Range(1.0, 1e9));
+  cmd->add_option("--max-outlier-fraction", args->limits.max_outlier_fraction,
+                  "refuse a solution that rejected more than this fraction of the points (default 0.1; and, always, "
+                  "one where a view lost more than half of its points: that view disagrees with the others)")
+      ->check(CLI::Range(0.0, 1.0));
+  cmd->add_flag("--allow-poor-fit", args->allow_poor_fit,
+                "write a solution that fails these checks (or has a singular covariance) anyway, with a warning on "
+                "stderr and stdout");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args] { return RunCalibRig(*args); }));
 });

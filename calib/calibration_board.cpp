@@ -70,6 +70,26 @@ Vec3 CalibrationBoard::Point(int id) const {
   return {x0 + kDx[corner] * tag_size_m, y0 + kDy[corner] * tag_size_m, 0.0};
 }
 
+std::vector<Pose> CalibrationBoard::NumberingSymmetries() const {
+  std::vector<Pose> out;
+  if (type != Type::kChessboard || (cols + rows) % 2 != 0) return out;
+  const Vec3 centre((cols - 1) * square_m / 2, (rows - 1) * square_m / 2, 0.0);
+  for (int quarter = 1; quarter < 4; ++quarter) {
+    if (cols != rows && quarter != 2) continue;
+    const Mat3 R = ExpSO3(Vec3(0, 0, quarter * M_PI / 2));
+    // Exact entries (0, +-1): the mapped points land exactly on grid points.
+    Mat3 Rr = R.array().round().matrix();
+    out.push_back(Pose{Rr, centre - Rr * centre});
+  }
+  return out;
+}
+
+double CalibrationBoard::SymmetryAngleDeg(const Pose& S) {
+  double a = std::atan2(S.R(1, 0), S.R(0, 0)) * 180.0 / M_PI;
+  if (a < 0) a += 360.0;
+  return a;
+}
+
 std::string CalibrationBoard::Describe() const {
   std::ostringstream s;
   if (type == Type::kChessboard)

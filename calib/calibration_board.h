@@ -46,6 +46,25 @@ struct CalibrationBoard {
 
   bool IsValid(std::string* why) const;
   int NumPoints() const;
+  // The numberings of the board's points a detector may report for one physical
+  // placement, as the rigid motions S of the board frame (in its plane, about the
+  // centre of the point grid) that map every point onto another: a view numbered
+  // through S reports the pixel of point S * P as the pixel of P. Identity excluded.
+  //
+  // cv::findChessboardCorners (the classic quad detector DetectBoard uses) starts
+  // its numbering at a grid corner next to a dark corner square, transposes to
+  // `cols` corners per row and then restores the handedness of the view, and for an
+  // even x even grid puts the first row above the last in the image. So, for a board
+  // seen from its printed side (tests/test_app_board_symmetry.cpp renders it):
+  //   cols + rows odd (e.g. 9 x 6):        the dark squares fix the numbering: none;
+  //   cols != rows, cols + rows even:      the half turn (which corner starts depends
+  //                                        on the image: how the camera is rolled);
+  //   cols == rows (any parity):           the quarter, half and three-quarter turns.
+  // AprilGrids: none (every tag carries its id).
+  std::vector<Pose> NumberingSymmetries() const;
+  // "half turn", "quarter turn" etc. of a symmetry from NumberingSymmetries: its
+  // rotation angle in degrees about the board normal, 0..360.
+  static double SymmetryAngleDeg(const Pose& S);
   // Board coordinates (m, z = 0) of point `id` (0 <= id < NumPoints()).
   Vec3 Point(int id) const;
   std::string Describe() const;

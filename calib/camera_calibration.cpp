@@ -233,40 +233,201 @@ std::vector<CameraModel> InitialCameras(const CameraCalibrationInput& input, con
   return models;
 }
 
+// RMS (per coordinate) of the observation's pixels against its board points mapped by
+// S and projected at T_cam_board; +infinity where a point is behind the camera.
+double ReprojectionRms(const CameraModel& cam, const BoardObservation& o, const Pose& T_cam_board, const Pose& S) {
+  double ss = 0.0;
+  for (size_t k = 0; k < o.pixels.size(); ++k) {
+    const Vec3 p = T_cam_board * (S * o.points_board[k]);
+    if (!(p.z() > 0.0)) return std::numeric_limits<double>::infinity();
+    const Vec2 q = cam.Project(p);
+    if (!q.allFinite()) return std::numeric_limits<double>::infinity();
+    ss += (q - o.pixels[k]).squaredNorm();
+  }
+  return std::sqrt(ss / std::max<size_t>(1, 2 * o.pixels.size()));
+}
+
+// Symmetric boards: a candidate T_cam_rig agrees with a frame when one of the frame's
+// candidates lies within this distance (rotation angle in rad + translation / the
+// typical board distance). A wrong numbering turns the candidate by 90 or 180 deg about
+// the board normal, so the exact value is not critical; it must exceed the scatter of
+// PnP poses from the initial intrinsics (a few degrees at worst).
+constexpr double kConsensusTolerance = 0.25;
+// ... and a frame's numbering is taken when its reprojection error is below this
+// fraction of the next best numbering's (a wrong numbering moves the corners by up to
+// the board's size in the image, the right one leaves the initial rig's error).
+constexpr double kDecisiveRatio = 0.5;
+
+std::string FrameCameraList(const CameraCalibrationInput& input, const std::vector<int>& cams) {
+  std::string s;
+  for (size_t k = 0; k < cams.size(); ++k) s += (k ? ", " : "") + input.camera_names[cams[k]];
+  return s;
+}
+
 // T_cam_rig of every camera, grown from camera 0 through shared frames, the camera
 // with the most shared frames first; each from the medoid of its candidates.
-std::vector<Pose> PlaceCameras(const CameraCalibrationInput& input, const std::vector<std::optional<Pose>>& T_cam_board,
-                               const std::vector<std::map<int, size_t>>& obs_of_frame, const LogFn& log) {
+//
+// With a symmetric board (input.board_symmetries) each shared frame gives one candidate
+// per numbering; the candidate that most frames agree with wins (refused when fewer
+// than two frames agree, or when a distinct candidate has as much support: the views
+// cannot tell the numberings apart). The new camera's observation of every frame it
+// shares with placed cameras is then renumbered to the numbering whose points
+// reproject best with the board pose the placed cameras saw; observations with no
+// decisive numbering are dropped. So all placed cameras of a frame always agree.
+std::vector<Pose> PlaceCameras(const CameraCalibrationInput& input, Observations& ob,
+                               const std::vector<CameraModel>& models, std::vector<std::optional<Pose>>& T_cam_board,
+                               std::vector<std::map<int, size_t>>& obs_of_frame, std::vector<bool>& dropped,
+                               const LogFn& log, CameraCalibrationResult& res) {
   const int ncam = static_cast<int>(input.camera_names.size());
+  const bool symmetric = !input.board_symmetries.empty();
+  std::vector<Pose> numberings = {Pose::Identity()};
+  numberings.insert(numberings.end(), input.board_symmetries.begin(), input.board_symmetries.end());
+  double scale = 0.0;
+  int nscale = 0;
+  for (const auto& T : T_cam_board)
+    if (T) scale += T->t.norm(), ++nscale;
+  scale = std::max(scale / std::max(1, nscale), 1e-6);
+  auto distance = [&](const Pose& a, const Pose& b) { return RotationAngle(a.R, b.R) + (a.t - b.t).norm() / scale; };
+
   std::vector<std::optional<Pose>> T_cam_rig(ncam);
   T_cam_rig[0] = Pose::Identity();
   for (int placed = 1; placed < ncam; ++placed) {
-    int best_cam = -1;
-    std::vector<Pose> best_candidates;
-    for (int c = 0; c < ncam; ++c) {
-      if (T_cam_rig[c]) continue;
-      std::vector<Pose> candidates;
+    // The unplaced camera with the most views shared with placed cameras (a frame
+    // counts once per placed camera in it).
+    int c = -1;
+    size_t best_views = 0;
+    for (int k = 0; k < ncam; ++k) {
+      if (T_cam_rig[k]) continue;
+      size_t n = 0;
       for (const auto& frame : obs_of_frame) {
-        const auto it = frame.find(c);
-        if (it == frame.end()) continue;
-        for (const auto& [j, oj] : frame)
-          if (j != c && T_cam_rig[j])
-            candidates.push_back(*T_cam_board[it->second] * T_cam_board[oj]->Inverse() * *T_cam_rig[j]);
+        if (!frame.count(k)) continue;
+        for (const auto& [j, oj] : frame) n += j != k && T_cam_rig[j].has_value();
       }
-      if (candidates.size() > best_candidates.size()) best_cam = c, best_candidates = candidates;
+      if (n > best_views) c = k, best_views = n;
     }
-    if (best_cam < 0) {
+    if (c < 0) {
       std::ostringstream s;
-      for (int c = 0; c < ncam; ++c)
-        if (!T_cam_rig[c]) s << (s.str().empty() ? "" : ", ") << input.camera_names[c];
+      for (int k = 0; k < ncam; ++k)
+        if (!T_cam_rig[k]) s << (s.str().empty() ? "" : ", ") << input.camera_names[k];
       Throw("camera calibration: camera(s) ", s.str(), " never saw the board in the same frame as ",
             input.camera_names[0],
             " (directly or through other cameras), so their pose in the rig is unknown; take images where the "
             "board is seen by these cameras and an already connected camera at the same time");
     }
-    T_cam_rig[best_cam] = MedoidPose(best_candidates);
-    log("placed " + input.camera_names[best_cam] + " from " + std::to_string(best_candidates.size()) +
-        " shared board views");
+    // Candidates T_c_rig = T_c_board S^-1 T_j_board^-1 T_j_rig, per shared frame f, placed camera j and
+    // numbering S (the observation's points renumbered to S P: its pose becomes T_c_board S^-1).
+    struct Candidate {
+      int frame;
+      Pose X;
+    };
+    std::vector<Candidate> candidates;
+    std::vector<int> frames;
+    std::set<int> placed_partners;
+    for (int f = 0; f < static_cast<int>(obs_of_frame.size()); ++f) {
+      const auto it = obs_of_frame[f].find(c);
+      if (it == obs_of_frame[f].end()) continue;
+      bool any = false;
+      for (const auto& [j, oj] : obs_of_frame[f]) {
+        if (j == c || !T_cam_rig[j]) continue;
+        any = true;
+        placed_partners.insert(j);
+        for (const Pose& S : numberings)
+          candidates.push_back({f, *T_cam_board[it->second] * S.Inverse() * T_cam_board[oj]->Inverse() * *T_cam_rig[j]});
+      }
+      if (any) frames.push_back(f);
+    }
+    const std::string partners = FrameCameraList(input, {placed_partners.begin(), placed_partners.end()});
+    if (!symmetric) {
+      std::vector<Pose> poses;
+      for (const Candidate& k : candidates) poses.push_back(k.X);
+      T_cam_rig[c] = MedoidPose(poses);
+      log("placed " + input.camera_names[c] + " from " + std::to_string(poses.size()) + " shared board views");
+      continue;
+    }
+    // Support of X: the frames with a candidate within the tolerance; cost: truncated distances.
+    auto support = [&](const Pose& X, double* cost) {
+      std::map<int, double> nearest;
+      for (const Candidate& k : candidates) {
+        const double d = distance(X, k.X);
+        auto [it, fresh] = nearest.emplace(k.frame, d);
+        if (!fresh) it->second = std::min(it->second, d);
+      }
+      int n = 0;
+      *cost = 0.0;
+      for (const auto& [f, d] : nearest) n += d < kConsensusTolerance, *cost += std::min(d, kConsensusTolerance);
+      return n;
+    };
+    int best = -1, best_support = 0;
+    double best_cost = 0.0;
+    std::vector<int> supports(candidates.size());
+    for (size_t a = 0; a < candidates.size(); ++a) {
+      double cost;
+      supports[a] = support(candidates[a].X, &cost);
+      if (best < 0 || supports[a] > best_support || (supports[a] == best_support && cost < best_cost))
+        best = static_cast<int>(a), best_support = supports[a], best_cost = cost;
+    }
+    int rival_support = 0;
+    for (size_t a = 0; a < candidates.size(); ++a)
+      if (distance(candidates[a].X, candidates[best].X) > 2 * kConsensusTolerance)
+        rival_support = std::max(rival_support, supports[a]);
+    if (best_support < 2 || rival_support >= best_support)
+      Throw("camera calibration: the board's numbering is symmetric (the detector may number it turned by 90 or "
+            "180 deg), and the ", frames.size(), " frame(s) camera ", input.camera_names[c], " shares with ",
+            partners, " do not tell which numbering of its views matches theirs (",
+            best_support, " frame(s) agree on its best pose, ", rival_support,
+            " on a pose turned against it); take more views with the board tilted in different directions, or use "
+            "a chessboard with one even and one odd number of inner corners (e.g. 9 x 6), whose numbering is "
+            "unique; no output written");
+    std::vector<Pose> agreeing;
+    for (int f : frames) {
+      const Candidate* nearest = nullptr;
+      for (const Candidate& k : candidates)
+        if (k.frame == f && (!nearest || distance(k.X, candidates[best].X) < distance(nearest->X, candidates[best].X)))
+          nearest = &k;
+      if (nearest && distance(nearest->X, candidates[best].X) < kConsensusTolerance) agreeing.push_back(nearest->X);
+    }
+    T_cam_rig[c] = MedoidPose(agreeing);
+    log("placed " + input.camera_names[c] + " from " + std::to_string(agreeing.size()) + " of " +
+        std::to_string(frames.size()) + " shared frames (numbering of the symmetric board checked per frame)");
+    // Per shared frame: the numbering of c's observation that reprojects best with the
+    // board pose the frame's placed cameras saw.
+    for (int f : frames) {
+      const size_t oc = obs_of_frame[f].at(c);
+      std::vector<Pose> boards;
+      for (const auto& [j, oj] : obs_of_frame[f])
+        if (j != c && T_cam_rig[j]) boards.push_back(T_cam_rig[j]->Inverse() * *T_cam_board[oj]);
+      const Pose T_c_board = *T_cam_rig[c] * MedoidPose(boards);
+      std::vector<std::pair<double, int>> rms;
+      for (size_t s = 0; s < numberings.size(); ++s)
+        rms.emplace_back(ReprojectionRms(models[c], ob.obs[oc], T_c_board, numberings[s]), static_cast<int>(s));
+      std::sort(rms.begin(), rms.end());
+      if (!(rms[0].first < kDecisiveRatio * rms[1].first)) {
+        std::ostringstream why;
+        why.precision(3);
+        why << "its numbering of the symmetric board could not be matched with the other cameras' (reprojection "
+            << rms[0].first << " px under the best numbering, " << rms[1].first << " px under the next)";
+        res.dropped.push_back({c, f, why.str()});
+        log("frame " + std::to_string(f) + ", " + input.camera_names[c] + ": left out: " + why.str());
+        dropped[oc] = true;
+        obs_of_frame[f].erase(c);
+        continue;
+      }
+      if (rms[0].second == 0) continue;
+      const Pose& S = numberings[rms[0].second];
+      double as_numbered = 0.0;
+      for (const auto& [r, s] : rms)
+        if (s == 0) as_numbered = r;
+      for (Vec3& P : ob.obs[oc].points_board) P = S * P;
+      T_cam_board[oc] = *T_cam_board[oc] * S.Inverse();
+      const double angle = std::atan2(S.R(1, 0), S.R(0, 0)) * 180.0 / M_PI;
+      res.renumbered.push_back({c, f, angle < 0 ? angle + 360.0 : angle, rms[0].first, rms[1].first});
+      std::ostringstream m;
+      m.precision(3);
+      m << "frame " << f << ", " << input.camera_names[c] << ": the detector numbered the symmetric board turned by "
+        << res.renumbered.back().angle_deg << " deg against " << partners << "; renumbered (reprojection "
+        << rms[0].first << " px, " << as_numbered << " px as numbered)";
+      log(m.str());
+    }
   }
   std::vector<Pose> out;
   for (const auto& T : T_cam_rig) out.push_back(*T);
@@ -274,8 +435,9 @@ std::vector<Pose> PlaceCameras(const CameraCalibrationInput& input, const std::v
 }
 
 // Intrinsics, extrinsics and one board pose per frame (medoid of its cameras' PnP poses).
-State Initialise(const CameraCalibrationInput& input, const Observations& ob, const CameraCalibrationOptions& options,
-                 const LogFn& log) {
+// Observations PlaceCameras drops are removed from `ob`.
+State Initialise(const CameraCalibrationInput& input, Observations& ob, const CameraCalibrationOptions& options,
+                 const LogFn& log, CameraCalibrationResult& res) {
   const std::vector<CameraModel> models = InitialCameras(input, ob, options, log);
   std::vector<std::optional<Pose>> T_cam_board(ob.obs.size());
   std::vector<std::map<int, size_t>> obs_of_frame(ob.nframes);  // frame -> camera -> obs index
@@ -283,7 +445,31 @@ State Initialise(const CameraCalibrationInput& input, const Observations& ob, co
     T_cam_board[i] = SolveBoardPose(ob.obs[i], models[ob.obs[i].camera]);
     if (T_cam_board[i]) obs_of_frame[ob.obs[i].frame][ob.obs[i].camera] = i;
   }
-  const std::vector<Pose> T_cam_rig = PlaceCameras(input, T_cam_board, obs_of_frame, log);
+  std::vector<bool> dropped(ob.obs.size(), false);
+  if (!input.board_symmetries.empty())
+    for (size_t i = 0; i < ob.obs.size(); ++i) {
+      const BoardObservation& o = ob.obs[i];
+      if (T_cam_board[i] || obs_of_frame[o.frame].empty()) continue;
+      // Its numbering cannot be compared with the frame's other cameras.
+      dropped[i] = true;
+      res.dropped.push_back({o.camera, o.frame,
+                             "its board pose could not be estimated (PnP), so its numbering of the symmetric board "
+                             "cannot be matched with the frame's other cameras"});
+    }
+  const std::vector<Pose> T_cam_rig = PlaceCameras(input, ob, models, T_cam_board, obs_of_frame, dropped, log, res);
+  if (std::find(dropped.begin(), dropped.end(), true) != dropped.end()) {
+    std::vector<BoardObservation> kept;
+    std::vector<std::optional<Pose>> kept_T;
+    for (size_t i = 0; i < ob.obs.size(); ++i)
+      if (!dropped[i]) kept.push_back(std::move(ob.obs[i])), kept_T.push_back(T_cam_board[i]);
+    ob.obs = std::move(kept);
+    T_cam_board = std::move(kept_T);
+    ob.per_cam.assign(input.camera_names.size(), {});
+    for (const BoardObservation& o : ob.obs) ob.per_cam[o.camera].push_back(&o);
+    obs_of_frame.assign(ob.nframes, {});
+    for (size_t i = 0; i < ob.obs.size(); ++i)
+      if (T_cam_board[i]) obs_of_frame[ob.obs[i].frame][ob.obs[i].camera] = i;
+  }
   State st;
   for (const CameraModel& m : models) st.intrinsics.push_back(m.Intrinsics());
   for (const Pose& T : T_cam_rig) st.rt_cam_rig.push_back(ToRt(T));
@@ -579,6 +765,22 @@ void ComputeCovariance(RigProblem& rp, const CameraCalibrationOptions& options, 
     return s;
   };
   for (int i = 0; i < na; ++i) res.covariance_singular |= !(cov(i, i) > 0.0 && std::isfinite(cov(i, i)));
+  // The covariance must be positive definite: the Schur complement, scaled to unit
+  // diagonal (its parameters' units differ by orders of magnitude), with no eigenvalue
+  // at or below working precision. A solve that went astray (e.g. a board numbered
+  // differently by two cameras) can end where it is not, and its "standard deviations"
+  // then print as 0 and its projection uncertainties as 0 or 1e6 px.
+  if (na > 0 && !res.covariance_singular) {
+    const Eigen::VectorXd d = S.diagonal();
+    if (!(d.minCoeff() > 0.0) || !d.allFinite()) {
+      res.covariance_singular = true;
+    } else {
+      const Eigen::VectorXd inv_sqrt = d.cwiseSqrt().cwiseInverse();
+      const Eigen::MatrixXd Sn = inv_sqrt.asDiagonal() * S * inv_sqrt.asDiagonal();
+      const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Sn, Eigen::EigenvaluesOnly);
+      res.covariance_singular = eig.info() != Eigen::Success || !(eig.eigenvalues().minCoeff() > 1e-13 * na);
+    }
+  }
   for (int c = 0; c < ncam; ++c) {
     const int n = static_cast<int>(st.intrinsics[c].size());
     res.intrinsics_covariance.push_back(options.fix_intrinsics ? Eigen::MatrixXd::Zero(n, n)
@@ -593,6 +795,48 @@ void ComputeCovariance(RigProblem& rp, const CameraCalibrationOptions& options, 
     res.board_warp_std_m = stddev(cov.block<2, 2>(warp_offset, warp_offset).diagonal());
 }
 
+// The views' noise floor (CameraCalibrationResult::views_alone_variance_px2).
+// The board points carry the solved warp (RigProblem's shape over the same extent), so
+// that a warped board's views are compared like with like.
+double ViewsAloneVariance(const CameraCalibrationResult& res) {
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const BoardObservation& o : res.observations)
+    for (const Vec3& P : o.points_board) lo = lo.cwiseMin(P.head<2>()), hi = hi.cwiseMax(P.head<2>());
+  auto warped = [&](Vec3 P) {
+    for (int d = 0; d < 2; ++d) {
+      const double u = hi[d] > lo[d] ? 2.0 * (P[d] - lo[d]) / (hi[d] - lo[d]) - 1.0 : 0.0;
+      P.z() += res.board_warp_m[d] * (1.0 - u * u);
+    }
+    return P;
+  };
+  double ss = 0.0;
+  int dof = 0;
+  for (size_t i = 0; i < res.observations.size(); ++i) {
+    const BoardObservation& o = res.observations[i];
+    BoardObservation in = o;
+    in.points_board.clear();
+    in.pixels.clear();
+    in.weights.clear();
+    for (size_t k = 0; k < o.pixels.size(); ++k)
+      if (res.observation_inliers[i][k]) {
+        in.points_board.push_back(warped(o.points_board[k]));
+        in.pixels.push_back(o.pixels[k]);
+        if (!o.weights.empty()) in.weights.push_back(o.weights[k]);
+      }
+    if (in.pixels.size() < 4) continue;
+    const CameraModel& cam = res.rig.cameras[o.camera];
+    const auto T = SolveBoardPose(in, cam);
+    if (!T) continue;
+    for (size_t k = 0; k < in.pixels.size(); ++k) {
+      const Vec3 p = *T * in.points_board[k];
+      const Vec2 q = cam.Project(p);
+      if (p.z() > 0.0 && q.allFinite()) ss += (in.Weight(k) * (q - in.pixels[k])).squaredNorm();
+    }
+    dof += 2 * static_cast<int>(in.pixels.size()) - 6;
+  }
+  return dof > 0 ? ss / dof : std::numeric_limits<double>::quiet_NaN();
+}
+
 // One lens model, all steps.
 CameraCalibrationResult CalibrateWithLensModel(const CameraCalibrationInput& input,
                                                const CameraCalibrationOptions& options) {
@@ -600,12 +844,13 @@ CameraCalibrationResult CalibrateWithLensModel(const CameraCalibrationInput& inp
   const LogFn log = [&](const std::string& s) {
     if (options.log) options.log(s);
   };
-  const Observations ob = PrepareObservations(input, options);
-  RigProblem rp(ob, Initialise(input, ob, options, log), options);
+  Observations ob = PrepareObservations(input, options);
   CameraCalibrationResult res;
+  RigProblem rp(ob, Initialise(input, ob, options, log, res), options);
   SolveWithOutlierRejection(rp, options, log, res);
   CollectSolution(rp, input, ob, options, res);
   ComputeCovariance(rp, options, res);
+  res.views_alone_variance_px2 = ViewsAloneVariance(res);
   res.lensmodel = options.lensmodel;
   return res;
 }
@@ -715,6 +960,92 @@ CameraCalibrationResult CalibrateCameras(const CameraCalibrationInput& input, co
   return CalibrateWithLensModel(input, options);
 }
 
+
+bool CalibrationQualityLimits::IsValid(std::string* why) const {
+  std::ostringstream s;
+  if (!(max_noise_ratio >= 1.0)) s << "max_noise_ratio must be >= 1 (got " << max_noise_ratio << ")";
+  else if (!(max_rms_px > 0.0)) s << "max_rms_px must be > 0 px (got " << max_rms_px << ")";
+  else if (!(max_outlier_fraction >= 0.0 && max_outlier_fraction <= 1.0))
+    s << "max_outlier_fraction must be within 0..1 (got " << max_outlier_fraction << ")";
+  else if (!(max_view_outlier_fraction >= 0.0 && max_view_outlier_fraction <= 1.0))
+    s << "max_view_outlier_fraction must be within 0..1 (got " << max_view_outlier_fraction << ")";
+  if (why) *why = s.str();
+  return s.str().empty();
+}
+
+std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& r, const CalibrationQualityLimits& limits,
+                                             const std::vector<std::string>& frame_names) {
+  std::string why;
+  if (!limits.IsValid(&why)) Throw("calibration quality limits: ", why);
+  std::vector<std::string> out;
+  auto add = [&](auto&&... parts) {
+    std::ostringstream s;
+    s.setf(std::ios::fixed);
+    s.precision(3);
+    (s << ... << parts);
+    out.push_back(s.str());
+  };
+  if (r.rig.size() == 0 || r.residuals.size() != r.rig.size() || r.intrinsics_std.size() != r.rig.size()) {
+    add("the result holds no solved rig");
+    return out;
+  }
+  if (!r.converged)
+    add("the last bundle adjustment did not converge in ", r.iterations, " iterations (", r.solver_message, ")");
+  if (!(r.rms_px <= limits.max_rms_px))
+    add("the residual RMS is ", r.rms_px, " px per coordinate, above the limit of ", limits.max_rms_px, " px");
+  const double ratio = std::sqrt(r.residual_variance_px2 / r.views_alone_variance_px2);
+  if (std::isfinite(ratio) && ratio > limits.max_noise_ratio)
+    add("the residual (", std::sqrt(r.residual_variance_px2), " px per coordinate) is ", std::setprecision(2), ratio,
+        " times the views' own noise floor (", std::setprecision(3), std::sqrt(r.views_alone_variance_px2),
+        " px, each view's board pose fitted alone; limit ", std::setprecision(2), limits.max_noise_ratio,
+        "): the views do not agree with one rig (a board numbered differently in two cameras, images of different "
+        "moments under one frame name, a camera that moved, a board that is not flat)");
+  const int total = r.num_inliers + r.num_outliers;
+  if (total > 0 && r.num_outliers > limits.max_outlier_fraction * total) {
+    std::ostringstream per;
+    for (size_t c = 0; c < r.residuals.size(); ++c)
+      per << (c ? ", " : "") << r.rig.names[c] << " " << r.residuals[c].num_outliers << "/" << r.residuals[c].num_points;
+    add(r.num_outliers, " of ", total, " points (", std::setprecision(1), 100.0 * r.num_outliers / total,
+        " %) were rejected as outliers (", per.str(), "), more than ", 100.0 * limits.max_outlier_fraction, " %");
+  }
+  for (size_t i = 0; i < r.observations.size() && i < r.observation_inliers.size(); ++i) {
+    const auto& inl = r.observation_inliers[i];
+    const int n = static_cast<int>(inl.size());
+    const int rejected = static_cast<int>(std::count(inl.begin(), inl.end(), false));
+    if (n > 0 && rejected > limits.max_view_outlier_fraction * n)
+      add("frame ",
+          r.observations[i].frame < static_cast<int>(frame_names.size()) ? frame_names[r.observations[i].frame]
+                                                                         : std::to_string(r.observations[i].frame),
+          ", ", r.rig.names[r.observations[i].camera], ": ", rejected, " of ", n,
+          " points were rejected as outliers (more than ", std::setprecision(0),
+          100.0 * limits.max_view_outlier_fraction, std::setprecision(3),
+          " %): the view as a whole disagrees with the others (numbered differently, taken at another moment, or "
+          "of another board)");
+  }
+  bool any_bad_std = false;
+  for (size_t c = 0; c < r.rig.size(); ++c) {
+    const Eigen::VectorXd& sd = r.intrinsics_std[c];
+    bool bad = false;
+    for (int i = 0; i < sd.size(); ++i) bad |= !(sd[i] > 0.0 && std::isfinite(sd[i]));
+    const bool fixed = sd.size() > 0 && sd.isZero(0.0);  // intrinsics held fixed
+    any_bad_std |= bad && !fixed;
+    if (bad && !fixed)
+      add(r.rig.names[c], ": an intrinsic parameter's standard deviation is zero, infinite or not a number (the "
+                          "normal matrix is singular or not positive definite: the views do not determine it)");
+    if (c > 0) {
+      bool bad_ext = false;
+      for (int i = 0; i < 6; ++i) bad_ext |= !(r.extrinsics_std[c][i] > 0.0 && std::isfinite(r.extrinsics_std[c][i]));
+      any_bad_std |= bad_ext;
+      if (bad_ext)
+        add(r.rig.names[c], ": a standard deviation of its pose in the rig is zero, infinite or not a number (the "
+                            "normal matrix is singular or not positive definite)");
+    }
+  }
+  if (r.covariance_singular && !any_bad_std)
+    add("the parameter covariance is singular or not positive definite: some parameters of ", r.lensmodel,
+        " are not determined by the views (their standard deviations and the projection uncertainty mean nothing)");
+  return out;
+}
 
 std::optional<Mat2> ProjectionCovariance(const CameraModel& camera, const Eigen::MatrixXd& cov_intrinsics,
                                          const Vec2& q, double range_m) {

@@ -11,7 +11,17 @@
 // ComputeCovariance; "auto" runs these per candidate model and SelectLensModel picks.
 //
 // Initialisation: cv::calibrateCamera per camera, cv::solvePnP per observation,
-// extrinsics from the board poses of frames that two cameras share. Outliers are
+// extrinsics from the board poses of frames that two cameras share. A board whose
+// numbering is symmetric (CameraCalibrationInput::board_symmetries, e.g. a 10 x 10
+// chessboard, which OpenCV may number turned by 90, 180 or 270 deg in each image) is
+// renumbered there, per frame and camera, to agree with the frame's other cameras:
+// each camera's extrinsics from the candidate (one per shared frame and numbering) that
+// most frames agree with, each observation's numbering from the reprojection error
+// with the board pose the other cameras saw (PlaceCameras; see
+// CameraCalibrationResult::renumbered and dropped). A single camera's calibration does
+// not depend on the numbering. CalibrationProblems then says whether the solution may
+// be trusted (convergence, residual against the views' own noise, outliers per view
+// and overall, a positive-definite covariance). Outliers are
 // rejected mrcal-style, with hysteresis: after each solve, when some inlier has a
 // coordinate error beyond (k + 1) sigma (sigma: inlier RMS per coordinate), every
 // point with a coordinate beyond k sigma is dropped and the problem re-solved. Without
@@ -57,6 +67,30 @@ struct CameraCalibrationInput {
   std::vector<std::string> camera_names;  // one per camera
   std::vector<int> widths, heights;       // image size per camera
   std::vector<BoardObservation> observations;
+  // The numberings the detector may have given one placement of the board, as rigid
+  // motions of the board frame mapping its points onto each other
+  // (CalibrationBoard::NumberingSymmetries; empty: the numbering is unique). With
+  // them, the observations of a frame seen by several cameras are renumbered to agree
+  // (see CameraCalibrationResult::renumbered); without them a symmetric board whose
+  // numbering differs between cameras gives a wrong rig.
+  std::vector<Pose> board_symmetries;
+};
+
+// One observation renumbered to agree with the other cameras of its frame: its board
+// points were replaced by S * P (S one of the input's board_symmetries, a turn by
+// angle_deg about the board normal). rms_px: the initial rig's reprojection error
+// (per coordinate) of the observation's pixels with the board pose the frame's other
+// cameras saw, under the chosen numbering; next_rms_px: under the next best one.
+struct BoardRenumbering {
+  int camera = 0, frame = 0;
+  double angle_deg = 0.0;
+  double rms_px = 0.0, next_rms_px = 0.0;
+};
+
+// An observation left out of the solve, and why.
+struct DroppedObservation {
+  int camera = 0, frame = 0;
+  std::string reason;
 };
 
 struct CameraCalibrationOptions {
@@ -170,6 +204,15 @@ struct CameraCalibrationResult {
   // pose), and per observation and point whether it stayed an inlier.
   std::vector<BoardObservation> observations;
   std::vector<std::vector<bool>> observation_inliers;
+  // The noise floor of the views: every observation's board pose solved on its own with
+  // the solved intrinsics (inlier points), sum |e|^2 / sum (2 n - 6) over them. Views
+  // that agree with one rig give residual_variance_px2 close to it; a view numbered
+  // differently, taken at another moment or by a moved camera raises the ratio.
+  double views_alone_variance_px2 = 0.0;
+  // Symmetric boards (input.board_symmetries): the observations renumbered to agree
+  // with their frame's other cameras, and those whose numbering could not be matched.
+  std::vector<BoardRenumbering> renumbered;
+  std::vector<DroppedObservation> dropped;
   // Covariance of each camera's intrinsics (NumIntrinsics square, in the units of
   // the intrinsics; zero when they were held fixed) and std of rt_cam_rig (rad, m; zero for camera 0, which
   // defines the rig frame). Board poses are marginalised (Schur complement).
@@ -184,6 +227,32 @@ struct CameraCalibrationResult {
   // Every solved parameter's covariance (what ProjectionCovarianceMeanFrames needs).
   CalibrationCovariance covariance;
 };
+
+// When a solution must not be used without a loud warning (calib-rig refuses to write it).
+struct CalibrationQualityLimits {
+  // sqrt(residual_variance_px2 / views_alone_variance_px2): how far the joint residual
+  // is above the views' own noise floor.
+  double max_noise_ratio = 1.5;
+  double max_rms_px = 1.0;               // per coordinate, inliers, absolute
+  double max_outlier_fraction = 0.10;    // rejected points / observed points, overall
+  // ... and in any one view (one camera's observation of one frame): most of a view's
+  // points rejected means the view disagrees with the rest as a whole (a wrong view,
+  // not noisy corners, which spread their outliers over all views).
+  double max_view_outlier_fraction = 0.5;
+  bool IsValid(std::string* why) const;
+};
+
+// Why the solution is not trustworthy, one sentence each with the figures (empty: none):
+// the last solve did not converge; the residual is above max_rms_px or far above the
+// views' noise floor (max_noise_ratio); more than max_outlier_fraction of the points
+// were rejected, or more than max_view_outlier_fraction of one view's (named by camera
+// and frame index); a parameter's standard deviation is zero, infinite or not a number
+// (the covariance is singular or not positive definite); camera 0 is not among the
+// cameras (a result not from CalibrateCameras).
+// frame_names (optional, by frame index) name the frames in the sentences.
+std::vector<std::string> CalibrationProblems(const CameraCalibrationResult& result,
+                                             const CalibrationQualityLimits& limits,
+                                             const std::vector<std::string>& frame_names = {});
 
 // Solves. InputError when a camera has no usable observation or is not connected to
 // camera 0 through shared frames (message names the camera and the remedy), when the

@@ -516,6 +516,32 @@ TEST(AppCalibRig, UnconvergedSolveIsRefusedWithoutOutput) {
                 {d / "out" / "left.cameramodel", d / "out" / "left.yml", d / "out" / "rig.yaml"});
 }
 
+// A solution whose covariance is singular (OPENCV8 on OpenCV's 13 left views: a
+// distortion coefficient the views do not determine, its "standard deviation" infinite)
+// is not trustworthy (issue 14): refused with the reason and nothing written, unless
+// --allow-poor-fit, which writes it with the warning on stderr and stdout. This solve
+// is so ill-conditioned that whether it converges within 200 iterations depends on the
+// last bits of rounding (it changes with the heap layout, e.g. the length of the -o
+// name, also before issue 14's changes); when it does not, that refusal stands.
+TEST(AppCalibRig, UndeterminedLensIsRefusedWithoutOutput) {
+  MCMS_REQUIRE_DATA(data, "opencv-stereo-chessboard");
+  const fs::path d = test::ScratchDir("app_calib_rig_undetermined");
+  WriteText(d / "board.yaml", kChessboardYaml);
+  LinkLeftViews(data, d / "left");
+  const CliRun r = Mcms(d, "calib-rig -q board.yaml left -m LENSMODEL_OPENCV8 -o out");
+  const std::vector<fs::path> outputs = {d / "out" / "left.cameramodel", d / "out" / "left.yml", d / "out" / "rig.yaml"};
+  if (r.err.find("did not converge") != std::string::npos) {
+    ExpectRefused(r, d, {"did not converge", "no output written"}, outputs);
+    GTEST_SKIP() << "skipped: this time the ill-conditioned OPENCV8 solve did not converge (refused for that)";
+  }
+  ExpectRefused(r, d, {"not trustworthy", "standard deviation", "no output written", "--allow-poor-fit"}, outputs);
+  const CliRun w = Mcms(d, "calib-rig -q board.yaml left -m LENSMODEL_OPENCV8 -o out --allow-poor-fit");
+  EXPECT_EQ(w.code, 0) << w.err;
+  EXPECT_NE(w.err.find("WARNING: the calibration is not trustworthy"), std::string::npos) << w.err;
+  EXPECT_NE(w.out.find("WARNING: the calibration is not trustworthy"), std::string::npos) << w.out;
+  EXPECT_TRUE(fs::exists(d / "out" / "left.cameramodel"));
+}
+
 // -o naming an existing file (not a folder) is bad input: an input error naming it
 // (exit 2, "mcms: error: ..."), not an internal error, and no model anywhere.
 TEST(AppCalibRig, OutputFolderThatIsAFileIsRefused) {

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/calibration_board.h"
 #include "calib/camera_calibration.h"
 #include "core/error.h"
 #include "tests/test_util.h"
@@ -202,6 +203,46 @@ TEST(CalibCameraMrcal, FigueroaOpenCv8MatchesMrcal) {
               r.board_warp_m[1], r.board_warp_std_m[0], r.board_warp_std_m[1]);
   EXPECT_NEAR(r.board_warp_m[0], -0.00104, 5e-5);
   EXPECT_NEAR(r.board_warp_m[1], 0.00052, 5e-5);
+}
+
+// Real data through the quality checks calib-rig applies before writing a model
+// (issue 14): mrcal's Figueroa solution passes them, as solved above (mrcal's inlier
+// set) and with this project's defaults (k = 4 outlier rejection) and the 10 x 10
+// board's numbering symmetries (one camera: nothing to renumber).
+TEST(CalibCameraMrcal, FigueroaPassesTheQualityChecks) {
+  MCMS_REQUIRE_DATA(dir, "mrcal-figueroa");
+  const Figueroa& fig = SolveFigueroa(dir);
+  if (!fig.skip.empty()) GTEST_SKIP() << fig.skip;
+  const CalibrationQualityLimits limits;
+  auto report = [](const char* what, const CameraCalibrationResult& r, const std::vector<std::string>& problems) {
+    std::printf("figueroa (%s): RMS %.4f px, noise floor of the views alone %.4f px (ratio %.3f), %d of %d points "
+                "rejected, covariance %s; %zu problem(s)\n",
+                what, r.rms_px, std::sqrt(r.views_alone_variance_px2),
+                std::sqrt(r.residual_variance_px2 / r.views_alone_variance_px2), r.num_outliers,
+                r.num_outliers + r.num_inliers, r.covariance_singular ? "SINGULAR" : "positive definite",
+                problems.size());
+    for (const auto& p : problems) std::printf("  - %s\n", p.c_str());
+    // The views' own noise floor is the residual's scale (like with like: same lens,
+    // same warp), not merely a bound.
+    EXPECT_NEAR(std::sqrt(r.residual_variance_px2 / r.views_alone_variance_px2), 1.0, 0.1) << what;
+  };
+  const std::vector<std::string> problems = CalibrationProblems(fig.r, limits);
+  report("mrcal's inliers", fig.r, problems);
+  EXPECT_TRUE(problems.empty());
+
+  CameraCalibrationInput in = fig.in;
+  const double spacing = fig.in.observations[0].points_board[1].x();
+  in.board_symmetries = CalibrationBoard::Chessboard(10, 10, spacing).NumberingSymmetries();
+  ASSERT_EQ(in.board_symmetries.size(), 3u);
+  CameraCalibrationOptions opt;
+  opt.lensmodel = "LENSMODEL_OPENCV8";
+  opt.solve_board_warp = true;
+  const CameraCalibrationResult r = CalibrateCameras(in, opt);
+  const std::vector<std::string> p2 = CalibrationProblems(r, limits);
+  report("defaults", r, p2);
+  EXPECT_TRUE(r.renumbered.empty());
+  EXPECT_TRUE(r.dropped.empty());
+  EXPECT_TRUE(p2.empty());
 }
 
 // Our mean-frames projection uncertainty from our own solve against mrcal's
