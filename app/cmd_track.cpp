@@ -93,19 +93,31 @@ int RunTrack(const TrackArgs& a) {
   for (const auto& line : notes) std::printf("%s\n", line.c_str());
   std::fflush(stdout);
   Progress progress("track", seq.frames.size(), a.quiet);
-  const auto results = TrackImageSequence(
-      seq, tracker, [&](size_t d, size_t) { progress.Update(d); }, a.tracker.Threads());
-  progress.Finish();
+  // Each frame's row is written (to a temporary file beside the output) as it finishes, and
+  // the summaries are running sums: memory does not grow with the length of the recording.
+  PoseCsvWriter writer(out);
+  PoseResidualCheck check;
+  size_t frames_done = 0;
   int ok = 0, degraded = 0, lost = 0;
-  for (const auto& r : results) (r.status == FrameStatus::kOk ? ok : r.status == FrameStatus::kDegraded ? degraded : lost)++;
+  std::string first_reason;
+  TrackImageSequenceStreaming(
+      seq, tracker,
+      [&](FrameResult&& r) {
+        if (frames_done++ == 0) first_reason = r.reason;
+        (r.status == FrameStatus::kOk ? ok : r.status == FrameStatus::kDegraded ? degraded : lost)++;
+        check.Add(r);
+        writer.Add(r);
+      },
+      [&](size_t d, size_t) { progress.Update(d); }, a.tracker.Threads());
+  progress.Finish();
   if (ok + degraded == 0)
-    Throw("target never found in any of the ", results.size(), " frames of ", images.string(),
-          " (first frame: ", results.front().reason, "); no output written");
-  const PoseResidualCheck check = CheckPoseResiduals(results);
+    Throw("target never found in any of the ", frames_done, " frames of ", images.string(), " (first frame: ", first_reason,
+          "); no output written");
+  check.Finish();
   notes.push_back(check.Describe());
   std::printf("%s\n", check.Describe().c_str());
-  WritePoseCsv(out, results, notes);
-  std::printf("tracked %zu frames: %d ok, %d degraded, %d lost -> %s\n", results.size(), ok, degraded, lost,
+  writer.Finish(notes);
+  std::printf("tracked %zu frames: %d ok, %d degraded, %d lost -> %s\n", frames_done, ok, degraded, lost,
               out.string().c_str());
   return 0;
 }
