@@ -111,23 +111,40 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
     Throw("camera count mismatch: the rig has ", rig.size(), " cameras but ", in.images_dir.string(), " holds ",
           folders.size(), " camera folders (not in the rig: ", extra, ")");
   }
-  std::map<size_t, std::vector<fs::path>> by_frame;
-  for (size_t c = 0; c < rig.size(); ++c) {
+  // Per camera (frame, file name), sorted; then the union of their frames. No path object
+  // per image: a long recording's listing stays small.
+  const size_t ncam = rig.size();
+  std::vector<std::vector<std::pair<size_t, std::string>>> per_camera(ncam);
+  for (size_t c = 0; c < ncam; ++c) {
     for (const auto& e : fs::directory_iterator(in.images_dir / rig.names[c])) {
       if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
       const auto f = FrameNumber(e.path());
       if (!f) continue;
-      auto& v = by_frame[*f];
-      v.resize(rig.size());
-      v[c] = e.path();
+      per_camera[c].emplace_back(*f, e.path().filename().string());
     }
+    std::sort(per_camera[c].begin(), per_camera[c].end());
   }
-  if (by_frame.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
   ImageSequence seq;
-  for (auto& [f, paths] : by_frame) {
-    seq.frames.push_back(f);
-    paths.resize(rig.size());
-    seq.image_paths.push_back(paths);
+  for (size_t c = 0; c < ncam; ++c) seq.camera_dirs.push_back(in.images_dir / rig.names[c]);
+  {
+    std::vector<size_t> all;
+    for (const auto& v : per_camera)
+      for (const auto& [f, name] : v) all.push_back(f);
+    std::sort(all.begin(), all.end());
+    all.erase(std::unique(all.begin(), all.end()), all.end());
+    seq.frames = std::move(all);
+  }
+  if (seq.frames.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
+  seq.image_names.resize(seq.frames.size() * ncam);
+  for (size_t c = 0; c < ncam; ++c) {
+    size_t i = 0;
+    for (auto& [f, name] : per_camera[c]) {
+      while (seq.frames[i] < f) ++i;
+      // Two files of one camera with the same frame number (000001.png and 1.png): the
+      // last in name order is used, as before.
+      seq.image_names[i * ncam + c] = std::move(name);
+    }
+    std::vector<std::pair<size_t, std::string>>().swap(per_camera[c]);
   }
   // Image size check on the first readable image of each camera: a wrong rig is an
   // error. Corrupt images (or a PNG header claiming an absurd size) are per-frame
@@ -135,14 +152,15 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   for (size_t c = 0; c < rig.size(); ++c) {
     seq.image_sizes.push_back({rig.cameras[c].Width(), rig.cameras[c].Height()});
     int tried = 0;
-    for (const auto& paths : seq.image_paths) {
-      if (paths[c].empty()) continue;
+    for (size_t i = 0; i < seq.frames.size(); ++i) {
+      const fs::path p = seq.ImagePath(i, c);
+      if (p.empty()) continue;
       if (++tried > 5) break;
       std::string problem;
-      const cv::Mat im = ReadImage(paths[c], nullptr, &problem);
+      const cv::Mat im = ReadImage(p, nullptr, &problem);
       if (im.empty()) continue;
       if (im.cols != rig.cameras[c].Width() || im.rows != rig.cameras[c].Height())
-        Throw("image ", paths[c].string(), " is ", im.cols, "x", im.rows, " but the rig says camera '", rig.names[c],
+        Throw("image ", p.string(), " is ", im.cols, "x", im.rows, " but the rig says camera '", rig.names[c],
               "' is ", rig.cameras[c].Width(), "x", rig.cameras[c].Height());
       break;
     }
@@ -170,8 +188,8 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
       if (it == times.end()) {
         // Name the image(s) that made this frame: often a stray file whose name holds digits.
         std::string images;
-        for (const auto& p : seq.image_paths[i])
-          if (!p.empty()) {
+        for (size_t c = 0; c < ncam; ++c)
+          if (const fs::path p = seq.ImagePath(i, c); !p.empty()) {
             if (!images.empty()) images += ", ";
             images += p.string();
           }
@@ -186,12 +204,23 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   return seq;
 }
 
+fs::path ImageSequence::ImagePath(size_t i, size_t c) const {
+  const std::string& name = image_names.at(i * cameras() + c);
+  if (name.empty()) return {};
+  return camera_dirs[c] / name;  // a whole path stays whole
+}
+
+void ImageSequence::SetImagePath(size_t i, size_t c, const fs::path& path) {
+  image_names.at(i * cameras() + c) = path.empty() ? std::string() : fs::absolute(path).string();
+}
+
 std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems) {
-  const size_t ncam = seq.image_paths.at(i).size();
+  const size_t ncam = seq.cameras();
+  if (i >= seq.frames.size()) Throw("LoadFrameImages: frame index ", i, " of a sequence of ", seq.frames.size());
   std::vector<cv::Mat> images(ncam);
   problems->assign(ncam, std::string());
   for (size_t c = 0; c < ncam; ++c) {
-    const fs::path& p = seq.image_paths[i][c];
+    const fs::path p = seq.ImagePath(i, c);
     if (p.empty()) {
       (*problems)[c] = "image missing";
       continue;
