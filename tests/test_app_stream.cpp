@@ -107,13 +107,6 @@ ChildRun Mcms(const std::string& args, const fs::path& scratch, const std::strin
   return r;
 }
 
-double OwnPeakMb() {
-  std::ifstream in("/proc/self/status");
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("VmHWM:", 0) == 0) return std::atof(line.c_str() + 6) / 1024.0;
-  return 0;
-}
-
 void ExpectNoPartialFiles(const fs::path& d) {
   for (const auto& e : fs::directory_iterator(d))
     EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << "left behind: " << e.path();
