@@ -166,7 +166,9 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
     }
   }
   // Times.
-  std::map<size_t, double> times;
+  // (frame, time) sorted by frame; of repeated frames the last row counts. A vector, not a
+  // map: 16 bytes per frame.
+  std::vector<std::pair<size_t, double>> times;
   if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
     const CsvTable t = ReadCsv(in.frames_csv);
     const int cf = t.Column("frame"), ct = t.Column("time_s");
@@ -176,16 +178,18 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
       if (!(time > last))
         Throw(in.frames_csv.string(), " line ", t.line_of_row[r], ": time_s must increase from row to row");
       last = time;
-      times[static_cast<size_t>(f)] = time;
+      times.emplace_back(static_cast<size_t>(f), time);
     }
+    std::stable_sort(times.begin(), times.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   } else if (!(in.frame_rate_hz > 0)) {
     Throw("frame rate must be positive, got ", in.frame_rate_hz);
   }
   for (size_t i = 0; i < seq.frames.size(); ++i) {
     const size_t f = seq.frames[i];
     if (!times.empty()) {
-      const auto it = times.find(f);
-      if (it == times.end()) {
+      auto it = std::upper_bound(times.begin(), times.end(), f,
+                                 [](size_t frame, const std::pair<size_t, double>& t) { return frame < t.first; });
+      if (it == times.begin() || (it - 1)->first != f) {
         // Name the image(s) that made this frame: often a stray file whose name holds digits.
         std::string images;
         for (size_t c = 0; c < ncam; ++c)
@@ -196,7 +200,7 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
         Throw("image ", images, " is frame ", f, " (the digits of its name) but ", in.frames_csv.string(),
               " has no time for frame ", f, "; remove the stray image or add the frame to ", in.frames_csv.filename().string());
       }
-      seq.times_s.push_back(it->second);
+      seq.times_s.push_back((it - 1)->second);
     } else {
       seq.times_s.push_back(static_cast<double>(f) / in.frame_rate_hz);
     }
