@@ -111,41 +111,55 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
     Throw("camera count mismatch: the rig has ", rig.size(), " cameras but ", in.images_dir.string(), " holds ",
           folders.size(), " camera folders (not in the rig: ", extra, ")");
   }
-  // Per camera (frame, file name), sorted; then the union of their frames. No path object
-  // per image: a long recording's listing stays small.
+  // Times, read before the listing so that the parsed table is gone before the names
+  // are allocated (a lower peak for long recordings).
+  // (frame, time) sorted by frame; of repeated frames the last row counts. A vector, not a
+  // map: 16 bytes per frame.
+  std::vector<std::pair<size_t, double>> times;
+  if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
+    const CsvTable t = ReadCsv(in.frames_csv);
+    const int cf = t.Column("frame"), ct = t.Column("time_s");
+    double last = -1e300;
+    for (size_t r = 0; r < t.rows.size(); ++r) {
+      const double f = t.Number(r, cf), time = t.Number(r, ct);
+      if (!(time > last))
+        Throw(in.frames_csv.string(), " line ", t.line_of_row[r], ": time_s must increase from row to row");
+      last = time;
+      times.emplace_back(static_cast<size_t>(f), time);
+    }
+    std::stable_sort(times.begin(), times.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  } else if (!(in.frame_rate_hz > 0)) {
+    Throw("frame rate must be positive, got ", in.frame_rate_hz);
+  }
+  // Two passes over the camera folders: the frame numbers first (8 bytes per image), then
+  // each image's name into its place. No path object per image, and no second copy of the
+  // names: a long recording's listing stays small.
   const size_t ncam = rig.size();
-  std::vector<std::vector<std::pair<size_t, std::string>>> per_camera(ncam);
-  for (size_t c = 0; c < ncam; ++c) {
-    for (const auto& e : fs::directory_iterator(in.images_dir / rig.names[c])) {
+  ImageSequence seq;
+  for (size_t c = 0; c < ncam; ++c) seq.camera_dirs.push_back(in.images_dir / rig.names[c]);
+  for (size_t c = 0; c < ncam; ++c)
+    for (const auto& e : fs::directory_iterator(seq.camera_dirs[c])) {
+      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
+      if (const auto f = FrameNumber(e.path())) seq.frames.push_back(*f);
+    }
+  std::sort(seq.frames.begin(), seq.frames.end());
+  seq.frames.erase(std::unique(seq.frames.begin(), seq.frames.end()), seq.frames.end());
+  seq.frames.shrink_to_fit();
+  if (seq.frames.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
+  seq.image_names.resize(seq.frames.size() * ncam);
+  for (size_t c = 0; c < ncam; ++c)
+    for (const auto& e : fs::directory_iterator(seq.camera_dirs[c])) {
       if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
       const auto f = FrameNumber(e.path());
       if (!f) continue;
-      per_camera[c].emplace_back(*f, e.path().filename().string());
-    }
-    std::sort(per_camera[c].begin(), per_camera[c].end());
-  }
-  ImageSequence seq;
-  for (size_t c = 0; c < ncam; ++c) seq.camera_dirs.push_back(in.images_dir / rig.names[c]);
-  {
-    std::vector<size_t> all;
-    for (const auto& v : per_camera)
-      for (const auto& [f, name] : v) all.push_back(f);
-    std::sort(all.begin(), all.end());
-    all.erase(std::unique(all.begin(), all.end()), all.end());
-    seq.frames = std::move(all);
-  }
-  if (seq.frames.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
-  seq.image_names.resize(seq.frames.size() * ncam);
-  for (size_t c = 0; c < ncam; ++c) {
-    size_t i = 0;
-    for (auto& [f, name] : per_camera[c]) {
-      while (seq.frames[i] < f) ++i;
+      const auto it = std::lower_bound(seq.frames.begin(), seq.frames.end(), *f);
+      if (it == seq.frames.end() || *it != *f) continue;  // appeared since the first pass
+      std::string& slot = seq.image_names[static_cast<size_t>(it - seq.frames.begin()) * ncam + c];
       // Two files of one camera with the same frame number (000001.png and 1.png): the
-      // last in name order is used, as before.
-      seq.image_names[i * ncam + c] = std::move(name);
+      // last in name order is used.
+      std::string name = e.path().filename().string();
+      if (slot.empty() || slot < name) slot = std::move(name);
     }
-    std::vector<std::pair<size_t, std::string>>().swap(per_camera[c]);
-  }
   // Image size check on the first readable image of each camera: a wrong rig is an
   // error. Corrupt images (or a PNG header claiming an absurd size) are per-frame
   // problems, found again when their frame is read.
@@ -164,25 +178,6 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
               "' is ", rig.cameras[c].Width(), "x", rig.cameras[c].Height());
       break;
     }
-  }
-  // Times.
-  // (frame, time) sorted by frame; of repeated frames the last row counts. A vector, not a
-  // map: 16 bytes per frame.
-  std::vector<std::pair<size_t, double>> times;
-  if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
-    const CsvTable t = ReadCsv(in.frames_csv);
-    const int cf = t.Column("frame"), ct = t.Column("time_s");
-    double last = -1e300;
-    for (size_t r = 0; r < t.rows.size(); ++r) {
-      const double f = t.Number(r, cf), time = t.Number(r, ct);
-      if (!(time > last))
-        Throw(in.frames_csv.string(), " line ", t.line_of_row[r], ": time_s must increase from row to row");
-      last = time;
-      times.emplace_back(static_cast<size_t>(f), time);
-    }
-    std::stable_sort(times.begin(), times.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  } else if (!(in.frame_rate_hz > 0)) {
-    Throw("frame rate must be positive, got ", in.frame_rate_hz);
   }
   for (size_t i = 0; i < seq.frames.size(); ++i) {
     const size_t f = seq.frames[i];
