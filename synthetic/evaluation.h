@@ -2,6 +2,9 @@
 // consistency with the covariance the tracker reported (NEES against chi-square).
 #pragma once
 
+#include <cmath>
+#include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -26,8 +29,39 @@ struct PoseErrorSummary {
   bool NeesInBand() const { return evaluated > 0 && mean_nees >= nees_band_lo && mean_nees <= nees_band_hi; }
 };
 
+// One frame's error against the truth: BoxMinus(estimate, truth) = [dtheta; dp], its
+// norms, and its NEES with the frame's reported covariance. All NaN for a frame without a
+// pose.
+struct FramePoseError {
+  Vec6 e = Vec6::Constant(std::nan(""));
+  double position_m = std::nan(""), rotation_rad = std::nan(""), nees = std::nan("");
+};
+
+// PoseErrorSummary as running sums, for sequences streamed frame by frame: Add() each frame
+// with its truth, Summary() at any time.
+class PoseErrorAccumulator {
+ public:
+  FramePoseError Add(const FrameResult& f, const Pose& truth);
+  PoseErrorSummary Summary() const;
+
+ private:
+  PoseErrorSummary s_;
+  double p2_ = 0, r2_ = 0, nees_ = 0, pp_ = 0, pr_ = 0;
+};
+
 // truth[i] is the true T_rig_target of results[i].
 PoseErrorSummary EvaluatePoses(const std::vector<FrameResult>& results, const std::vector<Pose>& truth);
+
+// A truth file of T_rig_target per frame: the columns frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz
+// (what `mcms render` writes as truth/poses.csv; other columns are ignored). InputError
+// naming the file, line and column on a missing column, a cell that is not a finite
+// number, a frame that is not a non-negative integer, a repeated frame, or a quaternion
+// whose norm is not 1 (within 1e-4).
+struct TruthPose {
+  double time_s = 0;
+  Pose T_rig_target;
+};
+std::map<size_t, TruthPose> ReadTruthPoses(const std::filesystem::path& path);
 
 // Two-sided band [lo, hi] holding a chi-square(dof) variable with probability `p`.
 void Chi2Band(double dof, double p, double* lo, double* hi);

@@ -217,7 +217,7 @@ TEST(HonestDefaults, CamerasWithDifferentGainsGetTheirOwn) {
   const CameraRig rig = CameraRig::Read(b / "rig.yaml");
   ImageSequence seq = ScanImageSequence({b / "images", b / "frames.csv", 10}, rig);
   const ImageSequence seq_a = ScanImageSequence({a / "images", a / "frames.csv", 10}, rig);
-  for (size_t i = 0; i < seq.frames.size(); ++i) seq.image_paths[i][0] = seq_a.image_paths[i][0];
+  for (size_t i = 0; i < seq.frames.size(); ++i) seq.SetImagePath(i, 0, seq_a.ImagePath(i, 0));
   const SequenceNoiseModel m = EstimateSequenceNoise(seq, rig, BlobDetectorOptions{}, {}, 2);
   for (const auto& line : m.Describe()) std::printf("%s\n", line.c_str());
   ASSERT_TRUE(m.cameras_differ);

@@ -98,21 +98,27 @@ std::vector<std::string> SequenceNoiseModel::Describe() const {
   return lines;
 }
 
+void PoseResidualCheck::Add(const FrameResult& f) {
+  if (!f.T_rig_target) return;
+  const int d = 2 * f.observations - 6;
+  if (d <= 0) return;
+  ++frames;
+  dof += d;
+  chi2 += f.chi2_per_dof * d;
+}
+
+void PoseResidualCheck::Finish() {
+  if (dof > 0) {
+    const boost::math::chi_squared d(dof);
+    band_lo = boost::math::quantile(d, 0.025) / dof;
+    band_hi = boost::math::quantile(d, 0.975) / dof;
+  }
+}
+
 PoseResidualCheck CheckPoseResiduals(const std::vector<FrameResult>& results) {
   PoseResidualCheck r;
-  for (const FrameResult& f : results) {
-    if (!f.T_rig_target) continue;
-    const int dof = 2 * f.observations - 6;
-    if (dof <= 0) continue;
-    ++r.frames;
-    r.dof += dof;
-    r.chi2 += f.chi2_per_dof * dof;
-  }
-  if (r.dof > 0) {
-    const boost::math::chi_squared d(r.dof);
-    r.band_lo = boost::math::quantile(d, 0.025) / r.dof;
-    r.band_hi = boost::math::quantile(d, 0.975) / r.dof;
-  }
+  for (const FrameResult& f : results) r.Add(f);
+  r.Finish();
   return r;
 }
 

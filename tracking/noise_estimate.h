@@ -67,8 +67,15 @@ struct PoseResidualCheck {
   static constexpr double kModelTolerance = 1.15;
   bool Optimistic() const { return dof > 0 && Chi2PerDof() > kModelTolerance * band_hi; }
   std::string Describe() const;
+
+  // Running sums, so a long sequence is checked as its frames stream past: Add() every
+  // frame (frames without a pose or without redundant observations are skipped), then
+  // Finish() once for the band.
+  void Add(const FrameResult& f);
+  void Finish();
 };
 
+// Add() of every result, then Finish().
 PoseResidualCheck CheckPoseResiduals(const std::vector<FrameResult>& results);
 
 }  // namespace mcms

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <condition_variable>
 #include <exception>
 #include <mutex>
 #include <thread>
@@ -14,6 +16,7 @@
 #include <sstream>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
+#include <unistd.h>
 
 #include "core/error.h"
 #include "core/io.h"
@@ -108,44 +111,11 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
     Throw("camera count mismatch: the rig has ", rig.size(), " cameras but ", in.images_dir.string(), " holds ",
           folders.size(), " camera folders (not in the rig: ", extra, ")");
   }
-  std::map<size_t, std::vector<fs::path>> by_frame;
-  for (size_t c = 0; c < rig.size(); ++c) {
-    for (const auto& e : fs::directory_iterator(in.images_dir / rig.names[c])) {
-      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
-      const auto f = FrameNumber(e.path());
-      if (!f) continue;
-      auto& v = by_frame[*f];
-      v.resize(rig.size());
-      v[c] = e.path();
-    }
-  }
-  if (by_frame.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
-  ImageSequence seq;
-  for (auto& [f, paths] : by_frame) {
-    seq.frames.push_back(f);
-    paths.resize(rig.size());
-    seq.image_paths.push_back(paths);
-  }
-  // Image size check on the first readable image of each camera: a wrong rig is an
-  // error. Corrupt images (or a PNG header claiming an absurd size) are per-frame
-  // problems, found again when their frame is read.
-  for (size_t c = 0; c < rig.size(); ++c) {
-    seq.image_sizes.push_back({rig.cameras[c].Width(), rig.cameras[c].Height()});
-    int tried = 0;
-    for (const auto& paths : seq.image_paths) {
-      if (paths[c].empty()) continue;
-      if (++tried > 5) break;
-      std::string problem;
-      const cv::Mat im = ReadImage(paths[c], nullptr, &problem);
-      if (im.empty()) continue;
-      if (im.cols != rig.cameras[c].Width() || im.rows != rig.cameras[c].Height())
-        Throw("image ", paths[c].string(), " is ", im.cols, "x", im.rows, " but the rig says camera '", rig.names[c],
-              "' is ", rig.cameras[c].Width(), "x", rig.cameras[c].Height());
-      break;
-    }
-  }
-  // Times.
-  std::map<size_t, double> times;
+  // Times, read before the listing so that the parsed table is gone before the names
+  // are allocated (a lower peak for long recordings).
+  // (frame, time) sorted by frame; of repeated frames the last row counts. A vector, not a
+  // map: 16 bytes per frame.
+  std::vector<std::pair<size_t, double>> times;
   if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
     const CsvTable t = ReadCsv(in.frames_csv);
     const int cf = t.Column("frame"), ct = t.Column("time_s");
@@ -155,27 +125,77 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
       if (!(time > last))
         Throw(in.frames_csv.string(), " line ", t.line_of_row[r], ": time_s must increase from row to row");
       last = time;
-      times[static_cast<size_t>(f)] = time;
+      times.emplace_back(static_cast<size_t>(f), time);
     }
+    std::stable_sort(times.begin(), times.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   } else if (!(in.frame_rate_hz > 0)) {
     Throw("frame rate must be positive, got ", in.frame_rate_hz);
+  }
+  // Two passes over the camera folders: the frame numbers first (8 bytes per image), then
+  // each image's name into its place. No path object per image, and no second copy of the
+  // names: a long recording's listing stays small.
+  const size_t ncam = rig.size();
+  ImageSequence seq;
+  for (size_t c = 0; c < ncam; ++c) seq.camera_dirs.push_back(in.images_dir / rig.names[c]);
+  for (size_t c = 0; c < ncam; ++c)
+    for (const auto& e : fs::directory_iterator(seq.camera_dirs[c])) {
+      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
+      if (const auto f = FrameNumber(e.path())) seq.frames.push_back(*f);
+    }
+  std::sort(seq.frames.begin(), seq.frames.end());
+  seq.frames.erase(std::unique(seq.frames.begin(), seq.frames.end()), seq.frames.end());
+  seq.frames.shrink_to_fit();
+  if (seq.frames.empty()) Throw("image folder ", in.images_dir.string(), " holds no images (expected <camera>/<frame>.png)");
+  seq.image_names.resize(seq.frames.size() * ncam);
+  for (size_t c = 0; c < ncam; ++c)
+    for (const auto& e : fs::directory_iterator(seq.camera_dirs[c])) {
+      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
+      const auto f = FrameNumber(e.path());
+      if (!f) continue;
+      const auto it = std::lower_bound(seq.frames.begin(), seq.frames.end(), *f);
+      if (it == seq.frames.end() || *it != *f) continue;  // appeared since the first pass
+      std::string& slot = seq.image_names[static_cast<size_t>(it - seq.frames.begin()) * ncam + c];
+      // Two files of one camera with the same frame number (000001.png and 1.png): the
+      // last in name order is used.
+      std::string name = e.path().filename().string();
+      if (slot.empty() || slot < name) slot = std::move(name);
+    }
+  // Image size check on the first readable image of each camera: a wrong rig is an
+  // error. Corrupt images (or a PNG header claiming an absurd size) are per-frame
+  // problems, found again when their frame is read.
+  for (size_t c = 0; c < rig.size(); ++c) {
+    seq.image_sizes.push_back({rig.cameras[c].Width(), rig.cameras[c].Height()});
+    int tried = 0;
+    for (size_t i = 0; i < seq.frames.size(); ++i) {
+      const fs::path p = seq.ImagePath(i, c);
+      if (p.empty()) continue;
+      if (++tried > 5) break;
+      std::string problem;
+      const cv::Mat im = ReadImage(p, nullptr, &problem);
+      if (im.empty()) continue;
+      if (im.cols != rig.cameras[c].Width() || im.rows != rig.cameras[c].Height())
+        Throw("image ", p.string(), " is ", im.cols, "x", im.rows, " but the rig says camera '", rig.names[c],
+              "' is ", rig.cameras[c].Width(), "x", rig.cameras[c].Height());
+      break;
+    }
   }
   for (size_t i = 0; i < seq.frames.size(); ++i) {
     const size_t f = seq.frames[i];
     if (!times.empty()) {
-      const auto it = times.find(f);
-      if (it == times.end()) {
+      auto it = std::upper_bound(times.begin(), times.end(), f,
+                                 [](size_t frame, const std::pair<size_t, double>& t) { return frame < t.first; });
+      if (it == times.begin() || (it - 1)->first != f) {
         // Name the image(s) that made this frame: often a stray file whose name holds digits.
         std::string images;
-        for (const auto& p : seq.image_paths[i])
-          if (!p.empty()) {
+        for (size_t c = 0; c < ncam; ++c)
+          if (const fs::path p = seq.ImagePath(i, c); !p.empty()) {
             if (!images.empty()) images += ", ";
             images += p.string();
           }
         Throw("image ", images, " is frame ", f, " (the digits of its name) but ", in.frames_csv.string(),
               " has no time for frame ", f, "; remove the stray image or add the frame to ", in.frames_csv.filename().string());
       }
-      seq.times_s.push_back(it->second);
+      seq.times_s.push_back((it - 1)->second);
     } else {
       seq.times_s.push_back(static_cast<double>(f) / in.frame_rate_hz);
     }
@@ -183,12 +203,23 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   return seq;
 }
 
+fs::path ImageSequence::ImagePath(size_t i, size_t c) const {
+  const std::string& name = image_names.at(i * cameras() + c);
+  if (name.empty()) return {};
+  return camera_dirs[c] / name;  // a whole path stays whole
+}
+
+void ImageSequence::SetImagePath(size_t i, size_t c, const fs::path& path) {
+  image_names.at(i * cameras() + c) = path.empty() ? std::string() : fs::absolute(path).string();
+}
+
 std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems) {
-  const size_t ncam = seq.image_paths.at(i).size();
+  const size_t ncam = seq.cameras();
+  if (i >= seq.frames.size()) Throw("LoadFrameImages: frame index ", i, " of a sequence of ", seq.frames.size());
   std::vector<cv::Mat> images(ncam);
   problems->assign(ncam, std::string());
   for (size_t c = 0; c < ncam; ++c) {
-    const fs::path& p = seq.image_paths[i][c];
+    const fs::path p = seq.ImagePath(i, c);
     if (p.empty()) {
       (*problems)[c] = "image missing";
       continue;
@@ -225,64 +256,203 @@ void ParallelFor(size_t begin, size_t end, int threads, const std::function<void
   if (error) std::rethrow_exception(error);
 }
 
+size_t SequenceWindow(int threads) { return 4 * static_cast<size_t>(std::max(threads, 1)); }
+
+size_t TrackImageSequenceStreaming(const ImageSequence& seq, Tracker& tracker,
+                                   const std::function<void(FrameResult&&)>& on_frame,
+                                   const std::function<void(size_t, size_t)>& progress, int threads) {
+  const size_t n = seq.frames.size();
+  threads = std::max(threads, 1);
+  struct Detected {
+    std::vector<std::optional<std::vector<ImagePoint>>> points;
+    std::vector<std::string> problems;
+  };
+  auto detect = [&](size_t i, Detected* d) {
+    const std::vector<cv::Mat> images = LoadFrameImages(seq, i, &d->problems);
+    d->points = tracker.DetectPoints(images, &d->problems);
+  };
+  auto deliver = [&](size_t i, const Detected& d) {
+    on_frame(tracker.ProcessPoints(seq.frames[i], seq.times_s[i], d.points, d.problems));
+    if (progress) progress(i + 1, n);
+  };
+  if (threads == 1 || n <= 1) {
+    for (size_t i = 0; i < n; ++i) {
+      Detected d;
+      detect(i, &d);
+      deliver(i, d);
+    }
+    return n > 0 ? 1 : 0;
+  }
+
+  // Reorder window: worker threads claim frames in order, at most `window` ahead of the
+  // next frame to deliver, and leave each in its ring slot; this thread takes them out in
+  // frame order, processes and delivers them.
+  const size_t window = SequenceWindow(threads);
+  std::vector<Detected> ring(window);
+  std::vector<char> ready(window, 0);
+  std::mutex mutex;
+  std::condition_variable to_workers, to_main;
+  size_t next_claim = 0, delivered = 0, max_held = 0;
+  bool stop = false;
+  std::exception_ptr error;
+  auto work = [&] {
+    for (;;) {
+      size_t i;
+      {
+        std::unique_lock<std::mutex> lock(mutex);
+        to_workers.wait(lock, [&] { return stop || next_claim >= n || next_claim < delivered + window; });
+        if (stop || next_claim >= n) return;
+        i = next_claim++;
+        max_held = std::max(max_held, next_claim - delivered);
+      }
+      Detected d;
+      try {
+        detect(i, &d);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!error) error = std::current_exception();
+        stop = true;
+        to_main.notify_all();
+        to_workers.notify_all();
+        return;
+      }
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        ring[i % window] = std::move(d);
+        ready[i % window] = 1;
+      }
+      to_main.notify_all();
+    }
+  };
+  // Stops and joins the workers however this function is left (an exception from
+  // on_frame included).
+  struct Pool {
+    std::vector<std::thread> threads;
+    std::function<void()> stop;
+    ~Pool() {
+      stop();
+      for (auto& t : threads) t.join();
+    }
+  } pool;
+  pool.stop = [&] {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      stop = true;
+    }
+    to_workers.notify_all();
+  };
+  for (int t = 0; t < threads; ++t) pool.threads.emplace_back(work);
+  for (size_t i = 0; i < n; ++i) {
+    Detected d;
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      to_main.wait(lock, [&] { return error || ready[i % window]; });
+      if (error) std::rethrow_exception(error);
+      d = std::move(ring[i % window]);
+      ready[i % window] = 0;
+    }
+    deliver(i, d);
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      delivered = i + 1;
+    }
+    to_workers.notify_all();
+  }
+  return max_held;
+}
+
 std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
                                             const std::function<void(size_t, size_t)>& progress, int threads) {
   std::vector<FrameResult> out;
-  const size_t n = seq.frames.size();
-  threads = std::max(threads, 1);
-  const size_t chunk = 4 * static_cast<size_t>(threads);
-  using Points = std::vector<std::optional<std::vector<ImagePoint>>>;
-  for (size_t f0 = 0; f0 < n; f0 += chunk) {
-    const size_t f1 = std::min(n, f0 + chunk);
-    std::vector<Points> points(f1 - f0);
-    std::vector<std::vector<std::string>> problems(f1 - f0);
-    ParallelFor(f0, f1, threads, [&](size_t i) {
-      const std::vector<cv::Mat> images = LoadFrameImages(seq, i, &problems[i - f0]);
-      points[i - f0] = tracker.DetectPoints(images, &problems[i - f0]);
-    });
-    for (size_t i = f0; i < f1; ++i) {
-      out.push_back(tracker.ProcessPoints(seq.frames[i], seq.times_s[i], points[i - f0], problems[i - f0]));
-      if (progress) progress(i + 1, n);
-    }
-  }
+  out.reserve(seq.frames.size());
+  TrackImageSequenceStreaming(
+      seq, tracker, [&](FrameResult&& r) { out.push_back(std::move(r)); }, progress, threads);
   return out;
 }
 
-void WritePoseCsv(const fs::path& path, const std::vector<FrameResult>& results,
-                  const std::vector<std::string>& comments) {
-  static const char* kAxes[6] = {"rx", "ry", "rz", "px", "py", "pz"};
-  WriteFileAtomically(path, [&](std::ostream& o) {
+namespace {
+const char* const kAxes[6] = {"rx", "ry", "rz", "px", "py", "pz"};
+}  // namespace
+
+PoseCsvWriter::PoseCsvWriter(fs::path path, std::vector<std::string> extra_columns)
+    : path_(std::move(path)), extra_columns_(std::move(extra_columns)) {
+  if (path_.has_parent_path() && !path_.parent_path().empty()) {
+    std::error_code ec;
+    fs::create_directories(path_.parent_path(), ec);
+    if (ec) Throw("cannot create folder ", path_.parent_path().string(), " for output ", path_.string(), ": ", ec.message());
+  }
+  rows_path_ = path_.string() + ".rows.partial-" + std::to_string(::getpid());
+  rows_out_ = std::make_unique<std::ofstream>(rows_path_, std::ios::binary | std::ios::trunc);
+  if (!*rows_out_) Throw("cannot write output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
+}
+
+PoseCsvWriter::~PoseCsvWriter() {
+  rows_out_.reset();
+  std::error_code ec;
+  fs::remove(rows_path_, ec);
+}
+
+void PoseCsvWriter::Add(const FrameResult& f, const std::vector<double>& extra) {
+  if (finished_) Throw("PoseCsvWriter::Add after Finish for ", path_.string());
+  if (extra.size() != extra_columns_.size())
+    Throw("PoseCsvWriter::Add: ", extra.size(), " extra values for ", extra_columns_.size(), " extra columns");
+  char buf[64];
+  auto num = [&](double v) {
+    std::snprintf(buf, sizeof(buf), "%.10g", v);
+    return std::string(buf);
+  };
+  std::ostream& o = *rows_out_;
+  std::string reason = f.reason;
+  std::replace(reason.begin(), reason.end(), ',', ';');
+  std::replace(reason.begin(), reason.end(), '"', '\'');
+  o << f.frame << "," << num(f.time_s) << "," << ToString(f.status) << ",\"" << reason << "\"";
+  if (f.T_rig_target) {
+    const auto q = f.T_rig_target->Quaternion();
+    const Vec3& t = f.T_rig_target->t;
+    o << "," << num(t.x()) << "," << num(t.y()) << "," << num(t.z()) << "," << num(q.w()) << "," << num(q.x()) << ","
+      << num(q.y()) << "," << num(q.z());
+  } else {
+    o << ",,,,,,,";
+  }
+  o << "," << f.balls_identified << "," << f.cameras_used << "," << f.observations << ","
+    << num(f.identification_margin) << "," << num(f.rms_px) << "," << num(f.chi2_per_dof);
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) o << "," << (f.T_rig_target ? num(f.cov(r, c)) : std::string());
+  for (double v : extra) o << "," << (std::isnan(v) ? std::string() : num(v));
+  o << "\n";
+  if (!o) Throw("error while writing output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
+  ++rows_;
+}
+
+void PoseCsvWriter::Finish(const std::vector<std::string>& comments) {
+  if (finished_) return;
+  rows_out_->flush();
+  if (!*rows_out_) Throw("error while writing output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
+  rows_out_.reset();
+  WriteFileAtomically(path_, [&](std::ostream& o) {
     for (const std::string& line : comments) o << "# " << line << "\n";
     o << "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,cameras,observations,id_margin_chi2,rms_px,"
          "chi2_per_dof";
     for (int r = 0; r < 6; ++r)
       for (int c = 0; c < 6; ++c) o << ",cov_" << kAxes[r] << "_" << kAxes[c];
+    for (const std::string& c : extra_columns_) o << "," << c;
     o << "\n";
-    char buf[64];
-    auto num = [&](double v) {
-      std::snprintf(buf, sizeof(buf), "%.10g", v);
-      return std::string(buf);
-    };
-    for (const FrameResult& f : results) {
-      std::string reason = f.reason;
-      std::replace(reason.begin(), reason.end(), ',', ';');
-      std::replace(reason.begin(), reason.end(), '"', '\'');
-      o << f.frame << "," << num(f.time_s) << "," << ToString(f.status) << ",\"" << reason << "\"";
-      if (f.T_rig_target) {
-        const auto q = f.T_rig_target->Quaternion();
-        const Vec3& t = f.T_rig_target->t;
-        o << "," << num(t.x()) << "," << num(t.y()) << "," << num(t.z()) << "," << num(q.w()) << "," << num(q.x())
-          << "," << num(q.y()) << "," << num(q.z());
-      } else {
-        o << ",,,,,,,";
-      }
-      o << "," << f.balls_identified << "," << f.cameras_used << "," << f.observations << ","
-        << num(f.identification_margin) << "," << num(f.rms_px) << "," << num(f.chi2_per_dof);
-      for (int r = 0; r < 6; ++r)
-        for (int c = 0; c < 6; ++c) o << "," << (f.T_rig_target ? num(f.cov(r, c)) : std::string());
-      o << "\n";
+    if (rows_ > 0) {
+      std::ifstream rows(rows_path_, std::ios::binary);
+      if (!rows) Throw("cannot read back the temporary file ", rows_path_.string(), " of ", path_.string());
+      o << rows.rdbuf();
     }
   });
+  finished_ = true;
+  std::error_code ec;
+  fs::remove(rows_path_, ec);
+}
+
+void WritePoseCsv(const fs::path& path, const std::vector<FrameResult>& results,
+                  const std::vector<std::string>& comments) {
+  PoseCsvWriter w(path);
+  for (const FrameResult& f : results) w.Add(f);
+  w.Finish(comments);
 }
 
 }  // namespace mcms

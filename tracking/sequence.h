@@ -8,7 +8,9 @@
 
 #include <array>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -23,13 +25,25 @@ struct SequenceInput {
 };
 
 struct ImageSequence {
-  std::vector<size_t> frames;                                    // sorted frame numbers
-  std::vector<double> times_s;                                   // one per frame
-  std::vector<std::vector<std::filesystem::path>> image_paths;  // [frame][camera], empty path = missing
+  std::vector<size_t> frames;   // sorted frame numbers
+  std::vector<double> times_s;  // one per frame
+  // Where frame i's image of camera c is: ImagePath(i, c), an empty path when it is
+  // missing. Stored compactly (one folder per camera, one name per image): a listing of
+  // 100,000 frame sets of 4 cameras takes about 13 MB, where a std::filesystem::path per
+  // image took 280 MB.
+  std::vector<std::filesystem::path> camera_dirs;  // [camera]
+  // [frame * cameras() + camera]: a file name inside camera_dirs[camera], or a whole path
+  // (SetImagePath), or "" when the image is missing.
+  std::vector<std::string> image_names;
   // [camera] {width, height} the rig gives; an image of another size (read from a PNG's
   // header before decoding, from the decoded image otherwise) degrades its frame.
   // Empty: not checked.
   std::vector<std::array<int, 2>> image_sizes;
+
+  size_t cameras() const { return camera_dirs.size(); }
+  std::filesystem::path ImagePath(size_t i, size_t c) const;
+  // Frame i's image of camera c is the file `path` (any folder; empty = missing).
+  void SetImagePath(size_t i, size_t c, const std::filesystem::path& path);
 };
 
 // Lists the frames and checks the layout against the rig: InputError when the folder
@@ -46,20 +60,62 @@ std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::ve
 // The first exception thrown by fn is rethrown after every thread has finished.
 void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn);
 
+// The most frames TrackImageSequenceStreaming holds at once (read and detected but not
+// yet handed to on_frame) on `threads` threads: its reorder window, 4 per thread.
+size_t SequenceWindow(int threads);
+
 // Runs the tracker over every frame (missing or undecodable images become per-frame
-// problems). Images are read and their blobs detected on `threads` threads, in chunks;
-// the frames are then processed in order, so the result does not depend on `threads`.
-// progress(done, total) is called after each frame.
+// problems) and hands each frame's result to on_frame as soon as it is finished, in frame
+// order; nothing of a frame is kept after on_frame returns, so memory does not grow with
+// the length of the sequence. Images are read and their blobs detected on `threads`
+// threads, at most SequenceWindow(threads) frames ahead of the frame being delivered; the
+// frames are processed in order, so the results do not depend on `threads`.
+// progress(done, total) is called after each frame. An exception from reading, detection
+// or on_frame stops every thread and is rethrown. Returns the greatest number of frames
+// that were held at once (at most SequenceWindow(threads)).
+size_t TrackImageSequenceStreaming(const ImageSequence& seq, Tracker& tracker,
+                                   const std::function<void(FrameResult&&)>& on_frame,
+                                   const std::function<void(size_t, size_t)>& progress = {}, int threads = 1);
+
+// The same, keeping every result (memory grows with the sequence: for short sequences
+// and callers that need them all; `mcms track` streams).
 std::vector<FrameResult> TrackImageSequence(const ImageSequence& seq, Tracker& tracker,
                                             const std::function<void(size_t, size_t)>& progress = {},
                                             int threads = 1);
 
-// One row per frame: frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz, diagnostics,
-// then the 36 entries of the 6x6 covariance in the [dtheta; dp] layout, named
-// cov_<row>_<col> with rows/cols rx,ry,rz (rad) and px,py,pz (m): units rad^2, rad*m, m^2.
-// Pose cells are empty for lost frames. Written atomically. Each line of `comments` is
-// written first as a line starting with "# " (the noise model the covariances assume);
-// the project's CSV readers skip such lines.
+// The pose CSV: one row per frame: frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,
+// diagnostics, then the 36 entries of the 6x6 covariance in the [dtheta; dp] layout, named
+// cov_<row>_<col> with rows/cols rx,ry,rz (rad) and px,py,pz (m): units rad^2, rad*m, m^2,
+// then the caller's extra columns (e.g. the errors against a truth file). Pose cells are
+// empty for lost frames, and so is an extra value that is NaN.
+//
+// Written as the frames stream past: each Add() appends a row to a temporary file beside
+// `path`; Finish(comments) writes `path` atomically (each comment line first as a line
+// starting with "# ": the noise model the covariances assume and summaries only known at
+// the end; the project's CSV readers skip such lines), then the header and the rows.
+// Destroyed without Finish() (an error mid-run), it removes its temporary file and leaves
+// no `path`.
+class PoseCsvWriter {
+ public:
+  explicit PoseCsvWriter(std::filesystem::path path, std::vector<std::string> extra_columns = {});
+  ~PoseCsvWriter();
+  PoseCsvWriter(const PoseCsvWriter&) = delete;
+  PoseCsvWriter& operator=(const PoseCsvWriter&) = delete;
+
+  // `extra` holds one value per extra column.
+  void Add(const FrameResult& f, const std::vector<double>& extra = {});
+  void Finish(const std::vector<std::string>& comments = {});
+  size_t rows() const { return rows_; }
+
+ private:
+  std::filesystem::path path_, rows_path_;
+  std::vector<std::string> extra_columns_;
+  std::unique_ptr<std::ofstream> rows_out_;
+  size_t rows_ = 0;
+  bool finished_ = false;
+};
+
+// All of `results` through a PoseCsvWriter.
 void WritePoseCsv(const std::filesystem::path& path, const std::vector<FrameResult>& results,
                   const std::vector<std::string>& comments = {});
 
