@@ -23,6 +23,11 @@ san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-poin
 # GradientChecker::ProbeResults) is then reported as a heap-buffer-overflow. Malloc is
 # 16-byte aligned under ASan too, so tell Eigen, as the uninstrumented libraries assume.
 san="$san -DEIGEN_MALLOC_ALREADY_ALIGNED=1"
+# GCC 12 with -fsanitize reports -Wmaybe-uninitialized inside libstdc++'s own std::regex
+# (std::function moved in regex_automaton.h; test_core_html_report uses std::regex): a known
+# false positive of the instrumented build, not of our code, which the normal -Werror build
+# still checks for this warning.
+san="$san -Wno-maybe-uninitialized"
 # -O1 -g keeps the tests fast enough and the reports readable; no NDEBUG, so the
 # project's MCMS_DCHECK and Eigen's own assertions (index ranges, sizes) are on too.
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCMS_WERROR=ON -DMCMS_BUILD_BENCH=OFF \
