@@ -13,30 +13,18 @@
 
 #include "core/random.h"
 #include "model/extensions.h"
-#include "test_util.h"
+#include "tests/cli_runner.h"
+#include "tests/test_util.h"
 
 namespace mcms {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code;
-  std::string out, err;
-};
+using test::CliRun;
 
-CliRun Mcms(const std::string& args, const fs::path& cwd) {
-  const std::string cmd = "cd " + cwd.string() + " && " + std::string(MCMS_CLI) + " " + args + " > " +
-                          (cwd / "stdout.txt").string() + " 2> " + (cwd / "stderr.txt").string();
-  const int status = std::system(cmd.c_str());
-  const auto slurp = [](const fs::path& p) {
-    std::ifstream in(p);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  return {WEXITSTATUS(status), slurp(cwd / "stdout.txt"), slurp(cwd / "stderr.txt")};
-}
+// Runs `mcms ARGS` in `cwd`.
+CliRun Mcms(const std::string& args, const fs::path& cwd) { return test::Mcms(cwd, args); }
 
 // A CSV log of the default robot: 30 poses x 4 passes over 2 h, a hidden joint 3 offset
 // of `offset_deg`, anisotropic noise, a temperature column.
@@ -70,13 +58,10 @@ std::string LogCsv(double offset_deg, uint64_t seed) {
   return o.str();
 }
 
-void Write(const fs::path& p, const std::string& s) {
-  std::ofstream(p) << s;
-}
 
 TEST(AppAuditRobot, NamesAHiddenJointOffsetInACsvLog) {
   const fs::path d = test::ScratchDir("audit_robot_e2e");
-  Write(d / "log.csv", LogCsv(0.006, 3));
+  test::WriteText(d / "log.csv", LogCsv(0.006, 3));
   const CliRun r = Mcms("audit robot -q log.csv --json audit.json -o out", d);
   ASSERT_EQ(r.code, 0) << r.err;
   std::printf("%s", r.out.c_str());
@@ -101,7 +86,7 @@ TEST(AppAuditRobot, NamesAHiddenJointOffsetInACsvLog) {
 
 void ExpectRefused(const std::string& name, const std::string& csv, const std::vector<std::string>& words) {
   const fs::path d = test::ScratchDir("audit_robot_bad_" + name);
-  Write(d / "log.csv", csv);
+  test::WriteText(d / "log.csv", csv);
   const CliRun r = Mcms("audit robot -q log.csv --json audit.json -o out", d);
   EXPECT_NE(r.code, 0) << name;
   for (const auto& w : words) EXPECT_NE(r.err.find(w), std::string::npos) << name << ": '" << w << "' not in: " << r.err;

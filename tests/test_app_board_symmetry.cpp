@@ -32,6 +32,7 @@
 #include "core/error.h"
 #include "core/random.h"
 #include "synthetic/board_renderer.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 #include "vision/camera_model.h"
 
@@ -459,24 +460,9 @@ TEST(BoardSymmetry, OneSharedFrameIsRefusedWithTheReason) {
 
 // --- mcms calib-rig --------------------------------------------------------------------
 
-struct CliRun {
-  int code;
-  std::string out, err;
-};
-
-std::string ReadAll(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-CliRun Mcms(const fs::path& dir, const std::string& args) {
-  const std::string cmd =
-      "cd '" + dir.string() + "' && '" + std::string(MCMS_CLI) + "' " + args + " > stdout.txt 2> stderr.txt";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadAll(dir / "stdout.txt"), ReadAll(dir / "stderr.txt")};
-}
+using test::CliRun;
+using test::Mcms;
+using test::ReadAll;
 
 std::string FrameName(int f) {
   char name[16];

@@ -26,6 +26,7 @@
 #include "core/io.h"
 #include "core/pose_math.h"
 #include "vision/camera_model.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -57,34 +58,11 @@ constexpr double kMinBaselineAlongX = 0.99;  // |t_x| / |t|
 constexpr double kBaselineRangeM[2] = {0.05, 0.15};
 constexpr double kMaxRelativeRotationRad = 2.0 * M_PI / 180.0;
 
-struct CliRun {
-  int code;
-  std::string out, err;
-};
-
-std::string ReadAll(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void WriteText(const fs::path& p, const std::string& text) {
-  std::ofstream o(p);
-  o << text;
-}
-
-// Runs a shell command in `dir`, capturing its exit code, stdout and stderr.
-CliRun Shell(const fs::path& dir, const std::string& command) {
-  const std::string cmd = "cd '" + dir.string() + "' && " + command + " > stdout.txt 2> stderr.txt";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadAll(dir / "stdout.txt"), ReadAll(dir / "stderr.txt")};
-}
-
-// Runs `mcms ARGS` in `dir` so that relative names in messages are the ones given.
-CliRun Mcms(const fs::path& dir, const std::string& args) {
-  return Shell(dir, "'" + std::string(MCMS_CLI) + "' " + args);
-}
+using test::CliRun;
+using test::Mcms;
+using test::ReadAll;
+using test::Shell;
+using test::WriteText;
 
 // The refusal the issue asks for: a non-zero exit, every needle on stderr, none of
 // `outputs` written and no temporary (".partial", ".tmp") left in `dir`.

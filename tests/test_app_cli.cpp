@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "core/io.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -18,20 +19,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code;
-  std::string err;
-};
+using test::CliRun;
 
-CliRun Mcms(const std::string& args, const fs::path& scratch) {
-  const fs::path err = scratch / "stderr.txt";
-  const std::string cmd = std::string(MCMS_CLI) + " " + args + " 2> " + err.string() + " > /dev/null";
-  const int status = std::system(cmd.c_str());
-  std::ifstream in(err);
-  std::stringstream s;
-  s << in.rdbuf();
-  return {WEXITSTATUS(status), s.str()};
-}
+// Runs `mcms ARGS` in `scratch`.
+CliRun Mcms(const std::string& args, const fs::path& scratch) { return test::Mcms(scratch, args); }
 
 // One small rendered recording shared by the tests of this process (copied before each
 // is spoiled); ctest runs every test in its own process, possibly in parallel.

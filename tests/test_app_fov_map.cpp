@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "core/io.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -16,28 +17,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code;
-  std::string out, err;
-};
+using test::CliRun;
 
-CliRun Mcms(const std::string& args, const fs::path& scratch) {
-  const fs::path err = scratch / "stderr.txt", out = scratch / "stdout.txt";
-  const std::string cmd = std::string(MCMS_CLI) + " " + args + " 2> " + err.string() + " > " + out.string();
-  const int status = std::system(cmd.c_str());
-  auto slurp = [](const fs::path& p) {
-    std::ifstream in(p);
-    std::stringstream s;
-    s << in.rdbuf();
-    return s.str();
-  };
-  return {WEXITSTATUS(status), slurp(out), slurp(err)};
-}
+// Runs `mcms ARGS` in `scratch`.
+CliRun Mcms(const std::string& args, const fs::path& scratch) { return test::Mcms(scratch, args); }
 
-void Write(const fs::path& p, const std::string& text) {
-  std::ofstream o(p);
-  o << text;
-}
 
 TEST(FovMapCli, DefaultRigMapWithPromisedColumns) {
   const fs::path s = test::ScratchDir("fovmap_default");
@@ -87,18 +71,18 @@ TEST(FovMapCli, PaperTablesAndJson) {
 TEST(FovMapCli, BadInputRefusedNothingWritten) {
   const fs::path s = test::ScratchDir("fovmap_bad");
   const std::string t1_header = "plane,point,sigma_x_mm,sigma_y_mm,sigma_z_mm,sigma_d_mm\n";
-  Write(s / "one_point_plane.csv", t1_header + "1,1,0.1,1.0,0.3,1.049\n1,2,0.1,1.0,0.3,1.049\n2,3,0.1,1.0,0.3,1.049\n");
-  Write(s / "nan.csv", t1_header + "1,1,0.1,nan,0.3,1.049\n1,2,0.1,1.0,0.3,1.049\n1,3,0.1,1.0,0.3,1.049\n");
-  Write(s / "bad_d.csv", t1_header + "1,1,0.1,1.0,0.3,2.0\n1,2,0.1,1.0,0.3,1.049\n1,3,0.1,1.0,0.3,1.049\n");
+  test::WriteText(s / "one_point_plane.csv", t1_header + "1,1,0.1,1.0,0.3,1.049\n1,2,0.1,1.0,0.3,1.049\n2,3,0.1,1.0,0.3,1.049\n");
+  test::WriteText(s / "nan.csv", t1_header + "1,1,0.1,nan,0.3,1.049\n1,2,0.1,1.0,0.3,1.049\n1,3,0.1,1.0,0.3,1.049\n");
+  test::WriteText(s / "bad_d.csv", t1_header + "1,1,0.1,1.0,0.3,2.0\n1,2,0.1,1.0,0.3,1.049\n1,3,0.1,1.0,0.3,1.049\n");
   std::string raw = "point,repeat,x_m,y_m,z_m\n";
   for (int p = 1; p <= 3; ++p)
     for (int k = 1; k <= 4; ++k)
       raw += std::to_string(p) + "," + std::to_string(k) + "," + std::to_string(0.1 * p + 1e-4 * k) + "," +
              std::to_string(0.02 * k * k * 1e-3) + "," + std::to_string(0.5 + 3e-5 * k) + "\n";
-  Write(s / "raw.csv", raw);
-  Write(s / "raw_one_repeat.csv", raw + "4,1,0.4,0.0,0.5\n");
-  Write(s / "reference_mismatch.csv", "point,x_m,y_m,z_m\n1,0.1,0,0.5\n2,0.2,0,0.5\n9,0.3,0,0.5\n");
-  Write(s / "lines_bad.csv", "plane,line,d_laser_mm,d_camera_mm,delta_mm\n1,1,400.2,400.0,5.0\n");
+  test::WriteText(s / "raw.csv", raw);
+  test::WriteText(s / "raw_one_repeat.csv", raw + "4,1,0.4,0.0,0.5\n");
+  test::WriteText(s / "reference_mismatch.csv", "point,x_m,y_m,z_m\n1,0.1,0,0.5\n2,0.2,0,0.5\n9,0.3,0,0.5\n");
+  test::WriteText(s / "lines_bad.csv", "plane,line,d_laser_mm,d_camera_mm,delta_mm\n1,1,400.2,400.0,5.0\n");
 
   struct Case {
     std::string args, must_name;
@@ -127,7 +111,7 @@ TEST(FovMapCli, BadInputRefusedNothingWritten) {
       EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << c.args;
   }
   // The raw CSV itself is accepted (the reference then matches the points).
-  Write(s / "reference.csv", "point,x_m,y_m,z_m\n1,0.1,0,0.5\n2,0.2,0,0.5\n3,0.3,0,0.5\n");
+  test::WriteText(s / "reference.csv", "point,x_m,y_m,z_m\n1,0.1,0,0.5\n2,0.2,0,0.5\n3,0.3,0,0.5\n");
   const CliRun ok = Mcms("fov-map --quiet --grid=0:0:1,0:0:1,0.5:0.5:1 --measured " + (s / "raw.csv").string() +
                              " --reference " + (s / "reference.csv").string() + " -o " + (s / "good").string(),
                          s);
@@ -141,7 +125,7 @@ TEST(FovMapCli, BadInputRefusedNothingWritten) {
                (k == 2 ? "" : std::to_string(0.1 * p + 1e-4 * k) + "," + std::to_string(2e-5 * k * k) + "," +
                                   std::to_string(0.5 + 3e-5 * k) + ",") +
                std::to_string(p) + "\n";
-  Write(s / "poses.csv", poses);
+  test::WriteText(s / "poses.csv", poses);
   const CliRun pr = Mcms("fov-map --quiet --grid=0:0:1,0:0:1,0.5:0.5:1 --measured " + (s / "poses.csv").string() + " -o " +
                              (s / "from_poses").string(),
                          s);

@@ -14,6 +14,7 @@
 #include "model/robot_model.h"
 #include "core/io.h"
 #include "tests/fuse_logs.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -22,10 +23,7 @@ namespace {
 namespace fs = std::filesystem;
 using Lines = std::vector<std::string>;
 
-struct CliRun {
-  int code;
-  std::string err;
-};
+using test::CliRun;
 
 using test::CleanLogs;
 using test::Logs;
@@ -48,14 +46,7 @@ const std::string kArgs = "fuse --quiet --tracker poses.csv --robot joints.csv -
                           "setup.yaml -o fused.csv";
 
 // Runs mcms in `dir` (relative file names, so messages name them as given).
-CliRun Fuse(const fs::path& dir, const std::string& args = kArgs) {
-  const std::string cmd = "cd " + dir.string() + " && " + std::string(MCMS_CLI) + " " + args + " 2> stderr.txt > /dev/null";
-  const int status = std::system(cmd.c_str());
-  std::ifstream in(dir / "stderr.txt");
-  std::stringstream s;
-  s << in.rdbuf();
-  return {WEXITSTATUS(status), s.str()};
-}
+CliRun Fuse(const fs::path& dir, const std::string& args = kArgs) { return test::Mcms(dir, args); }
 
 // Writes the logs into a fresh folder, runs the CLI and expects a refusal whose one line
 // contains every needle, and no output.

@@ -18,6 +18,7 @@
 #include "model/inclinometer.h"
 #include "model/robot_model.h"
 #include "tests/fuse_logs.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 #include "vision/camera_model.h"
 
@@ -27,21 +28,10 @@ namespace {
 namespace fs = std::filesystem;
 using Lines = std::vector<std::string>;
 
-struct CliRun {
-  int code;
-  std::string err;
-};
+using test::CliRun;
 
-// Runs mcms with `args` from folder `cwd`; stderr is returned.
-CliRun Mcms(const std::string& args, const fs::path& cwd) {
-  const std::string cmd = "cd " + cwd.string() + " && " + std::string(MCMS_CLI) + " " + args + " 2> " +
-                          (cwd / "stderr.txt").string() + " > /dev/null";
-  const int status = std::system(cmd.c_str());
-  std::ifstream in(cwd / "stderr.txt");
-  std::stringstream s;
-  s << in.rdbuf();
-  return {WEXITSTATUS(status), s.str()};
-}
+// Runs `mcms ARGS` in `cwd`.
+CliRun Mcms(const std::string& args, const fs::path& cwd) { return test::Mcms(cwd, args); }
 
 const fs::path& Recording() {
   static const fs::path dir = [] {

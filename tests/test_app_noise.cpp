@@ -16,6 +16,7 @@
 #include "synthetic/evaluation.h"
 #include "synthetic/renderer.h"
 #include "synthetic/scenario.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 #include "tracking/noise_estimate.h"
 
@@ -24,24 +25,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code;
-  std::string out, err;
-};
+using test::CliRun;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-CliRun Mcms(const std::string& args, const fs::path& scratch) {
-  const fs::path out = scratch / "stdout.txt", err = scratch / "stderr.txt";
-  const std::string cmd = std::string(MCMS_CLI) + " " + args + " > " + out.string() + " 2> " + err.string();
-  const int status = std::system(cmd.c_str());
-  return {WEXITSTATUS(status), Slurp(out), Slurp(err)};
-}
+// Runs `mcms ARGS` in `scratch`.
+CliRun Mcms(const std::string& args, const fs::path& scratch) { return test::Mcms(scratch, args); }
 
 struct Noise {
   double gain, read_noise;
@@ -71,7 +58,7 @@ fs::path Recording(const Noise& n) {
                 static_cast<unsigned long long>(n.seed), n.ball_dn);
   const fs::path shared = fs::path(MCMS_BINARY_DIR) / "test-scratch" / key / "rec";
   const Scenario sc = ThreeCameras(n);
-  if (fs::exists(shared / "truth" / "poses.csv") && Slurp(shared / "scenario.yaml") == sc.ToYaml()) return shared;
+  if (fs::exists(shared / "truth" / "poses.csv") && test::ReadAll(shared / "scenario.yaml") == sc.ToYaml()) return shared;
   std::error_code ec;
   fs::remove_all(shared, ec);  // absent, incomplete or of another scenario
   const fs::path mine = test::ScratchDir(std::string(key) + "_" + std::to_string(::getpid())) / "rec";
@@ -122,7 +109,7 @@ TrackStats Evaluate(const fs::path& poses, const fs::path& truth_csv) {
   Chi2Band(6.0 * s.frames, 0.95, &s.band_lo, &s.band_hi);
   s.band_lo /= s.frames;
   s.band_hi /= s.frames;
-  std::istringstream in(Slurp(poses));
+  std::istringstream in(test::ReadAll(poses));
   for (std::string line; std::getline(in, line) && !line.empty() && line[0] == '#';) s.comments.push_back(line);
   return s;
 }
@@ -200,7 +187,7 @@ TEST(HonestDefaults, AuditBlamesTheNoiseModelNotTheCameras) {
   EXPECT_NE(bad.err.find("larger than the pixel noise model predicts"), std::string::npos) << bad.err;
   EXPECT_FALSE(fs::exists(dir / "rig.yaml"));
   // The report is written all the same (the rig is what cannot be repaired).
-  const std::string json = Slurp(dir / "audit.json");
+  const std::string json = test::ReadAll(dir / "audit.json");
   EXPECT_NE(json.find("\"mode\": \"cameras\""), std::string::npos) << json;
   EXPECT_NE(json.find("\"name\": \"pixel_noise_scale\""), std::string::npos) << json;
   EXPECT_NE(json.find("\"clean\": false"), std::string::npos) << json;
@@ -244,7 +231,7 @@ TEST(HonestDefaults, ThreadsDoNotChangeTheOutputAndRedirectedProgressIsLines) {
   ASSERT_EQ(r1.code, 0) << r1.err;
   const CliRun r2 = Mcms("track -q --threads 2 -o " + two.string() + " " + rec.string(), dir);
   ASSERT_EQ(r2.code, 0) << r2.err;
-  EXPECT_EQ(Slurp(one), Slurp(two));
+  EXPECT_EQ(test::ReadAll(one), test::ReadAll(two));
   EXPECT_EQ(r1.err.find('\r'), std::string::npos);
   EXPECT_NE(r1.err.find("track: 10/10 (100%)\n"), std::string::npos) << r1.err;
   const fs::path s = test::ScratchDir("noise_help");

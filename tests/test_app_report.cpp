@@ -21,6 +21,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -28,25 +29,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code;
-  std::string out, err;
-};
+using test::CliRun;
 
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-CliRun Shell(const std::string& cmd, const fs::path& scratch) {
-  const fs::path err = scratch / "stderr.txt", out = scratch / "stdout.txt";
-  const int status = std::system((cmd + " 2> " + err.string() + " > " + out.string()).c_str());
-  return {WEXITSTATUS(status), Slurp(out), Slurp(err)};
-}
-
-CliRun Mcms(const std::string& args, const fs::path& scratch) { return Shell(std::string(MCMS_CLI) + " " + args, scratch); }
+CliRun Shell(const std::string& cmd, const fs::path& scratch) { return test::Shell(scratch, cmd); }
+CliRun Mcms(const std::string& args, const fs::path& scratch) { return test::Mcms(scratch, args); }
 
 std::string Chromium() {
   if (const char* env = std::getenv("MCMS_CHROMIUM")) return env;
@@ -93,7 +79,7 @@ BrowserResult OpenInBrowser(const fs::path& page, const fs::path& scratch, const
 
 // Every figure of the page rendered and the only console message is the page's own.
 void ExpectCleanPage(const fs::path& page, const fs::path& scratch, size_t min_figures, const fs::path& screenshot = {}) {
-  const std::string html = Slurp(page);
+  const std::string html = test::ReadAll(page);
   const int embedded = static_cast<int>(Count(html, "<img class=\"figure\""));
   EXPECT_GE(embedded, static_cast<int>(min_figures));
   const BrowserResult b = OpenInBrowser(page, scratch, screenshot);
@@ -135,16 +121,16 @@ TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
   const fs::path page = s / "demo" / "report.html";
   EXPECT_NE(demo.out.find("wrote " + page.string()), std::string::npos) << demo.out;
   ASSERT_TRUE(fs::exists(page));
-  const std::string from_demo = Slurp(page);
+  const std::string from_demo = test::ReadAll(page);
   const CliRun rep = Mcms("report " + (s / "demo").string(), s);
   ASSERT_EQ(rep.code, 0) << rep.err;
   EXPECT_NE(rep.out.find("the output of mcms demo"), std::string::npos) << rep.out;
-  EXPECT_EQ(Slurp(page), from_demo);
+  EXPECT_EQ(test::ReadAll(page), from_demo);
   // Every SVG the demo wrote is on the page, with its summary and tables.
   size_t svgs = 0;
   for (const auto& e : fs::directory_iterator(s / "demo")) svgs += e.path().extension() == ".svg";
   EXPECT_GE(svgs, 4u);  // the per-point errors and the ISO 9283 plots
-  const std::string html = Slurp(page);
+  const std::string html = test::ReadAll(page);
   // ... and the per-frame plots of its tracker_poses.csv: status, position, predicted sigma,
   // reprojection RMS.
   EXPECT_EQ(Count(html, "<img class=\"figure\""), svgs + 4);

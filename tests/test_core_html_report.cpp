@@ -24,16 +24,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void Write(const fs::path& p, const std::string& text) {
-  std::ofstream out(p, std::ios::binary);
-  out << text;
-}
-
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
 std::string Base64Decode(const std::string& in) {
   auto val = [](char c) -> int {
     if (c >= 'A' && c <= 'Z') return c - 'A';
@@ -99,21 +89,21 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   SamplePlot().WriteSvg(d / "errors.svg");
   HeatMap h{"map", "x (m)", "y (m)", "sigma (mm)", {0, 1}, {0, 1}, {1, 2, 3, NAN}, {}, {}, false, 2.5};
   h.WriteSvg(d / "heatmap.svg");
-  Write(d / "summary.txt", "mean error 0.02 mm < 0.05 mm & fine\n");
-  Write(d / "setup.yaml", "rig: {cameras: 4}\n");
+  test::WriteText(d / "summary.txt", "mean error 0.02 mm < 0.05 mm & fine\n");
+  test::WriteText(d / "setup.yaml", "rig: {cameras: 4}\n");
   std::string long_text;
   for (int i = 0; i < 200; ++i) long_text += "line " + std::to_string(i) + "\n";
-  Write(d / "region.txt", long_text);
-  Write(d / "small.csv", "point,err_mm\n1,0.5\n2,0.25\n");
+  test::WriteText(d / "region.txt", long_text);
+  test::WriteText(d / "small.csv", "point,err_mm\n1,0.5\n2,0.25\n");
   std::string big = "# a comment line\ncondition,value\n";
   for (int i = 0; i < 100; ++i) big += std::string(i % 3 ? "\"a, b\"" : "c") + "," + std::to_string(i) + "\n";
-  Write(d / "big.csv", big);
-  Write(d / "broken.svg", "<html>not a figure</html>");
-  Write(d / "ragged.csv", "a,b\n1,2\n3\n");
-  Write(d / "picture.png", "\x89PNG");
+  test::WriteText(d / "big.csv", big);
+  test::WriteText(d / "broken.svg", "<html>not a figure</html>");
+  test::WriteText(d / "ragged.csv", "a,b\n1,2\n3\n");
+  test::WriteText(d / "picture.png", "\x89PNG");
   fs::create_directories(d / "images" / "cam0");
-  Write(d / "images" / "cam0" / "0.png", "x");
-  Write(d / "out.csv.partial-123", "half");
+  test::WriteText(d / "images" / "cam0" / "0.png", "x");
+  test::WriteText(d / "out.csv.partial-123", "half");
 
   HtmlReportContents c;
   const std::string html = BuildHtmlReport({d, "", 25, 100000}, &c);
@@ -127,8 +117,8 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   // The figures are the files, byte for byte.
   const auto figs = EmbeddedFigures(html);
   ASSERT_EQ(figs.size(), 2u);
-  EXPECT_EQ(figs[0], Slurp(d / "errors.svg"));
-  EXPECT_EQ(figs[1], Slurp(d / "heatmap.svg"));
+  EXPECT_EQ(figs[0], test::ReadAll(d / "errors.svg"));
+  EXPECT_EQ(figs[1], test::ReadAll(d / "heatmap.svg"));
   // Text is escaped; tables shown or summarised.
   EXPECT_NE(html.find("mean error 0.02 mm &lt; 0.05 mm &amp; fine"), std::string::npos);
   EXPECT_NE(html.find("<td>0.25</td>"), std::string::npos);
@@ -163,7 +153,7 @@ TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
                     i, 0.1 * i, 1.0 + 0.001 * i, 0.01 * std::sin(i), 0.02 * std::cos(i), -0.03 * std::sin(i), 1.5, 3.0 + i % 5);
     csv += row;
   }
-  Write(d / "poses.csv", csv);
+  test::WriteText(d / "poses.csv", csv);
   HtmlReportContents c;
   const std::string html = BuildHtmlReport({d, "track run", 25, 100000}, &c);
   EXPECT_EQ(c.kind, "track");
@@ -218,8 +208,8 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
   est += "4,4,lost,\"no balls\",,,,,,,,0,";
   for (int i = 0; i < 36; ++i) est += ",";
   est += "\n";
-  Write(d / "poses.csv", est);
-  Write(d / "truth" / "poses.csv", truth);
+  test::WriteText(d / "poses.csv", est);
+  test::WriteText(d / "truth" / "poses.csv", truth);
   HtmlReportContents c;
   const std::string html = BuildHtmlReport({d}, &c);
   EXPECT_EQ(c.kind, "track");
@@ -236,14 +226,14 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
 TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
   const fs::path d = test::ScratchDir("html_report_bad");
   EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "missing"}); }).find("missing does not exist"), std::string::npos);
-  Write(d / "file.txt", "x");
+  test::WriteText(d / "file.txt", "x");
   EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "file.txt"}); }).find("is not a folder"), std::string::npos);
   fs::create_directories(d / "empty");
-  Write(d / "empty" / "x.bin", "x");
+  test::WriteText(d / "empty" / "x.bin", "x");
   EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"), std::string::npos);
   // An output that is a folder: refused before anything is built.
   fs::create_directories(d / "run" / "out.html");
-  Write(d / "run" / "summary.txt", "ok");
+  test::WriteText(d / "run" / "summary.txt", "ok");
   EXPECT_NE(InputErrorOf([&] { WriteHtmlReport({d / "run"}, d / "run" / "out.html"); }).find("is a folder"),
             std::string::npos);
   // A failing build leaves no file.
@@ -251,9 +241,9 @@ TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
   EXPECT_FALSE(fs::exists(d / "empty.html"));
   // A good run writes the page; a report.html in the folder is not reported on itself.
   WriteHtmlReport({d / "run"}, d / "run" / "report.html");
-  const std::string first = Slurp(d / "run" / "report.html");
+  const std::string first = test::ReadAll(d / "run" / "report.html");
   WriteHtmlReport({d / "run"}, d / "run" / "report.html");
-  EXPECT_EQ(Slurp(d / "run" / "report.html"), first);  // deterministic, and does not include itself
+  EXPECT_EQ(test::ReadAll(d / "run" / "report.html"), first);  // deterministic, and does not include itself
 }
 
 // Tick labels of the y axis: the text of every right-aligned label.

@@ -16,11 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-void WriteText(const fs::path& p, const std::string& text) {
-  std::ofstream out(p, std::ios::binary);
-  out << text;
-}
-
 // The message of the InputError `f` throws; fails the test when it throws nothing.
 template <typename F>
 std::string InputErrorOf(F&& f) {
@@ -50,7 +45,7 @@ TEST(Io, WriteFileAtomicallyWritesAndCreatesTheFolder) {
 TEST(Io, AFailedWriteLeavesThePreviousFileAndNoPartialOne) {
   const fs::path dir = test::ScratchDir("core_io_fail");
   const fs::path p = dir / "out.txt";
-  WriteText(p, "old\n");
+  test::WriteText(p, "old\n");
   EXPECT_THROW(WriteFileAtomically(p,
                                    [](std::ostream& o) {
                                      o << "half of the new content";
@@ -73,7 +68,7 @@ TEST(Io, ReadTextFileNamesAMissingFile) {
 
 TEST(Io, ReadCsvSkipsCommentsAndBlankLinesTrimsCellsAndKeepsLineNumbers) {
   const fs::path p = test::ScratchDir("core_io_csv") / "t.csv";
-  WriteText(p, "# a comment\n time_s , x_m,name,note\r\n\n0.5, 1e-3 ,a,\n   \n2,-4.25,b b,last\n");
+  test::WriteText(p, "# a comment\n time_s , x_m,name,note\r\n\n0.5, 1e-3 ,a,\n   \n2,-4.25,b b,last\n");
   const CsvTable t = ReadCsv(p);
   ASSERT_EQ(t.header, (std::vector<std::string>{"time_s", "x_m", "name", "note"}));
   ASSERT_EQ(t.rows.size(), 2u);
@@ -90,16 +85,16 @@ TEST(Io, ReadCsvSkipsCommentsAndBlankLinesTrimsCellsAndKeepsLineNumbers) {
 
 TEST(Io, ReadCsvErrorsNameFileLineAndColumn) {
   const fs::path dir = test::ScratchDir("core_io_csv_errors");
-  WriteText(dir / "short.csv", "a,b,c\n1,2,3\n4,5\n");
+  test::WriteText(dir / "short.csv", "a,b,c\n1,2,3\n4,5\n");
   std::string msg = InputErrorOf([&] { ReadCsv(dir / "short.csv"); });
   EXPECT_NE(msg.find("short.csv line 3"), std::string::npos) << msg;
   EXPECT_NE(msg.find("expected 3 columns"), std::string::npos) << msg;
 
-  WriteText(dir / "empty.csv", "# only a comment\n\n");
+  test::WriteText(dir / "empty.csv", "# only a comment\n\n");
   msg = InputErrorOf([&] { ReadCsv(dir / "empty.csv"); });
   EXPECT_NE(msg.find("empty.csv"), std::string::npos) << msg;
 
-  WriteText(dir / "cells.csv", "a,b\n1,x\n2,nan\n3,\n4,5abc\n");
+  test::WriteText(dir / "cells.csv", "a,b\n1,x\n2,nan\n3,\n4,5abc\n");
   const CsvTable t = ReadCsv(dir / "cells.csv");
   msg = InputErrorOf([&] { t.Column("z"); });
   EXPECT_NE(msg.find("'z'"), std::string::npos) << msg;
@@ -113,7 +108,7 @@ TEST(Io, ReadCsvErrorsNameFileLineAndColumn) {
 
 TEST(Io, OutputPathsAreCheckedBeforeWork) {
   const fs::path dir = test::ScratchDir("core_io_paths");
-  WriteText(dir / "file.txt", "x");
+  test::WriteText(dir / "file.txt", "x");
   fs::create_directories(dir / "folder");
   // A folder where a file is wanted, and the reverse, are refused with the option named.
   std::string msg = InputErrorOf([&] { RequireWritableFile(dir / "folder", "-o"); });

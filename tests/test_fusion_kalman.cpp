@@ -12,20 +12,14 @@
 #include "core/random.h"
 #include "fusion/chi_square.h"
 #include "fusion/kalman.h"
+#include "tests/test_util.h"
 
 namespace mcms {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(no InputError)";
-}
+using test::ErrorOf;
 
 // --- (a) the paper's scheme ------------------------------------------------------------
 

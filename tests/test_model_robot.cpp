@@ -36,14 +36,7 @@ Eigen::VectorXd RandomInside(const RobotModel& robot, Rng& rng) {
   return q;
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(no InputError)";
-}
+using test::ErrorOf;
 
 TEST(RobotModel, Kr5ArcAtZeroPose) {
   const RobotModel robot = RobotModel::Default();

@@ -7,11 +7,15 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include <Eigen/Core>
+
+#include "core/error.h"
 
 namespace mcms::test {
 
@@ -47,7 +51,30 @@ inline Eigen::MatrixXd NumericJacobian(const std::function<Eigen::VectorXd(const
   return J;
 }
 
-// A fresh scratch folder under the build tree.
+// The message of the InputError that `f` throws, "(no InputError)" when it throws none.
+inline std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no InputError)";
+}
+
+// The whole file, "" when it does not exist. One stream per file: `s << in.rdbuf()` of an
+// empty file sets failbit on `s`.
+inline std::string ReadAll(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+inline void WriteText(const std::filesystem::path& p, const std::string& text) {
+  std::ofstream out(p, std::ios::binary);
+  out << text;
+}
+
 // A fresh scratch folder of this process: ctest runs test cases as separate processes in
 // parallel, so the name carries the process id (two cases of one suite sharing a name
 // would otherwise remove each other's files).

@@ -397,15 +397,7 @@ TEST(BlobDetector, EstimatesTheImageNoiseFromASparseSample) {
 // Bad input.
 // ---------------------------------------------------------------------------------------
 
-template <typename F>
-std::string ErrorOf(F f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using test::ErrorOf;
 
 TEST(BlobDetector, RejectsBadImages) {
   EXPECT_NE(ErrorOf([] { DetectBlobs(cv::Mat()); }).find("empty"), std::string::npos);
