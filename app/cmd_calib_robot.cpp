@@ -18,7 +18,8 @@
 //   --report FILE    the report (also printed): starting and final residuals, the
 //                    registration T_meas_base, every parameter with its sigma, the fixed
 //                    parameters with the reason, correlated pairs, k-fold held-out errors
-//   --plot FILE.svg  position error per measurement before and after calibration
+//   --plot FILE.svg  position error per measurement before and after calibration, and
+//                    FILE-joints.svg the same errors against each joint angle
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -110,7 +111,7 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
       ->check(CLI::ExistingFile);
   sub->add_option("-o,--output", args->output, "Calibrated robot YAML to write (required)")->type_name("FILE");
   sub->add_option("--report", args->report, "Also write the report to this file")->type_name("FILE");
-  sub->add_option("--plot", args->plot, "SVG plot of the error per measurement")->type_name("FILE.svg");
+  sub->add_option("--plot", args->plot, "SVG plot of the error per measurement (and FILE-joints.svg: against each joint angle)")->type_name("FILE.svg");
   sub->add_option("--base-guess", args->base_guess, "Starting T_meas_base: x y z qw qx qy qz")->expected(7);
   sub->add_option("--tool-guess", args->tool_guess, "Starting T_flange_tool: x y z qw qx qy qz")->expected(7);
   sub->add_option("--position-sigma-mm", args->position_sigma_mm, "Measurement noise per axis, mm (default 0.05)")

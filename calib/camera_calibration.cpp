@@ -1214,24 +1214,48 @@ std::string SummarizeCalibration(const CameraCalibrationResult& r) {
 void WriteResidualPlot(const CameraCalibrationResult& r, int camera, const std::filesystem::path& path) {
   if (camera < 0 || camera >= static_cast<int>(r.rig.size())) Throw("WriteResidualPlot: no camera ", camera);
   const auto& st = r.residuals[camera];
+  const CameraModel& cam = r.rig.cameras[camera];
   const double sigma = st.rms_px > 0 ? st.rms_px : 1.0;
+  // Residuals are sub-pixel on a megapixel image: draw them as arrows magnified so that the
+  // largest inlier is about 6 % of the image width, with a round magnification.
+  double largest = 0.0;
+  for (size_t i = 0; i < st.pixels.size(); ++i)
+    if (st.inlier[i]) largest = std::max(largest, st.residuals[i].norm());
+  double scale = 1.0;
+  if (largest > 0) {
+    const double want = 0.06 * std::max(cam.Width(), 1) / largest;
+    const double decade = std::pow(10.0, std::floor(std::log10(want)));
+    scale = want >= 5 * decade ? 5 * decade : want >= 2 * decade ? 2 * decade : decade;
+  }
   PlotSeries low{"|e| < 1 sigma", {}, {}, "#2ca02c", true}, mid{"1-3 sigma", {}, {}, "#ff7f0e", true},
       high{"> 3 sigma", {}, {}, "#d62728", true}, out{"rejected", {}, {}, "#000000", true};
   for (size_t i = 0; i < st.pixels.size(); ++i) {
     const double e = st.residuals[i].norm() / sigma;
     PlotSeries& s = !st.inlier[i] ? out : e < 1 ? low : e < 3 ? mid : high;
     s.x.push_back(st.pixels[i].x());
-    s.y.push_back(-st.pixels[i].y());
+    s.y.push_back(st.pixels[i].y());
+    // Rejected points can be off by many pixels: markers only, no arrow across the image.
+    s.dx.push_back(st.inlier[i] ? st.residuals[i].x() : std::numeric_limits<double>::quiet_NaN());
+    s.dy.push_back(st.inlier[i] ? st.residuals[i].y() : std::numeric_limits<double>::quiet_NaN());
   }
   Plot p;
   std::ostringstream t;
-  t << r.rig.names[camera] << ": residuals over the image (sigma = " << sigma << " px per coordinate)";
+  t << r.rig.names[camera] << ": residuals (projected - observed) over the image, arrows x" << scale
+    << "; sigma = " << sigma << " px per coordinate";
   p.title = t.str();
   p.x_label = "u (px)";
-  p.y_label = "-v (px)";
-  for (auto* s : {&low, &mid, &high, &out})
+  p.y_label = "v (px)";
+  p.y_down = true;
+  p.equal_scale = true;
+  if (cam.Width() > 0 && cam.Height() > 0) {
+    p.x_range = std::make_pair(-0.5, cam.Width() - 0.5);
+    p.y_range = std::make_pair(-0.5, cam.Height() - 0.5);
+  }
+  for (auto* s : {&low, &mid, &high, &out}) {
+    s->vector_scale = scale;
     if (!s->x.empty()) p.series.push_back(*s);
-  p.WriteSvg(path);
+  }
+  p.WriteSvg(path, 900, std::clamp(static_cast<int>(900.0 * cam.Height() / std::max(cam.Width(), 1)) + 120, 420, 900));
 }
 
 }  // namespace mcms

@@ -21,6 +21,12 @@ std::string ValueText(const CalibrationParameter& p, double v) {
 }
 }  // namespace
 
+std::filesystem::path JointPlotPath(const std::filesystem::path& plot) {
+  std::filesystem::path p = plot;
+  p.replace_filename(plot.stem().string().append("-joints").append(plot.extension().string()));
+  return p;
+}
+
 std::string PoseText(const Pose& T) {
   const Eigen::Quaterniond q = T.Quaternion();
   std::ostringstream s;
@@ -50,7 +56,10 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   // Refuse unwritable outputs before the solve, not after it.
   RequireWritableFile(job.output, "-o");
   if (!job.report.empty()) RequireWritableFile(job.report, "--report");
-  if (!job.plot.empty()) RequireWritableFile(job.plot, "--plot");
+  if (!job.plot.empty()) {
+    RequireWritableFile(job.plot, "--plot");
+    RequireWritableFile(JointPlotPath(job.plot), "--plot");
+  }
   const std::vector<RobotMeasurement> ms = ReadRobotMeasurements(job.measurements);
   const auto say = [&](const std::string& line) {
     if (job.progress) job.progress(line);
@@ -146,7 +155,23 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     series("nominal DH, registered", nominal.errors_after, "#d62728");
     series("calibrated", r.errors_after, "#1f77b4");
     if (cv) series("calibrated, held out", cv->calibrated, "#2ca02c");
+    // The same errors against each joint angle, the variable that drives them: a joint offset
+    // or error motion shows as a trend or a wave along its own joint.
+    std::vector<Plot> joints;
+    for (int j = 0; j < robot.NumJoints(); ++j) {
+      Plot pj;
+      pj.title = "joint " + std::to_string(j + 1);
+      pj.x_label = "q" + std::to_string(j + 1) + " (deg)";
+      pj.y_label = "position error (mm)";
+      for (const PlotSeries& s : plot.series) {
+        PlotSeries sj = s;
+        for (size_t i = 0; i < sj.x.size() && i < ms.size(); ++i) sj.x[i] = ms[i].q[j] / kDeg;
+        pj.series.push_back(sj);
+      }
+      joints.push_back(pj);
+    }
     plot.WriteSvg(job.plot);
+    WritePlotGridSvg(JointPlotPath(job.plot), joints, 3);
   }
   r.robot.Write(job.output);
   return report;

@@ -19,7 +19,8 @@ struct RobotCalibrationJob {
   std::filesystem::path measurements;   // YAML (calib/robot_calibration.h ReadRobotMeasurements)
   std::filesystem::path robot;          // robot description; empty = the built-in default
   std::filesystem::path output;         // calibrated robot YAML (required)
-  std::filesystem::path report, plot;   // optional
+  // optional; with `plot` also the errors against each joint angle (JointPlotPath(plot))
+  std::filesystem::path report, plot;
   std::optional<Pose> base_guess;       // T_meas_base; default: rigid fit of nominal tool positions
   std::optional<Pose> tool_guess;       // T_flange_tool; default: the robot file's tool
   std::vector<std::string> fixed;
@@ -36,6 +37,9 @@ struct RobotCalibrationJob {
 // Runs the job; returns the report text (also written to `report` when given). InputError
 // naming the input when anything is wrong; outputs are checked writable before the solve.
 std::string RunRobotCalibrationJob(const RobotCalibrationJob& job);
+
+// Where the errors-against-joint-angle plot goes: "err.svg" -> "err-joints.svg".
+std::filesystem::path JointPlotPath(const std::filesystem::path& plot);
 
 // "translation_m [x, y, z], quaternion_wxyz [w, x, y, z]".
 std::string PoseText(const Pose& T);

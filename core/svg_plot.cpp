@@ -260,6 +260,33 @@ void Plot::WriteSvg(const std::filesystem::path& path, int W, int H) const {
   WriteFileAtomically(path, [&](std::ostream& out) { out << text; });
 }
 
+std::string PlotGridSvg(const std::vector<Plot>& plots, int columns, int cell_w, int cell_h) {
+  if (plots.empty() || columns < 1 || cell_w < 100 || cell_h < 100)
+    throw std::invalid_argument("PlotGridSvg: expected at least one plot, columns >= 1 and cells of >= 100 px");
+  const int n = static_cast<int>(plots.size());
+  const int cols = std::min(columns, n), rows = (n + cols - 1) / cols;
+  std::ostringstream o;
+  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << cols * cell_w << "' height='" << rows * cell_h
+    << "' font-family='sans-serif' font-size='12'>\n";
+  for (int i = 0; i < n; ++i) {
+    // Each plot is its own nested <svg> placed at its cell (nested viewports are plain SVG).
+    std::string cell = plots[i].ToSvg(cell_w, cell_h);
+    const std::string head = "<svg xmlns='http://www.w3.org/2000/svg'";
+    if (cell.compare(0, head.size(), head) != 0) throw std::logic_error("PlotGridSvg: unexpected plot document");
+    cell.replace(0, head.size(), "<svg x='" + std::to_string((i % cols) * cell_w) + "' y='" +
+                                     std::to_string((i / cols) * cell_h) + "'");
+    o << cell;
+  }
+  o << "</svg>\n";
+  return o.str();
+}
+
+void WritePlotGridSvg(const std::filesystem::path& path, const std::vector<Plot>& plots, int columns, int cell_w,
+                      int cell_h) {
+  const std::string text = PlotGridSvg(plots, columns, cell_w, cell_h);
+  WriteFileAtomically(path, [&](std::ostream& out) { out << text; });
+}
+
 namespace {
 // Viridis, 9 stops, linear in between.
 std::string Viridis(double t) {

@@ -40,6 +40,12 @@ struct Plot {
   void WriteSvg(const std::filesystem::path& path, int width = 900, int height = 420) const;
 };
 
+// Several plots in one SVG document, `columns` per row, each cell_w x cell_h (small
+// multiples: e.g. an error against each joint angle). Written atomically.
+std::string PlotGridSvg(const std::vector<Plot>& plots, int columns, int cell_w = 450, int cell_h = 300);
+void WritePlotGridSvg(const std::filesystem::path& path, const std::vector<Plot>& plots, int columns, int cell_w = 450,
+                      int cell_h = 300);
+
 // A heat map of values on a regular grid of cell centres, with a colour bar (viridis)
 // labelled with the value's name and unit. Cells without a value (NaN) are grey; with a
 // threshold, cells whose value is below it are outlined in red.

@@ -112,22 +112,22 @@ std::string Num(double v, int digits = 3) {
 // The time-merged sample stream: robot, inclinometer, camera at equal stamps.
 struct Event {
   double t;
-  SensorKind kind;
+  StreamSensor kind;
   size_t index;
 };
 
 std::vector<Event> MergedEvents(const SensorLogs& logs, double t_end) {
   std::vector<Event> events;
   for (size_t i = 0; i < logs.tracker.samples.size(); ++i)
-    events.push_back({logs.tracker.samples[i].time_s, SensorKind::kCamera, i});
+    events.push_back({logs.tracker.samples[i].time_s, StreamSensor::kCamera, i});
   if (logs.robot)
     for (size_t i = 0; i < logs.robot->samples.size(); ++i)
       if (logs.robot->samples[i].time_s <= t_end)
-        events.push_back({logs.robot->samples[i].time_s, SensorKind::kRobot, i});
+        events.push_back({logs.robot->samples[i].time_s, StreamSensor::kRobot, i});
   if (logs.inclinometer)
     for (size_t i = 0; i < logs.inclinometer->samples.size(); ++i)
       if (logs.inclinometer->samples[i].time_s <= t_end)
-        events.push_back({logs.inclinometer->samples[i].time_s, SensorKind::kInclinometer, i});
+        events.push_back({logs.inclinometer->samples[i].time_s, StreamSensor::kInclinometer, i});
   std::stable_sort(events.begin(), events.end(),
                    [](const Event& a, const Event& b) { return a.t < b.t || (a.t == b.t && a.kind < b.kind); });
   return events;
@@ -154,7 +154,7 @@ class KalmanRun {
 
   void Process(const Event& e) {
     const int k = static_cast<int>(e.kind);
-    if (e.kind == SensorKind::kInclinometer) {
+    if (e.kind == StreamSensor::kInclinometer) {
       const Vec2& reading = logs_.inclinometer->samples[e.index].reading;
       if (setup_.exclude_faults && BeyondRange(reading, setup_.inclinometer)) {
         range_.Add(reading, setup_.inclinometer);
@@ -166,7 +166,7 @@ class KalmanRun {
       return;
     }
     PoseWithCovariance m;
-    if (e.kind == SensorKind::kRobot) {
+    if (e.kind == StreamSensor::kRobot) {
       m = RobotFlangePose(logs_.robot->samples[e.index].q, setup_, 1.0, accuracy_scale_);
     } else {
       const TrackerSample& s = logs_.tracker.samples[e.index];
@@ -185,11 +185,11 @@ class KalmanRun {
       // start again from this measurement.
       std::string who;
       for (int j = 0; j < 3; ++j)
-        if (streak_[j] >= 2) who += (who.empty() ? "" : " and ") + std::string(ToString(static_cast<SensorKind>(j)));
+        if (streak_[j] >= 2) who += (who.empty() ? "" : " and ") + std::string(ToString(static_cast<StreamSensor>(j)));
       std::string text = "filter restarted at " + Num(e.t, 9) + " s: " + who + " kept contradicting its state";
       if (start_.alone) {
         // The state was that one sample and nothing since vouched for it: it was the fault.
-        const std::string name = ToString(static_cast<SensorKind>(start_.kind));
+        const std::string name = ToString(static_cast<StreamSensor>(start_.kind));
         text += " (which came from one " + name + " sample at " + Num(start_.t, 9) + " s alone: left out)";
         restart_culprits_.push_back(name);
       }
@@ -214,14 +214,14 @@ class KalmanRun {
     r.covariance = covariance;
     double total = 0.0;
     // Camera first, as in the MOIFA rows.
-    for (const SensorKind kind : {SensorKind::kCamera, SensorKind::kRobot, SensorKind::kInclinometer}) {
+    for (const StreamSensor kind : {StreamSensor::kCamera, StreamSensor::kRobot, StreamSensor::kInclinometer}) {
       const int k = static_cast<int>(kind);
       if (used_[k]) {
         r.sensors.push_back(ToString(kind));
         r.statistics.push_back({ToString(kind), nis_[k], dof_[k]});
       }
     }
-    for (const SensorKind kind : {SensorKind::kRobot, SensorKind::kInclinometer, SensorKind::kCamera}) {
+    for (const StreamSensor kind : {StreamSensor::kRobot, StreamSensor::kInclinometer, StreamSensor::kCamera}) {
       const int k = static_cast<int>(kind);
       total += nis_[k];
       r.dof += dof_[k];
@@ -230,7 +230,7 @@ class KalmanRun {
         r.flagged.push_back(ToString(kind));
     }
     r.p_value = r.dof > 0 ? ChiSquareSurvival(total, r.dof) : 1.0;
-    for (const SensorKind kind : {SensorKind::kCamera, SensorKind::kRobot, SensorKind::kInclinometer}) {
+    for (const StreamSensor kind : {StreamSensor::kCamera, StreamSensor::kRobot, StreamSensor::kInclinometer}) {
       const Rejected& x = rejected_[static_cast<int>(kind)];
       if (x.count == 0) continue;
       r.excluded.push_back(ToString(kind));
@@ -274,7 +274,7 @@ class KalmanRun {
       dof_[k] += u.dof;
       ++rejected_[k].accepted;
       // An accepted full pose vouches for the state; a tilt alone does not (no position).
-      if (k != static_cast<int>(SensorKind::kInclinometer)) {
+      if (k != static_cast<int>(StreamSensor::kInclinometer)) {
         for (int& c : streak_) c = 0;
         start_.alone = false;
       }
@@ -319,13 +319,13 @@ void CheckInputs(const SensorLogs& logs, const std::vector<FusionWindow>& window
 
 }  // namespace
 
-const char* ToString(SensorKind k) {
+const char* ToString(StreamSensor k) {
   switch (k) {
-    case SensorKind::kRobot:
+    case StreamSensor::kRobot:
       return "robot";
-    case SensorKind::kInclinometer:
+    case StreamSensor::kInclinometer:
       return "inclinometer";
-    case SensorKind::kCamera:
+    case StreamSensor::kCamera:
       return "camera";
   }
   return "?";
@@ -579,7 +579,7 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
                   static_cast<double>(events.size()) / static_cast<double>(logs.tracker.samples.size()));
     for (const Event& e : events) {
       run.Process(e);
-      if (e.kind != SensorKind::kCamera) continue;
+      if (e.kind != StreamSensor::kCamera) continue;
       const TrackerSample& s = logs.tracker.samples[e.index];
       out.push_back(run.Report(s.frame, s.time_s, run.Filter().PoseEstimate(), run.Filter().PoseCovariance()));
     }
@@ -592,12 +592,12 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
     while (e0 < events.size() && events[e0].t < t0) ++e0;
     size_t e1 = e0;
     int robot_readings = 0;
-    for (; e1 < events.size() && events[e1].t < t1; ++e1) robot_readings += events[e1].kind == SensorKind::kRobot;
+    for (; e1 < events.size() && events[e1].t < t1; ++e1) robot_readings += events[e1].kind == StreamSensor::kRobot;
     // The filter starts at the window's first camera frame: a single joint reading, whose
     // covariance carries the window's systematic error inflated, is no prior on its own.
     // Samples before that frame are dropped; those at its time stamp follow it.
     size_t first = e0;
-    while (first < e1 && events[first].kind != SensorKind::kCamera) ++first;
+    while (first < e1 && events[first].kind != StreamSensor::kCamera) ++first;
     if (first == e1) {
       e0 = e1;
       continue;

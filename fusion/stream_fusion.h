@@ -77,8 +77,8 @@ struct SensorLogs {
 void CheckTimeOverlap(const SensorLogs& logs);
 
 // The sensors, in the order of the KF's tie-break at equal time stamps.
-enum class SensorKind { kRobot = 0, kInclinometer = 1, kCamera = 2 };
-const char* ToString(SensorKind k);
+enum class StreamSensor { kRobot = 0, kInclinometer = 1, kCamera = 2 };
+const char* ToString(StreamSensor k);
 
 // The camera's measurement of T_base_flange with its covariance: model/flange_pose.h with
 // the setup's cell geometry (see the header comment).

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "calib/iso9283.h"
+#include "calib/robot_audit.h"
 #include "calib/robot_calibration.h"
 #include "fusion/sensor_logs.h"
 #include "fusion/stream_fusion.h"
@@ -430,6 +431,35 @@ void BindRobot(py::module_& m) {
       py::arg("T_meas_base_guess") = py::none(), py::arg("folds") = 5,
       "k-fold held-out prediction errors of the calibrated model and of the nominal model registered on the same "
       "folds (measurement i in fold i mod k). Options as calibrate_robot's.");
+
+  m.def(
+      "audit_robot",
+      [](const std::string& log, std::optional<RobotModel> robot, const std::vector<std::string>& only,
+         double false_alarm, int folds, int max_effects) {
+        const RobotModel model = robot ? *robot : RobotModel::Default();
+        RobotAuditOptions o;
+        o.only = only;
+        o.false_alarm = false_alarm;
+        o.folds = folds;
+        o.max_effects = max_effects;
+        std::string why;
+        if (!o.IsValid(&why)) Throw("audit_robot: ", why);
+        RobotAuditResult r;
+        {
+          py::gil_scoped_release release;
+          r = AuditRobot(model, ReadRobotLog(log, model), o);
+        }
+        // The report's JSON (the CLI's --json) as Python objects, plus the text and the
+        // robot with the effects its description can hold.
+        py::dict d = py::module_::import("json").attr("loads")(r.report.ToJson());
+        d["text"] = r.report.Text();
+        d["extended_robot"] = r.extended_robot;
+        return d;
+      },
+      py::arg("log"), py::arg("robot") = py::none(), py::arg("only") = std::vector<std::string>{},
+      py::arg("false_alarm") = 0.01, py::arg("folds") = 5, py::arg("max_effects") = 4,
+      "The robot mode of the model audit (`mcms audit robot`): the report as the --json file's dict "
+      "('mode', 'nominal', 'clean', 'effects', 'undecided'), with 'text' and 'extended_robot'.");
 
   m.def(
       "iso9283_pose",

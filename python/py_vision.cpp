@@ -235,6 +235,21 @@ py::dict FovPointDict(const FovPointPrediction& p) {
   return d;
 }
 
+// The options shared by fov_map and predict_fov_points: the target's orientation in the rig
+// (a rotation matrix, or None for the default) and the thread count.
+FovMapOptions GetFovMapOptions(py::handle R_rig_target, int threads) {
+  FovMapOptions o;
+  if (!R_rig_target.is_none()) {
+    Mat3 R = GetMatrix(R_rig_target, "R_rig_target", 3, 3);
+    if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-6 || R.determinant() < 0)
+      Throw("argument 'R_rig_target': not a rotation matrix");
+    o.R_rig_target = R;
+  }
+  if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+  o.threads = threads;
+  return o;
+}
+
 }  // namespace
 
 void BindVision(py::module_& m) {
@@ -700,16 +715,8 @@ void BindVision(py::module_& m) {
       "fov_map",
       [](const CameraRig& rig, const Target& target, const std::string& grid, py::handle R_rig_target, int threads,
          double threshold_mm, std::optional<std::string> output_dir) {
-        FovMapOptions o;
+        FovMapOptions o = GetFovMapOptions(R_rig_target, threads);
         o.grid = FovGrid::Parse(grid, "argument 'grid'");
-        if (!R_rig_target.is_none()) {
-          Mat3 R = GetMatrix(R_rig_target, "R_rig_target", 3, 3);
-          if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-6 || R.determinant() < 0)
-            Throw("argument 'R_rig_target': not a rotation matrix");
-          o.R_rig_target = R;
-        }
-        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
-        o.threads = threads;
         o.threshold_mm = threshold_mm;
         std::string why;
         if (!o.IsValid(&why)) Throw("fov map options: ", why);
@@ -756,15 +763,7 @@ void BindVision(py::module_& m) {
   m.def(
       "predict_fov_points",
       [](const CameraRig& rig, const Target& target, py::handle positions, py::handle R_rig_target, int threads) {
-        FovMapOptions o;
-        if (!R_rig_target.is_none()) {
-          Mat3 R = GetMatrix(R_rig_target, "R_rig_target", 3, 3);
-          if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-6 || R.determinant() < 0)
-            Throw("argument 'R_rig_target': not a rotation matrix");
-          o.R_rig_target = R;
-        }
-        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
-        o.threads = threads;
+        const FovMapOptions o = GetFovMapOptions(R_rig_target, threads);
         const std::vector<Vec3> p = GetPoints3(positions, "positions");
         if (p.empty()) Throw("argument 'positions': expected at least one position");
         std::vector<FovMapPoint> r;

@@ -1,17 +1,20 @@
 #!/usr/bin/env bash
-# AddressSanitizer + UndefinedBehaviorSanitizer build of the unit tests of the lower
-# modules, and a run of them. Builds into ./build-asan (separate from ./build).
-#   scripts/sanitize.sh              # core, vision, model, tracking, fusion unit tests
+# AddressSanitizer + UndefinedBehaviorSanitizer build of the test suite, and a run of it.
+# Builds into ./build-asan (separate from ./build).
+#   scripts/sanitize.sh              # every module's unit tests + the app tests named below
 #   MCMS_SANITIZE_MODULES="core vision" scripts/sanitize.sh   # a narrower subset
-# The modules' tests are chosen by their ctest label (the <module> of test_<module>_*.cpp);
-# the calib, synthetic and app suites are left out because under the sanitizers they take
-# longer than CI allows (they are built and run by scripts/setup.sh test).
+#   MCMS_SANITIZE_APP_TESTS="inputs cli fuse" (default)      # which tests/test_app_<what>.cpp
+# The modules' tests are chosen by their ctest label (the <module> of test_<module>_*.cpp).
+# Of the end-to-end app suites (the mcms binary, built instrumented too) only the bad-input,
+# CLI and fusion ones run by default: the rendering-heavy ones take longer under the
+# sanitizers than CI allows (all of them run uninstrumented in scripts/setup.sh test).
 # Any sanitizer report fails the run: UBSan does not recover, ASan stops at the first error,
 # LeakSanitizer runs at every test's exit.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-modules="${MCMS_SANITIZE_MODULES:-core vision model tracking fusion}"
+modules="${MCMS_SANITIZE_MODULES:-core vision model tracking fusion calib synthetic app}"
+app_tests="${MCMS_SANITIZE_APP_TESTS:-inputs cli fuse}"
 jobs=$(nproc 2>/dev/null || echo 2)
 launcher=()
 if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache); fi
@@ -48,7 +51,12 @@ for m in $modules; do
   found=0
   for src in tests/test_"${m}"_*.cpp; do
     [ -e "$src" ] || continue
-    targets+=("$(basename "$src" .cpp)")
+    name="$(basename "$src" .cpp)"
+    if [ "$m" = app ]; then
+      what="${name#test_app_}"
+      case " $app_tests " in *" $what "*) ;; *) continue ;; esac
+    fi
+    targets+=("$name")
     found=1
   done
   if [ "$found" = 1 ]; then labels+=("$m"); fi
@@ -58,8 +66,10 @@ if [ ${#targets[@]} -eq 0 ]; then
   exit 2
 fi
 echo "sanitize: building ${targets[*]}"
+case " $modules " in *" app "*) targets+=(mcms) ;; esac
 cmake --build build-asan -j"$jobs" --target "${targets[@]}"
 
 label_regex="^($(IFS='|'; echo "${labels[*]}"))\$"
 echo "sanitize: running the tests labelled $label_regex"
-ctest --test-dir build-asan --output-on-failure -j"$jobs" -L "$label_regex"
+# Test executables left unbuilt (the app suites not chosen) appear as <name>_NOT_BUILT.
+ctest --test-dir build-asan --output-on-failure -j"$jobs" -L "$label_regex" -E '_NOT_BUILT$' 

@@ -321,5 +321,21 @@ TEST(SvgPlot, ResidualVectorsOverTheImageKeepImageAxes) {
   EXPECT_NE(svg.find(">0</text>"), std::string::npos);
 }
 
+TEST(SvgPlot, GridPlacesEachPlotInItsCell) {
+  std::vector<Plot> plots(5, SamplePlot());
+  for (int i = 0; i < 5; ++i) plots[i].title = "panel " + std::to_string(i);
+  const std::string svg = PlotGridSvg(plots, 3, 400, 300);
+  // 3 columns, 2 rows; each panel a nested viewport at its cell, all titles present.
+  EXPECT_EQ(svg.rfind("<svg xmlns='http://www.w3.org/2000/svg' width='1200' height='600'", 0), 0u) << svg.substr(0, 120);
+  for (const char* cell : {"<svg x='0' y='0'", "<svg x='400' y='0'", "<svg x='800' y='0'", "<svg x='0' y='300'",
+                           "<svg x='400' y='300'"})
+    EXPECT_EQ(Count(svg, cell), 1u) << cell;
+  EXPECT_EQ(Count(svg, "<svg"), 6u);
+  EXPECT_EQ(Count(svg, "</svg>"), 6u);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(Count(svg, ">panel " + std::to_string(i) + "<"), 1u) << i;
+  EXPECT_THROW(PlotGridSvg({}, 3), std::invalid_argument);
+  EXPECT_THROW(PlotGridSvg(plots, 0), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace mcms

@@ -94,6 +94,50 @@ class Calibration(unittest.TestCase):
         self.assertEqual(cv["calibrated"]["dp"].shape, (40, 3))
         self.assertLess(cv["calibrated"]["rms_position_m"], 0.2 * cv["nominal"]["rms_position_m"])
 
+    def _audit_log(self, path, offset_rad, seed):
+        """A measurement log of 30 poses x 3 repeats (0.02 mm noise) from a robot whose joint 3
+        reads offset_rad less than it is (a hidden joint_offset)."""
+        robot = mcms.RobotModel.default()
+        q = joints(robot, seed, 30)
+        rng = np.random.default_rng(seed + 100)
+        T_meas_base = mcms.pose_from_rt([0.01, -0.02, 0.3, 1.5, -0.4, 0.2])
+        rows = ["time_s," + ",".join(f"q{j + 1}_rad" for j in range(6)) + ",x_m,y_m,z_m"]
+        t = 0.0
+        for rep in range(3):
+            for x in q:
+                true_q = x.copy()
+                true_q[2] += offset_rad
+                p = (T_meas_base @ robot.T_base_tool(true_q))[:3, 3] + rng.normal(0, 2e-5, 3)
+                rows.append(",".join(f"{v:.12g}" for v in [t, *x, *p]))
+                t += 10.0
+        pathlib.Path(path).write_text("\n".join(rows) + "\n")
+
+    def test_audit_names_a_hidden_joint_offset(self):
+        import tempfile
+        with tempfile.TemporaryDirectory() as d:
+            log = pathlib.Path(d) / "log.csv"
+            only = ["joint_offset", "link_length"]
+            self._audit_log(log, np.radians(0.03), 7)
+            r = mcms.audit_robot(str(log), only=only)
+            self.assertEqual(r["mode"], "robot")
+            self.assertFalse(r["clean"], r["text"])
+            found = [e for e in r["effects"] if e["name"] == "joint_offset" and e["where"] == "joint 3"]
+            self.assertEqual(len(found), 1, r["text"])
+            e = found[0]
+            (name, value), = e["parameters"].items()
+            self.assertLess(abs(value - np.radians(0.03)), 3 * e["sigma"][name], r["text"])
+            self.assertGreater(e["heldout_loglik_gain"], 0)
+            self.assertIsInstance(r["extended_robot"], mcms.RobotModel)
+            # The same log without the offset: clean, nothing named.
+            self._audit_log(log, 0.0, 7)
+            r = mcms.audit_robot(str(log), only=only)
+            self.assertTrue(r["clean"], r["text"])
+            self.assertEqual(r["effects"], [])
+            with self.assertRaisesRegex(mcms.InputError, "false"):
+                mcms.audit_robot(str(log), false_alarm=2.0)
+            with self.assertRaisesRegex(mcms.InputError, "nope.csv"):
+                mcms.audit_robot(str(pathlib.Path(d) / "nope.csv"))
+
     def test_bad_measurements_name_the_argument(self):
         robot = mcms.RobotModel.default()
         q = joints(robot, 5, 10)
