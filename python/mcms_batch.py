@@ -16,6 +16,13 @@ end); with --scheduler ADDR the recordings go to that scheduler's workers, which
 able to `import mcms` and `import mcms_batch` (PYTHONPATH holding the build's python/
 folder).
 
+Recordings are handed to the workers no faster than their threads take them, so a worker
+process that dies (a crash, out of memory) takes only the recording it was tracking with it:
+that recording fails with "the worker process died while tracking it" and is not retried
+(on the local cluster; a scheduler given with --scheduler applies its own
+distributed.scheduler.allowed-failures, Dask's default retries it on 3 more workers). A
+recording Dask had already handed to the dying worker but not begun goes back in the queue.
+
 Exit status: 0 when at least one recording was tracked (failures are in the table), 3 when
 every recording failed, 2 on bad input (no recordings, a missing folder or list, an output
 that is not a folder, a scheduler that cannot be reached).
@@ -84,13 +91,19 @@ def find_recordings(source):
     return out
 
 
+def started_marker(output):
+    return os.path.join(os.path.dirname(output), ".mcms_batch_started")
+
+
 def track_one(path, output, truth, options):
     """The task run in a worker: mcms.track_recording of one recording, the summary row's numbers."""
+    os.makedirs(os.path.dirname(output), exist_ok=True)
+    with open(started_marker(output), "w"):  # the task began: a death from here on is this recording's
+        pass
     if os.environ.get("MCMS_BATCH_TEST_DIE_ON") == os.path.basename(os.path.normpath(path)):
         os._exit(70)  # the test hook of the module's docstring: a worker that dies
     import mcms
 
-    os.makedirs(os.path.dirname(output), exist_ok=True)
     r = mcms.track_recording(path, output=output, truth=truth, **options)
     e = r["errors"]
     return {
@@ -134,6 +147,9 @@ def write_summary(path, rows):
             w.writerow(COLUMNS)
             for r in rows:
                 w.writerow([cell(r.get(c)) for c in COLUMNS])
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # as an ordinary file, not mkstemp's 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -154,7 +170,9 @@ def parse_args(argv):
     p = argparse.ArgumentParser(
         prog="mcms batch",
         description="Track many recordings on Dask distributed (a local cluster, or --scheduler) and collect their "
-                    "results and failures in OUT/summary.csv. A failing recording never stops the others.")
+                    "results and failures in OUT/summary.csv. A failing recording never stops the others.",
+        epilog="Exit status: 0 when at least one recording was tracked (the failed ones are rows with status "
+               "'failed' and the message), 3 when every recording failed, 2 on bad input.")
     p.add_argument("source", metavar="DIR_OR_LIST",
                    help="folder whose sub-folders are recordings (images/, rig.yaml, target.yaml, frames.csv), or a "
                         "text file with one recording folder per line")
@@ -199,15 +217,14 @@ def run(a):
         raise BatchInputError(f"-o {a.output} exists and is not a folder; give a folder for the outputs")
     try:
         import dask
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, KilledWorker, LocalCluster, wait
     except ImportError as e:
         raise BatchInputError(f"Dask distributed is not installed for {sys.executable} ({e}); on Debian: apt install "
                               "python3-distributed") from None
     # A recording whose worker dies fails at once instead of being retried on the next
-    # worker (which it might kill too); each worker holds only the tasks it runs, so a dying
-    # worker takes no queued recording with it. Both apply to the local cluster's scheduler;
-    # a scheduler given with --scheduler has its own configuration.
-    dask.config.set({"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0})
+    # worker (which it might kill too). This applies to the local cluster's scheduler; a
+    # scheduler given with --scheduler has its own (Dask's default: 3 retries).
+    dask.config.set({"distributed.scheduler.allowed-failures": 0})
     options = {"frame_rate_hz": a.rate, "read_noise_dn": a.read_noise, "polarity": a.polarity,
                "threshold_dn": a.threshold, "threads": a.threads}
     if a.gain is not None:
@@ -219,6 +236,12 @@ def run(a):
         except Exception as e:  # OSError, TimeoutError, ValueError on a malformed address
             raise BatchInputError(f"--scheduler {a.scheduler}: cannot connect to a Dask scheduler there "
                                   f"({type(e).__name__}: {e})") from None
+        try:
+            client.wait_for_workers(1, timeout=a.connect_timeout)
+        except Exception:
+            client.close()
+            raise BatchInputError(f"--scheduler {a.scheduler}: the scheduler has no worker (none joined within "
+                                  f"{a.connect_timeout:g} s); start workers with `dask worker {a.scheduler}`") from None
         where = f"scheduler {a.scheduler}"
     else:
         cluster = LocalCluster(n_workers=a.workers, threads_per_worker=a.threads_per_worker, processes=True,
@@ -240,26 +263,58 @@ def run(a):
     try:
         if not a.quiet:
             print(f"batch: {len(recordings)} recordings on {where}", file=sys.stderr, flush=True)
-        futures = {}
-        for i, (name, path) in enumerate(recordings):
-            out = os.path.abspath(os.path.join(a.output, name, "poses.csv"))
-            f = client.submit(track_one, os.path.abspath(path), out, truth_for(a.truth, os.path.abspath(path)),
-                              options, key=f"mcms-track-{i}-{name}", pure=False, retries=0)
-            futures[f] = name
+        # Recordings are handed out no faster than the workers' threads take them: a worker
+        # never holds a queued recording, so a worker that dies takes only the recording it
+        # was tracking with it (Dask would otherwise fail every task assigned to it).
+        pending = list(enumerate(recordings))
+        inflight = {}
+        attempts = {}
         done = 0
-        for f in as_completed(list(futures)):
-            name = futures[f]
+
+        def free_threads():
+            return max(1, sum(client.nthreads().values())) - len(inflight)
+
+        while pending or inflight:
+            while pending and free_threads() > 0:
+                i, (name, path) = pending.pop(0)
+                out = os.path.abspath(os.path.join(a.output, name, "poses.csv"))
+                if os.path.exists(started_marker(out)):
+                    os.unlink(started_marker(out))
+                attempts[name] = attempts.get(name, 0) + 1
+                f = client.submit(track_one, os.path.abspath(path), out, truth_for(a.truth, os.path.abspath(path)),
+                                  options, key=f"mcms-track-{i}-{name}-{attempts[name]}", pure=False, retries=0)
+                inflight[f] = (i, name, path, out)
             try:
-                row = {"status": "ok", **f.result()}
-            except Exception as e:  # the recording's error, or the worker's death
-                row = {"status": "failed", "message": failure_message(e)}
-            row["name"] = name
-            rows[name] = row
-            done += 1
-            if not a.quiet:
-                what = (f"ok, {row['ok']}/{row['frames']} frames ok, {row['seconds']:.1f} s" if row["status"] == "ok"
-                        else "FAILED: " + row["message"])
-                print(f"batch: {done}/{len(recordings)} {name}: {what}", file=sys.stderr, flush=True)
+                # Also wakes up now and then: a restarted worker takes the next recording.
+                wait(list(inflight), timeout=1.0, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                pass
+            for f in [f for f in inflight if f.done()]:
+                i, name, path, out = inflight.pop(f)
+                try:
+                    row = {"status": "ok", **f.result()}
+                except KilledWorker as e:
+                    # A task that Dask had handed to a worker which then died of something
+                    # else (another recording) never began: it goes back in the queue.
+                    if not os.path.exists(started_marker(out)) and attempts[name] < 3:
+                        f.release()
+                        pending.insert(0, (i, (name, path)))
+                        continue
+                    row = {"status": "failed", "message": failure_message(e)}
+                except Exception as e:  # the recording's error
+                    row = {"status": "failed", "message": failure_message(e)}
+                f.release()
+                if os.path.exists(started_marker(out)):
+                    os.unlink(started_marker(out))
+                    if not os.listdir(os.path.dirname(out)):
+                        os.rmdir(os.path.dirname(out))
+                row["name"] = name
+                rows[name] = row
+                done += 1
+                if not a.quiet:
+                    what = (f"ok, {row['ok']}/{row['frames']} frames ok, {row['seconds']:.1f} s"
+                            if row["status"] == "ok" else "FAILED: " + row["message"])
+                    print(f"batch: {done}/{len(recordings)} {name}: {what}", file=sys.stderr, flush=True)
     finally:
         client.close()
         if cluster is not None:

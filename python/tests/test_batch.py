@@ -42,7 +42,8 @@ class Batch(unittest.TestCase):
         shutil.copytree(os.path.join(cls.root, "rec_a"), broken)
         with open(os.path.join(broken, "rig.yaml"), "w") as f:
             f.write("cameras: [ {name: cam0, lensmodel: \n")
-        shutil.copytree(os.path.join(cls.root, "rec_b"), os.path.join(cls.root, "rec_dies"))
+        # First in order: Dask may already have handed the next recording to its worker.
+        shutil.copytree(os.path.join(cls.root, "rec_b"), os.path.join(cls.root, "rec_0_dies"))
         os.makedirs(os.path.join(cls.root, "not_a_recording"))  # skipped: no images/, no rig.yaml
 
     @classmethod
@@ -103,21 +104,23 @@ class Batch(unittest.TestCase):
     def test_local_cluster_failures_do_not_stop_the_others(self):
         with tempfile.TemporaryDirectory() as d:
             out = os.path.join(d, "out")
-            r = self.batch(self.root, "-o", out, "--workers", "2", env={"MCMS_BATCH_TEST_DIE_ON": "rec_dies"})
+            r = self.batch(self.root, "-o", out, "--workers", "2", env={"MCMS_BATCH_TEST_DIE_ON": "rec_0_dies"})
             self.assertEqual(r.returncode, 0, r.stderr)
             rows = read_summary(os.path.join(out, "summary.csv"))
-            self.assertEqual(list(rows), ["rec_a", "rec_b", "rec_broken_rig", "rec_c", "rec_dies"])
+            self.assertEqual(list(rows), ["rec_0_dies", "rec_a", "rec_b", "rec_broken_rig", "rec_c"])
             for name in ("rec_a", "rec_b", "rec_c"):
                 self.check_good(rows[name])
                 self.assertEqual(rows[name]["output"], os.path.join(out, name, "poses.csv"))
             self.assertEqual(rows["rec_broken_rig"]["status"], "failed")
             self.assertIn(os.path.join("rec_broken_rig", "rig.yaml"), rows["rec_broken_rig"]["message"])
-            self.assertEqual(rows["rec_dies"]["status"], "failed")
-            self.assertIn("worker process died", rows["rec_dies"]["message"])
-            self.assertFalse(os.path.exists(os.path.join(out, "rec_broken_rig", "poses.csv")))
+            self.assertEqual(rows["rec_0_dies"]["status"], "failed")
+            self.assertIn("worker process died", rows["rec_0_dies"]["message"])
+            self.assertFalse(os.path.exists(os.path.join(out, "rec_broken_rig")))
+            self.assertFalse(os.path.exists(os.path.join(out, "rec_0_dies")))
+            self.assertEqual(sorted(os.listdir(os.path.join(out, "rec_a"))), ["poses.csv"])
             # The table on stdout, progress on stderr.
             self.assertIn("3 of 5 recordings tracked, 2 failed", r.stdout)
-            self.assertIn("rec_dies: FAILED", r.stderr)
+            self.assertIn("rec_0_dies: FAILED", r.stderr)
             # The same recording tracked alone gives the same figures (the cluster changes nothing).
             alone = mcms.track_recording(os.path.join(self.root, "rec_c"), output=os.path.join(d, "c.csv"),
                                          truth="auto")
