@@ -33,7 +33,7 @@ int RunAudit(const AuditArgs& a) {
   const Target target = Target::Read(dir / "target.yaml");
   const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate}, rig);
   std::vector<std::string> notes;
-  Tracker tracker(rig, target, a.tracker.Options(seq, rig, &notes));
+  Tracker tracker(rig, target, a.tracker.Settings().Options(seq, rig, &notes));
   for (const auto& line : notes) std::printf("%s\n", line.c_str());
   std::fflush(stdout);
   Progress progress("track", seq.frames.size(), a.quiet);

@@ -2,15 +2,14 @@
 // and its 6x6 covariance.
 #include <cmath>
 #include <cstdio>
-#include <map>
+#include <memory>
 #include <thread>
 
 #include "app/commands.h"
 #include "app/tracking_options.h"
 #include "core/error.h"
 #include "core/io.h"
-#include "synthetic/evaluation.h"
-#include "tracking/sequence.h"
+#include "synthetic/track_recording.h"
 
 namespace mcms::app {
 
@@ -37,60 +36,18 @@ int TrackerCli::Threads() const {
   return threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
-TrackerOptions TrackerCli::Options(const ImageSequence& seq, const CameraRig& rig,
-                                   std::vector<std::string>* notes) const {
-  TrackerOptions o;
-  o.detector.read_noise_dn = read_noise_dn;
-  o.detector.polarity = polarity == "dark" ? Polarity::kDark : Polarity::kBright;
-  o.detector.threshold_dn = threshold_dn;
-  char buf[160];
-  if (gain_e_per_dn) {
-    o.detector.gain_e_per_dn = *gain_e_per_dn;
-    std::snprintf(buf, sizeof(buf), "noise model: gain %.4g e-/DN for every camera (--gain)%s", *gain_e_per_dn,
-                  *gain_e_per_dn > 0 ? "" : ": photon noise left out");
-    notes->push_back(buf);
-  } else {
-    NoiseEstimateOptions no;
-    no.frames = noise_frames;
-    const SequenceNoiseModel m = EstimateSequenceNoise(seq, rig, o.detector, no, Threads());
-    o.camera_gain_e_per_dn = m.gain_e_per_dn;
-    for (const auto& line : m.Describe()) notes->push_back(line);
-  }
-  if (read_noise_dn > 0) {
-    std::snprintf(buf, sizeof(buf), "noise model: background pixel noise %.4g DN (--read-noise)", read_noise_dn);
-    notes->push_back(buf);
-  }
-  return o;
+RecordingTrackerSettings TrackerCli::Settings() const {
+  RecordingTrackerSettings s;
+  s.gain_e_per_dn = gain_e_per_dn;
+  s.read_noise_dn = read_noise_dn;
+  s.polarity = polarity == "dark" ? Polarity::kDark : Polarity::kBright;
+  s.threshold_dn = threshold_dn;
+  s.noise_frames = noise_frames;
+  s.threads = Threads();
+  return s;
 }
 
 namespace {
-
-// The error summary against a truth file, as the lines printed and written at the top of
-// poses.csv.
-std::vector<std::string> DescribeTruthErrors(const PoseErrorSummary& s, const std::string& file) {
-  std::vector<std::string> lines;
-  char buf[400];
-  if (s.evaluated == 0) {
-    lines.push_back("truth " + file + ": no frame with a pose to compare");
-    return lines;
-  }
-  std::snprintf(buf, sizeof(buf),
-                "truth %s: position error RMS %.4f mm (the covariances predict %.4f), max %.4f mm; rotation error "
-                "RMS %.5f deg (predicted %.5f), max %.5f deg; over %d frames with a pose",
-                file.c_str(), 1e3 * s.position_rms_m, 1e3 * s.predicted_position_rms_m, 1e3 * s.position_max_m,
-                s.rotation_rms_rad * 180 / M_PI, s.predicted_rotation_rms_rad * 180 / M_PI,
-                s.rotation_max_rad * 180 / M_PI, s.evaluated);
-  lines.push_back(buf);
-  std::snprintf(buf, sizeof(buf),
-                "truth: mean NEES %.3f over %d frames; an honest 6-dof covariance gives 6 on average, the mean "
-                "within %.3f-%.3f (95 %% chi-square band with %d dof, /%d): %s",
-                s.mean_nees, s.evaluated, s.nees_band_lo, s.nees_band_hi, 6 * s.evaluated, s.evaluated,
-                s.NeesInBand()                    ? "consistent"
-                : s.mean_nees > s.nees_band_hi    ? "ABOVE the band, the covariance is optimistic"
-                                                  : "below the band, the covariance is conservative");
-  lines.push_back(buf);
-  return lines;
-}
 
 struct TrackArgs {
   std::string dir;
@@ -101,86 +58,31 @@ struct TrackArgs {
 };
 
 int RunTrack(const TrackArgs& a) {
-  namespace fs = std::filesystem;
-  const fs::path dir = a.dir;
-  auto pick = [&](const std::string& given, const char* inside) -> fs::path {
-    if (!given.empty()) return given;
-    if (a.dir.empty()) Throw("give a recording folder DIR or --", inside, "");
-    return dir / inside;
-  };
-  const fs::path images = pick(a.images, "images");
-  const fs::path rig_file = !a.rig.empty() ? fs::path(a.rig) : pick("", "rig.yaml");
-  const fs::path target_file = !a.target.empty() ? fs::path(a.target) : pick("", "target.yaml");
-  const fs::path frames = !a.frames_csv.empty() ? fs::path(a.frames_csv) : (a.dir.empty() ? fs::path() : dir / "frames.csv");
-  const fs::path out = !a.output.empty() ? fs::path(a.output) : (a.dir.empty() ? fs::path("poses.csv") : dir / "poses.csv");
-  RequireWritableFile(out, "track -o");  // before the sequence, not after it
-
-  CameraRig rig = CameraRig::Read(rig_file);
-  Target target = Target::Read(target_file);
-  const ImageSequence seq = ScanImageSequence({images, frames, a.rate}, rig);
-  // The truth, checked against the recording's frames before the long work.
-  std::map<size_t, TruthPose> truth;
-  if (!a.truth.empty()) {
-    truth = ReadTruthPoses(a.truth);
-    for (size_t i = 0; i < seq.frames.size(); ++i) {
-      const auto it = truth.find(seq.frames[i]);
-      if (it == truth.end())
-        Throw("truth file ", a.truth, " has no row for frame ", seq.frames[i], " of ", images.string(), " (it holds ",
-              truth.size(), " frames, ", truth.begin()->first, " to ", truth.rbegin()->first,
-              "); give the truth of this recording");
-      if (!(std::abs(it->second.time_s - seq.times_s[i]) <= 1e-6 * std::max(1.0, std::abs(seq.times_s[i]))))
-        Throw("truth file ", a.truth, ": frame ", seq.frames[i], " is at time_s ", it->second.time_s,
-              " but the recording has it at ", seq.times_s[i], " s",
-              frames.empty() || !std::filesystem::exists(frames) ? std::string(" (from --rate; give --frames)")
-                                                                 : " (from " + frames.string() + ")",
-              "; give the truth of this recording");
-    }
-  }
-  std::vector<std::string> notes;
-  Tracker tracker(rig, target, a.tracker.Options(seq, rig, &notes));
-  for (const auto& line : notes) std::printf("%s\n", line.c_str());
-  std::fflush(stdout);
-  Progress progress("track", seq.frames.size(), a.quiet);
-  // Each frame's row is written (to a temporary file beside the output) as it finishes, and
-  // the summaries are running sums: memory does not grow with the length of the recording.
-  const bool with_truth = !truth.empty();
-  PoseCsvWriter writer(out, with_truth ? std::vector<std::string>{"err_pos_mm", "err_rot_deg", "nees"}
-                                       : std::vector<std::string>{});
-  PoseResidualCheck check;
-  PoseErrorAccumulator errors;
-  size_t frames_done = 0;
-  int ok = 0, degraded = 0, lost = 0;
-  std::string first_reason;
-  TrackImageSequenceStreaming(
-      seq, tracker,
-      [&](FrameResult&& r) {
-        if (frames_done++ == 0) first_reason = r.reason;
-        (r.status == FrameStatus::kOk ? ok : r.status == FrameStatus::kDegraded ? degraded : lost)++;
-        check.Add(r);
-        if (with_truth) {
-          const FramePoseError e = errors.Add(r, truth.at(r.frame).T_rig_target);
-          writer.Add(r, {1e3 * e.position_m, e.rotation_rad * 180 / M_PI, e.nees});
-        } else {
-          writer.Add(r);
-        }
+  TrackRecordingInput in;
+  in.dir = a.dir;
+  in.images = a.images;
+  in.rig = a.rig;
+  in.target = a.target;
+  in.frames_csv = a.frames_csv;
+  in.output = a.output;
+  in.output_what = "track -o";
+  in.truth = a.truth;
+  in.rate_hz = a.rate;
+  in.tracker = a.tracker.Settings();
+  std::unique_ptr<Progress> progress;
+  const TrackRecordingResult r = TrackRecording(
+      in,
+      [&](const std::string& line) {
+        std::printf("%s\n", line.c_str());
+        std::fflush(stdout);
       },
-      [&](size_t d, size_t) { progress.Update(d); }, a.tracker.Threads());
-  progress.Finish();
-  if (ok + degraded == 0)
-    Throw("target never found in any of the ", frames_done, " frames of ", images.string(), " (first frame: ", first_reason,
-          "); no output written");
-  check.Finish();
-  notes.push_back(check.Describe());
-  std::printf("%s\n", check.Describe().c_str());
-  if (with_truth) {
-    for (const std::string& line : DescribeTruthErrors(errors.Summary(), a.truth)) {
-      notes.push_back(line);
-      std::printf("%s\n", line.c_str());
-    }
-  }
-  writer.Finish(notes);
-  std::printf("tracked %zu frames: %d ok, %d degraded, %d lost -> %s\n", frames_done, ok, degraded, lost,
-              out.string().c_str());
+      [&](size_t done, size_t total) {
+        if (!progress) progress = std::make_unique<Progress>("track", total, a.quiet);
+        progress->Update(done);
+      });
+  if (progress) progress->Finish();
+  std::printf("tracked %zu frames: %d ok, %d degraded, %d lost -> %s\n", r.frames, r.ok, r.degraded, r.lost,
+              r.output.string().c_str());
   return 0;
 }
 
@@ -208,7 +110,8 @@ McmsCommand track_command([](CLI::App& app) {
                   "`mcms render` writes as DIR/truth/poses.csv); adds the columns err_pos_mm, err_rot_deg (norms of "
                   "the [rotation; position] error of the tracked pose against the truth) and nees (that error "
                   "squared, normalized by the frame's covariance) to the output, and prints the mean NEES against "
-                  "its chi-square band; every frame of the recording needs a truth row at the same time");
+                  "its chi-square band; every frame of the recording needs a truth row at the same time; 'auto' = "
+                  "DIR/truth/poses.csv when it exists");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   args->tracker.Add(cmd);
   return std::make_pair(cmd, Runner([args] { return RunTrack(*args); }));

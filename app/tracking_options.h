@@ -23,11 +23,8 @@ struct TrackerCli {
 
   void Add(CLI::App* cmd);
   int Threads() const;
-  // The tracker options for this recording: the options given, and, unless --gain was
-  // given, the per-camera gain measured from the images (tracking/noise_estimate.h).
-  // Appends the noise model's description to `notes` (printed, and written as the '#'
-  // header of poses.csv).
-  TrackerOptions Options(const ImageSequence& seq, const CameraRig& rig, std::vector<std::string>* notes) const;
+  // The library's settings (tracking/noise_estimate.h) from these options.
+  RecordingTrackerSettings Settings() const;
 };
 
 }  // namespace mcms::app

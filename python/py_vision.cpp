@@ -5,7 +5,9 @@
 #include <opencv2/core.hpp>
 
 #include "python/py_common.h"
+#include "fusion/sensor_logs.h"
 #include "synthetic/fov_map.h"
+#include "synthetic/track_recording.h"
 #include "tracking/audit.h"
 #include "tracking/fov_prediction.h"
 #include "tracking/noise_estimate.h"
@@ -248,6 +250,37 @@ FovMapOptions GetFovMapOptions(py::handle R_rig_target, int threads) {
   if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
   o.threads = threads;
   return o;
+}
+
+py::dict ErrorSummaryDict(const PoseErrorSummary& e, const std::string& truth_file) {
+  py::dict d;
+  d["frames"] = e.frames;
+  d["ok"] = e.ok;
+  d["degraded"] = e.degraded;
+  d["lost"] = e.lost;
+  d["evaluated"] = e.evaluated;
+  d["position_rms_m"] = e.evaluated ? e.position_rms_m : kNaN;
+  d["position_max_m"] = e.evaluated ? e.position_max_m : kNaN;
+  d["rotation_rms_rad"] = e.evaluated ? e.rotation_rms_rad : kNaN;
+  d["rotation_max_rad"] = e.evaluated ? e.rotation_max_rad : kNaN;
+  d["predicted_position_rms_m"] = e.evaluated ? e.predicted_position_rms_m : kNaN;
+  d["predicted_rotation_rms_rad"] = e.evaluated ? e.predicted_rotation_rms_rad : kNaN;
+  d["mean_nees"] = e.evaluated ? e.mean_nees : kNaN;
+  d["nees_band"] = py::make_tuple(e.evaluated ? e.nees_band_lo : kNaN, e.evaluated ? e.nees_band_hi : kNaN);
+  d["nees_consistent"] = e.NeesInBand();
+  d["description"] = DescribeTruthErrors(e, truth_file);
+  return d;
+}
+
+std::optional<std::string> OptionalPath(py::handle h, const char* name) {
+  if (h.is_none()) return std::nullopt;
+  py::object fs = py::module_::import("os").attr("fspath");
+  try {
+    return py::str(fs(h)).cast<std::string>();
+  } catch (py::error_already_set&) {
+    Throw("argument '", name, "': expected a path (str or os.PathLike) or None, got a ",
+          py::str(py::type::handle_of(h).attr("__name__")).cast<std::string>());
+  }
 }
 
 }  // namespace
@@ -802,6 +835,103 @@ void BindVision(py::module_& m) {
       "The field-of-view map's prediction at (N, 3) positions (rig frame, m): the detector's centre noise "
       "tabulated on rendered ball images, then sigma_p, sigma_r (N, 3; m, rad), sigma_d (N,), cov (N, 6, 6), "
       "NaN where not trackable.");
+
+  m.def(
+      "track_recording",
+      [](py::handle dir, py::handle output, py::handle truth, py::handle images, py::handle rig, py::handle target,
+         py::handle frames_csv, double frame_rate_hz, std::optional<double> gain_e_per_dn, double read_noise_dn,
+         const std::string& polarity, double threshold_dn, int noise_frames, int threads) {
+        TrackRecordingInput in;
+        if (auto p = OptionalPath(dir, "dir")) in.dir = *p;
+        if (auto p = OptionalPath(output, "output")) in.output = *p;
+        if (auto p = OptionalPath(truth, "truth")) in.truth = *p;
+        if (auto p = OptionalPath(images, "images")) in.images = *p;
+        if (auto p = OptionalPath(rig, "rig")) in.rig = *p;
+        if (auto p = OptionalPath(target, "target")) in.target = *p;
+        if (auto p = OptionalPath(frames_csv, "frames_csv")) in.frames_csv = *p;
+        in.rate_hz = frame_rate_hz;
+        in.tracker.gain_e_per_dn = gain_e_per_dn;
+        in.tracker.read_noise_dn = read_noise_dn;
+        if (polarity == "dark")
+          in.tracker.polarity = Polarity::kDark;
+        else if (polarity != "bright")
+          Throw("argument 'polarity': expected 'bright' or 'dark', got '", polarity, "'");
+        in.tracker.threshold_dn = threshold_dn;
+        if (noise_frames < 1) Throw("argument 'noise_frames': expected >= 1, got ", noise_frames);
+        in.tracker.noise_frames = static_cast<size_t>(noise_frames);
+        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+        in.tracker.threads = threads;
+        TrackRecordingResult r;
+        {
+          // Minutes of work in C++: other Python threads (a dask worker's event loop) run meanwhile.
+          py::gil_scoped_release release;
+          r = TrackRecording(in);
+        }
+        py::dict d;
+        d["output"] = r.output.string();
+        d["images"] = r.images.string();
+        d["truth"] = r.truth.empty() ? py::object(py::none()) : py::object(py::str(r.truth));
+        d["frames"] = r.frames;
+        d["ok"] = r.ok;
+        d["degraded"] = r.degraded;
+        d["lost"] = r.lost;
+        d["residual_chi2_per_dof"] = r.residuals.dof > 0 ? r.residuals.Chi2PerDof() : kNaN;
+        d["residuals_in_band"] = r.residuals.InBand();
+        d["errors"] = r.errors ? py::object(ErrorSummaryDict(*r.errors, r.truth)) : py::object(py::none());
+        d["notes"] = r.notes;
+        d["seconds"] = r.seconds;
+        return d;
+      },
+      py::arg("dir") = py::none(), py::kw_only(), py::arg("output") = py::none(), py::arg("truth") = py::none(),
+      py::arg("images") = py::none(), py::arg("rig") = py::none(), py::arg("target") = py::none(),
+      py::arg("frames_csv") = py::none(), py::arg("frame_rate_hz") = 10.0, py::arg("gain_e_per_dn") = py::none(),
+      py::arg("read_noise_dn") = 0.0, py::arg("polarity") = "bright", py::arg("threshold_dn") = 0.0,
+      py::arg("noise_frames") = 12, py::arg("threads") = 1,
+      "Tracks one recording folder as `mcms track DIR` does (images/, rig.yaml, target.yaml, frames.csv; each can "
+      "be given instead) and writes the pose CSV (default DIR/poses.csv). truth: a truth CSV of T_rig_target "
+      "(what `mcms render` writes as truth/poses.csv), 'auto' (DIR/truth/poses.csv when it exists) or None. "
+      "Returns a dict: output, images, truth, frames, ok, degraded, lost, residual_chi2_per_dof, residuals_in_band, "
+      "errors (with a truth: as evaluate_poses returns, else None), notes (the CSV's '#' lines), seconds. Bad input "
+      "raises mcms.InputError with the message of `mcms track`. The GIL is released while it runs.");
+
+  m.def(
+      "evaluate_poses",
+      [](py::handle results, py::handle truth_csv) {
+        const auto truth_path = OptionalPath(truth_csv, "truth_csv");
+        if (!truth_path) Throw("argument 'truth_csv': expected the path of a truth CSV, got None");
+        const std::string truth_file = *truth_path;
+        const auto truth = ReadTruthPoses(truth_file);
+        std::vector<FrameResult> frames;
+        std::string source = "the results";
+        if (py::isinstance<py::str>(results) || py::hasattr(results, "__fspath__")) {
+          source = *OptionalPath(results, "results");
+          const TrackerLog log = ReadTrackerLog(source);
+          for (const TrackerSample& s : log.samples) {
+            FrameResult r;
+            r.frame = static_cast<size_t>(s.frame);
+            r.time_s = s.time_s;
+            r.status = FrameStatus::kOk;  // the CSV reader keeps tracked rows, not ok vs degraded
+            r.T_rig_target = s.T_rig_target;
+            r.cov = s.covariance;
+            frames.push_back(std::move(r));
+          }
+          frames.resize(frames.size() + static_cast<size_t>(log.lost_rows));  // lost: no pose
+        } else {
+          try {
+            frames = results.cast<std::vector<FrameResult>>();
+          } catch (const py::cast_error&) {
+            Throw("argument 'results': expected a list of mcms.FrameResult or the path of a pose CSV, got a ",
+                  py::str(py::type::handle_of(results).attr("__name__")).cast<std::string>());
+          }
+        }
+        return ErrorSummaryDict(EvaluateAgainstTruth(frames, truth, truth_file, source), truth_file);
+      },
+      py::arg("results"), py::arg("truth_csv"),
+      "Errors of tracked poses against a truth CSV (frames matched by number, times must agree): results is a list "
+      "of mcms.FrameResult or the path of a pose CSV (`mcms track` output; from a CSV, ok counts every tracked "
+      "frame, ok or degraded). Returns a dict: frames, ok, degraded, lost, evaluated, position_rms_m, "
+      "position_max_m, rotation_rms_rad, rotation_max_rad, predicted_position_rms_m, predicted_rotation_rms_rad, "
+      "mean_nees, nees_band (95 %), nees_consistent, description (lines). NaN when no frame has a pose.");
 }
 
 }  // namespace mcms::python

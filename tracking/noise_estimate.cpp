@@ -136,3 +136,45 @@ std::string PoseResidualCheck::Describe() const {
 }
 
 }  // namespace mcms
+
+namespace mcms {
+
+void RecordingTrackerSettings::Check() const {
+  if (gain_e_per_dn && !(*gain_e_per_dn >= 0 && std::isfinite(*gain_e_per_dn)))
+    Throw("gain_e_per_dn: expected a number >= 0, got ", *gain_e_per_dn);
+  if (!(read_noise_dn >= 0 && std::isfinite(read_noise_dn)))
+    Throw("read_noise_dn: expected a number >= 0, got ", read_noise_dn);
+  if (!(threshold_dn >= 0 && std::isfinite(threshold_dn)))
+    Throw("threshold_dn: expected a number >= 0, got ", threshold_dn);
+  if (noise_frames < 1) Throw("noise_frames: expected >= 1, got ", noise_frames);
+  if (threads < 1) Throw("threads: expected >= 1, got ", threads);
+}
+
+TrackerOptions RecordingTrackerSettings::Options(const ImageSequence& seq, const CameraRig& rig,
+                                                 std::vector<std::string>* notes) const {
+  Check();
+  TrackerOptions o;
+  o.detector.read_noise_dn = read_noise_dn;
+  o.detector.polarity = polarity;
+  o.detector.threshold_dn = threshold_dn;
+  char buf[160];
+  if (gain_e_per_dn) {
+    o.detector.gain_e_per_dn = *gain_e_per_dn;
+    std::snprintf(buf, sizeof(buf), "noise model: gain %.4g e-/DN for every camera (--gain)%s", *gain_e_per_dn,
+                  *gain_e_per_dn > 0 ? "" : ": photon noise left out");
+    notes->push_back(buf);
+  } else {
+    NoiseEstimateOptions no;
+    no.frames = noise_frames;
+    const SequenceNoiseModel m = EstimateSequenceNoise(seq, rig, o.detector, no, threads);
+    o.camera_gain_e_per_dn = m.gain_e_per_dn;
+    for (const auto& line : m.Describe()) notes->push_back(line);
+  }
+  if (read_noise_dn > 0) {
+    std::snprintf(buf, sizeof(buf), "noise model: background pixel noise %.4g DN (--read-noise)", read_noise_dn);
+    notes->push_back(buf);
+  }
+  return o;
+}
+
+}  // namespace mcms

@@ -14,6 +14,7 @@
 // shows as chi2/dof above its band.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,26 @@ SequenceNoiseModel EstimateSequenceNoise(const ImageSequence& seq,
                                          const BlobDetectorOptions& detector,
                                          const NoiseEstimateOptions& options = {},
                                          int threads = 1);
+
+// The tracker's settings as `mcms track` and `mcms audit cameras` take them (and
+// mcms.track_recording): what is given, and what is measured from the recording when it is
+// not (the gain).
+struct RecordingTrackerSettings {
+  std::optional<double> gain_e_per_dn;  // absent: measured per camera from the recording's images
+  double read_noise_dn = 0;             // 0: measured around each blob
+  Polarity polarity = Polarity::kBright;
+  double threshold_dn = 0;              // 0: automatic
+  size_t noise_frames = 12;             // frames the gain is measured from
+  int threads = 1;                      // reading images and detecting blobs
+
+  // InputError naming the setting when one is out of range.
+  void Check() const;
+  // The tracker options for the recording `seq`: the settings given, and, unless
+  // gain_e_per_dn is given, the per-camera gain measured from the images
+  // (EstimateSequenceNoise). Appends the noise model's description to `notes` (printed by
+  // the CLI, and written as the '#' header of poses.csv).
+  TrackerOptions Options(const ImageSequence& seq, const CameraRig& rig, std::vector<std::string>* notes) const;
+};
 
 struct PoseResidualCheck {
   int frames = 0;           // frames with a pose
