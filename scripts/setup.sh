@@ -19,6 +19,7 @@ packages=(
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   mrcal python3-mrcal python3-opencv python3-numpy pybind11-dev python3-dev
+  python3-distributed  # `mcms batch`: Dask distributed (its test runs a local cluster)
   chromium  # the HTML report's test opens `mcms report` pages in headless Chromium (skipped without it)
 )
 missing=()
