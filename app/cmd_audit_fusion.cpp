@@ -80,8 +80,11 @@ int RunAuditFusion(const AuditFusionArgs& a) {
     InclinometerAuditOptions io;
     io.false_alarm = a.false_alarm / 2;
     io.progress = job.options.progress;
+    // The robot's joint log gives the motion's shape between the tracker's frames.
+    std::vector<OrientationSample> motion;
+    for (const JointSample& s : joints.samples) motion.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
     try {
-      ir = AuditInclinometer(setup.inclinometer, ref, readings, io);
+      ir = AuditInclinometer(setup.inclinometer, ref, readings, io, motion);
     } catch (const InputError& e) {
       Throw(a.inclinometer, " against ", a.tracker, ": ", e.what());
     }

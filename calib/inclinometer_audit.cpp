@@ -87,13 +87,15 @@ struct GroupUse {
   Eigen::MatrixXd whitening;
   double logdet = 0.0;
   std::vector<double> w;  // interpolation weights of the readings
+  std::vector<int> seg;   // the motion's segment of each reading (-1: none)
 };
 
 class Auditor {
  public:
   Auditor(const Inclinometer& incl, const std::vector<OrientationReference>& ref,
-          const std::vector<InclinometerReadingSample>& readings, const InclinometerAuditOptions& o)
-      : incl_(incl), ref_(ref), o_(o) {
+          const std::vector<InclinometerReadingSample>& readings, const InclinometerAuditOptions& o,
+          const std::vector<OrientationSample>& motion)
+      : incl_(incl), ref_(ref), o_(o), motion_(motion) {
     // Saturated readings are not readings.
     const double lim = incl.range + 5 * incl.sigma;
     for (const auto& r : readings)
@@ -136,6 +138,28 @@ class Auditor {
   const OrientationReference& Ref(int k) const { return ref_[k]; }
   const InclinometerReadingSample& Reading(int i) const { return z_[i]; }
 
+  // The motion at t (identity without one) and its segment.
+  int Segment(double t) const {
+    if (motion_.size() < 2) return -1;
+    const auto it = std::upper_bound(motion_.begin(), motion_.end(), t,
+                                     [](double x, const OrientationSample& m) { return x < m.time_s; });
+    return std::clamp(static_cast<int>(it - motion_.begin()) - 1, 0, static_cast<int>(motion_.size()) - 2);
+  }
+  Mat3 MotionAt(double t, int seg) const {
+    if (seg < 0) return Mat3::Identity();
+    const OrientationSample &a = motion_[seg], &b = motion_[seg + 1];
+    const double u = (t - a.time_s) / (b.time_s - a.time_s);
+    return a.R_base_flange * ExpSO3(u * LogSO3(a.R_base_flange.transpose() * b.R_base_flange));
+  }
+  // D_a and chi of a group.
+  void Discrepancy(const Group& g, Mat3* D_a, Vec3* chi) const {
+    const OrientationReference &a = ref_[g.a], &b = ref_[g.a + 1];
+    *D_a = MotionAt(a.time_s, Segment(a.time_s)).transpose() * a.R_base_flange;
+    const Mat3 D_b = MotionAt(b.time_s, Segment(b.time_s)).transpose() * b.R_base_flange;
+    *chi = LogSO3(D_a->transpose() * D_b);
+  }
+
+  // `use` (null: the nominal clock, no whitening).
   InclinometerGroupCost Cost(const Model& m, const Group& g, const GroupUse* use) const {
     InclinometerGroupCost c;
     c.incl = &incl_;
@@ -143,14 +167,32 @@ class Auditor {
     c.t0 = t0_;
     c.t_a = ref_[g.a].time_s;
     c.t_b = ref_[g.a + 1].time_s;
-    c.R_a = ref_[g.a].R_base_flange;
-    c.phi = LogSO3(c.R_a.transpose() * ref_[g.a + 1].R_base_flange);
-    for (int i : g.readings) {
-      c.s.push_back(z_[i].time_s);
-      c.z.push_back(z_[i].reading);
+    Discrepancy(g, &c.D_a, &c.chi);
+    for (size_t i = 0; i < g.readings.size(); ++i) {
+      const InclinometerReadingSample& zi = z_[g.readings[i]];
+      c.s.push_back(zi.time_s);
+      c.z.push_back(zi.reading);
+      const int seg = use ? use->seg[i] : Segment(zi.time_s);
+      if (seg >= 0) {
+        const OrientationSample &a = motion_[seg], &b = motion_[seg + 1];
+        c.m_t0.push_back(a.time_s);
+        c.m_t1.push_back(b.time_s);
+        c.m_R0.push_back(a.R_base_flange);
+        c.m_psi.push_back(LogSO3(a.R_base_flange.transpose() * b.R_base_flange));
+      }
     }
     c.whitening = use ? use->whitening : Eigen::MatrixXd::Identity(c.NumResiduals(), c.NumResiduals());
     return c;
+  }
+
+  // The reference orientation of reading i of group g at reference time t (for plots and
+  // the whitening).
+  Mat3 OrientationAt(const Group& g, double t) const {
+    Mat3 D_a;
+    Vec3 chi;
+    Discrepancy(g, &D_a, &chi);
+    const double w = (t - ref_[g.a].time_s) / (ref_[g.a + 1].time_s - ref_[g.a].time_s);
+    return MotionAt(t, Segment(t)) * D_a * ExpSO3(w * chi);
   }
 
   // The groups' whitening under model m's clock.
@@ -162,7 +204,6 @@ class Auditor {
     for (size_t gi = 0; gi < groups_.size(); ++gi) {
       const Group& g = groups_[gi];
       const OrientationReference &a = ref_[g.a], &b = ref_[g.a + 1];
-      const Vec3 phi = LogSO3(a.R_base_flange.transpose() * b.R_base_flange);
       const int n = static_cast<int>(g.readings.size());
       Eigen::MatrixXd A(2 * n, 3), B(2 * n, 3);
       GroupUse& u = out[gi];
@@ -171,7 +212,8 @@ class Auditor {
         const double t = clock ? ReferenceTimeT<double>(*clock, m.p[kc].data(), s, t0_) : s;
         const double w = (t - a.time_s) / (b.time_s - a.time_s);
         u.w.push_back(w);
-        incl_.Tilt(a.R_base_flange * ExpSO3(w * phi), &H);
+        u.seg.push_back(Segment(t));
+        incl_.Tilt(OrientationAt(g, t), &H);
         A.middleRows<2>(2 * i) = (1 - w) * H;
         B.middleRows<2>(2 * i) = w * H;
       }
@@ -317,6 +359,7 @@ class Auditor {
   const Inclinometer& incl_;
   const std::vector<OrientationReference>& ref_;
   const InclinometerAuditOptions& o_;
+  const std::vector<OrientationSample> motion_;  // a copy: the caller may pass a temporary
   std::vector<InclinometerReadingSample> z_;
   std::vector<Group> groups_;
   long num_readings_ = 0;
@@ -377,7 +420,8 @@ double TwoSidedP(double z) { return std::erfc(std::abs(z) / std::sqrt(2.0)); }
 
 InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::vector<OrientationReference>& reference,
                                           const std::vector<InclinometerReadingSample>& readings,
-                                          const InclinometerAuditOptions& o) {
+                                          const InclinometerAuditOptions& o,
+                                          const std::vector<OrientationSample>& motion) {
   std::string why;
   if (!o.IsValid(&why)) Throw("inclinometer audit options: ", why);
   if (!incl.IsValid(&why)) Throw(why);
@@ -388,7 +432,10 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
   AuditReport& rep = res.report;
   rep.mode = "fusion";
   rep.rms_unit = "rad";
-  const Auditor a(incl, reference, readings, o);
+  for (size_t i = 1; i < motion.size(); ++i)
+    if (!(motion[i].time_s > motion[i - 1].time_s))
+      Throw("audit of the inclinometer: the motion record's times must increase (sample ", i + 1, ")");
+  const Auditor a(incl, reference, readings, o, motion.size() >= 2 ? motion : std::vector<OrientationSample>{});
   const long N = a.NumReadings();
   if (static_cast<long>(a.NumGroups()) < 4L * o.folds)
     Throw("audit of the inclinometer: only ", a.NumGroups(), " pairs of reference frames with inclinometer readings "
@@ -424,11 +471,10 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
       const OrientationReference &ra = a.Ref(g.a), &rb = a.Ref(g.a + 1);
       // The tilt rate from the frames, not the readings (whose noise is in the residual).
       const Vec2 rate = (incl.Tilt(rb.R_base_flange) - incl.Tilt(ra.R_base_flange)) / (rb.time_s - ra.time_s);
-      const Vec3 phi = LogSO3(ra.R_base_flange.transpose() * rb.R_base_flange);
       for (size_t i = 0; i < g.readings.size(); ++i) {
         w[0].push_back(r[2 * i]);
         w[1].push_back(r[2 * i + 1]);
-        const Vec2 tilt = incl.Tilt(ra.R_base_flange * ExpSO3(use[gi].w[i] * phi));
+        const Vec2 tilt = incl.Tilt(a.OrientationAt(g, a.Reading(g.readings[i]).time_s));
         cov[0].second.push_back(a.Reading(g.readings[i]).time_s);
         cov[1].second.push_back(tilt[0]);
         cov[2].second.push_back(tilt[1]);
@@ -627,16 +673,13 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
     rep.notes.push_back(b);
   }
   const Model nominal;
-  const auto use0 = a.Assign(nominal);
   for (size_t gi = 0; gi < a.NumGroups(); ++gi) {
     const Group& g = a.Groups()[gi];
     const Eigen::VectorXd r0 = a.Residual(nominal, g, nullptr), r1 = a.Residual(cur, g, nullptr);
-    const OrientationReference &ra = a.Ref(g.a), &rb = a.Ref(g.a + 1);
-    const Vec3 phi = LogSO3(ra.R_base_flange.transpose() * rb.R_base_flange);
     for (size_t i = 0; i < g.readings.size(); ++i) {
       InclinometerAuditResult::Row row;
       row.time_s = a.Reading(g.readings[i]).time_s;
-      row.tilt = incl.Tilt(ra.R_base_flange * ExpSO3(use0[gi].w[i] * phi));
+      row.tilt = incl.Tilt(a.OrientationAt(g, row.time_s));
       row.nominal = r0.segment<2>(2 * i);
       row.extended = r1.segment<2>(2 * i);
       res.rows.push_back(row);

@@ -9,7 +9,8 @@
 // Residuals. Each reading (stamp s_i) is predicted at its reference time t_i =
 // ReferenceTimeT(s_i) (the clock extension; s_i without one) from the flange orientation
 // interpolated between the two reference frames around it (R_a Exp(w Log(R_a^T R_b)),
-// w = (t_i - t_a) / (t_b - t_a)); residual = predicted - read. The readings between one
+// w = (t_i - t_a) / (t_b - t_a); with a dense motion record M(t), M(t) D(t) with the
+// discrepancy D = M^T R interpolated so between the frames); residual = predicted - read. The readings between one
 // pair of frames form a group whitened together: S = sigma^2 I + A C_a A^T + B C_b B^T
 // (A, B: the tilts' Jacobians (Inclinometer::Tilt) times 1 - w_i and w_i), since they
 // share the frames' errors. Only every other pair of frames is used, so that no frame is
@@ -91,9 +92,19 @@ struct InclinometerAuditResult {
   Inclinometer Extended(const Inclinometer& nominal) const;
 };
 
+// `motion` (optional, time order, on the reference clock): a dense record of the flange's
+// orientation (e.g. the robot's forward kinematics at its joint log's stamps) whose shape
+// interpolates between the reference frames, so that a frame rate far below the motion's
+// curvature does not leave an interpolation error in the residuals; the reference frames
+// still fix the orientation (the motion's own error is interpolated linearly between them).
+struct OrientationSample {
+  double time_s = 0.0;
+  Mat3 R_base_flange = Mat3::Identity();
+};
 InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::vector<OrientationReference>& reference,
                                           const std::vector<InclinometerReadingSample>& readings,
-                                          const InclinometerAuditOptions& options = {});
+                                          const InclinometerAuditOptions& options = {},
+                                          const std::vector<OrientationSample>& motion = {});
 
 // Writes `prefix`residuals.csv and plots/`prefix`residuals_vs_time.svg,
 // plots/`prefix`residuals_vs_tilt.svg into dir (which must exist).
@@ -109,11 +120,19 @@ struct InclinometerGroupCost {
   const std::vector<Extension>* ext = nullptr;
   double t0 = 0.0;  // clock_drift's origin (inclinometer clock)
   double t_a = 0.0, t_b = 1.0;  // the two reference frames' times
-  Mat3 R_a = Mat3::Identity();  // R_base_flange at t_a
-  Vec3 phi = Vec3::Zero();      // Log(R_a^T R_b)
-  std::vector<double> s;        // the readings' stamps
-  std::vector<Vec2> z;          // and values
-  Eigen::MatrixXd whitening;    // 2n x 2n
+  // R(t) = M(t) D_a Exp(w chi), w = (t - t_a) / (t_b - t_a): the reference frames'
+  // orientations are M(t_a) D_a and M(t_b) D_a Exp(chi); M is the motion's shape (the
+  // identity without one).
+  Mat3 D_a = Mat3::Identity();
+  Vec3 chi = Vec3::Zero();
+  std::vector<double> s;  // the readings' stamps
+  std::vector<Vec2> z;    // and values
+  // Per reading: the motion's segment around its reference time, M(t) = M0 Exp(u psi),
+  // u = (t - m_t0) / (m_t1 - m_t0); empty: no motion (M = I).
+  std::vector<double> m_t0, m_t1;
+  std::vector<Mat3> m_R0;
+  std::vector<Vec3> m_psi;
+  Eigen::MatrixXd whitening;  // 2n x 2n
 
   int NumResiduals() const { return 2 * static_cast<int>(s.size()); }
 
@@ -129,15 +148,23 @@ struct InclinometerGroupCost {
       else if (e.effect == Effect::kInclinometerMisalignment) mis = p[k];
       else if (e.effect == Effect::kClockOffset || e.effect == Effect::kClockDrift) clock = &e, pc = p[k];
     }
+    using M3 = Eigen::Matrix<T, 3, 3>;
     const int n = static_cast<int>(s.size());
     Eigen::Matrix<T, Eigen::Dynamic, 1> e(2 * n);
     for (int i = 0; i < n; ++i) {
       const T t = clock ? ReferenceTimeT<T>(*clock, pc, s[i], t0) : T(s[i]);
       const T w = (t - T(t_a)) / T(t_b - t_a);
-      const T aa[3] = {w * phi[0], w * phi[1], w * phi[2]};
-      Eigen::Matrix<T, 3, 3> D;
-      ceres::AngleAxisToRotationMatrix(aa, D.data());
-      const Eigen::Matrix<T, 3, 3> R = R_a.cast<T>() * D;
+      const T aa[3] = {w * chi[0], w * chi[1], w * chi[2]};
+      M3 E;
+      ceres::AngleAxisToRotationMatrix(aa, E.data());
+      M3 R = D_a.cast<T>() * E;
+      if (!m_R0.empty()) {
+        const T u = (t - T(m_t0[i])) / T(m_t1[i] - m_t0[i]);
+        const T bb[3] = {u * m_psi[i][0], u * m_psi[i][1], u * m_psi[i][2]};
+        M3 F;
+        ceres::AngleAxisToRotationMatrix(bb, F.data());
+        R = m_R0[i].cast<T>() * F * R;
+      }
       const Eigen::Matrix<T, 2, 1> pred =
           InclinometerReadingOfT<T>(R, incl->R_flange_incl, mis, bias) + incl->bias.cast<T>();
       e[2 * i] = pred[0] - T(z[i][0]);

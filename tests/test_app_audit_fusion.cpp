@@ -87,7 +87,7 @@ TEST(AppAuditFusion, LogsOnDifferentClocksAreRefused) {
 
 // The inclinometer audit of logs written to `d`, through the library (as the command
 // reads them).
-InclinometerAuditResult AuditInclinometerLogs(const fs::path& d, double false_alarm = 0.01) {
+InclinometerAuditResult AuditInclinometerLogs(const fs::path& d, double false_alarm = 0.01, bool with_motion = true) {
   const FusionSetup setup = ReadFusionSetup(d / "setup.yaml");
   const TrackerLog tracker = ReadTrackerLog(d / "poses.csv");
   const InclinometerLog incl = ReadInclinometerLog(d / "incl.csv");
@@ -102,7 +102,11 @@ InclinometerAuditResult AuditInclinometerLogs(const fs::path& d, double false_al
   for (const InclinometerSample& s : incl.samples) z.push_back({s.time_s, s.reading, s.line});
   InclinometerAuditOptions io;
   io.false_alarm = false_alarm;
-  return AuditInclinometer(setup.inclinometer, ref, z, io);
+  std::vector<OrientationSample> motion;
+  if (with_motion)
+    for (const JointSample& s : ReadJointLog(d / "joints.csv", setup.robot).samples)
+      motion.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
+  return AuditInclinometer(setup.inclinometer, ref, z, io, motion);
 }
 
 // A seed picks the effect and its size: a bias of 4..8e-5 rad (0.0023..0.0046 deg) in a

@@ -45,9 +45,16 @@ TEST(InclinometerAudit, CostMatchesNumericDerivatives) {
     f.cost.t0 = 0.5;
     f.cost.t_a = 12.3;
     f.cost.t_b = 12.4;
-    f.cost.R_a = ExpSO3(Vec3(0.3, 0.2, -0.5));
-    f.cost.phi = Vec3(0.01, -0.02, 0.015);
+    f.cost.D_a = ExpSO3(Vec3(0.3, 0.2, -0.5));
+    f.cost.chi = Vec3(0.001, -0.002, 0.0015);
     f.cost.s = {12.31, 12.33, 12.35};
+    // The motion's shape: 10 ms segments around each reading.
+    for (double t : f.cost.s) {
+      f.cost.m_t0.push_back(t - 0.004);
+      f.cost.m_t1.push_back(t + 0.006);
+      f.cost.m_R0.push_back(ExpSO3(Vec3(0.1, 0.05 * t, -0.02)));
+      f.cost.m_psi.push_back(Vec3(0.002, 0.001, -0.003));
+    }
     f.cost.z = {Vec2(0.11, -0.05), Vec2(0.112, -0.049), Vec2(0.113, -0.047)};
     f.cost.whitening = Eigen::MatrixXd::Identity(6, 6) * 5000.0;
     f.cost.whitening(3, 1) = 300.0;
