@@ -97,7 +97,9 @@ int RunAuditFusion(const AuditFusionArgs& a) {
                   log.rows.size(), a.tracker.c_str(), a.robot.c_str());
     text += b;
     if (with_incl) {
-      std::snprintf(b, sizeof b, "inclinometer %s: %zu readings, %zu tracked frames between two of them\n",
+      std::snprintf(b, sizeof b,
+                    "inclinometer %s: %zu readings, %zu of them between two tracked frames used (every other "
+                    "pair of frames)\n",
                     a.inclinometer.c_str(), incl_log.samples.size(), ir.rows.size());
       text += b;
     }

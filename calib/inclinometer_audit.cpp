@@ -455,7 +455,7 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
     const boost::math::chi_squared d(2.0 * N);
     const double p_hi = boost::math::cdf(boost::math::complement(d, ev0.chi2));
     const double p_lo = boost::math::cdf(d, ev0.chi2);
-    tests.push_back({"chi-square of " + where + "'s residuals against its sigma (chi2/dof)", rep.nominal_chi2_per_dof,
+    tests.push_back({where + ": chi-square of the residuals against its sigma (chi2/dof)", rep.nominal_chi2_per_dof,
                      std::min(1.0, 2 * std::min(p_hi, p_lo)), false});
     std::vector<std::vector<double>> w(2);
     std::vector<std::pair<std::string, std::vector<double>>> cov(5);
@@ -490,13 +490,13 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
         if (i + 1 < w[k].size()) num += w[k][i] * w[k][i + 1];
       }
       const double r1 = den > 0 ? num / den : 0.0;
-      tests.push_back({std::string("autocorrelation in time (") + ax[k] + ")", r1,
+      tests.push_back({where + ": autocorrelation in time (" + ax[k] + ")", r1,
                        TwoSidedP(r1 * std::sqrt(static_cast<double>(N))), false});
       for (const auto& [name, x] : cov) {
         const double r = Corr(x, w[k]);
         if (!std::isfinite(r)) continue;
         const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(std::max(1.0, N - 3.0));
-        tests.push_back({"trend vs " + name + " (" + ax[k] + ")", r, TwoSidedP(z), false});
+        tests.push_back({where + ": trend vs " + name + " (" + ax[k] + ")", r, TwoSidedP(z), false});
       }
     }
     const double per = alpha_tests / tests.size();
