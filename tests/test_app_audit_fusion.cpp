@@ -193,6 +193,24 @@ TEST(AppAuditFusion, TheCommandAuditsTheInclinometer) {
   EXPECT_NE(run.out.find("effect inclinometer_bias at inclinometer"), std::string::npos) << run.out;
 }
 
+TEST(AppAuditFusion, AnInclinometerLogOnAnotherClockIsRefused) {
+  Hidden h = PickEffect(3);
+  const fs::path d = test::ScratchDir("audit_fusion_incl_bad");
+  test::Logs l = test::MovingLogs(h.o);
+  for (size_t i = 1; i < l.files["incl.csv"].size(); ++i) {
+    std::string& line = l.files["incl.csv"][i];
+    const auto c = line.find(',');
+    line = test::N(std::stod(line.substr(0, c)) + 3600.0) + line.substr(c);
+  }
+  test::Write(d, l);
+  const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv -o out"));
+  EXPECT_NE(run.code, 0);
+  EXPECT_NE(run.err.find("incl.csv"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("same clock"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(d / "a.json"));
+  EXPECT_FALSE(fs::exists(d / "out"));
+}
+
 // Clean logs: at the default designed rate (0.01 for the whole fusion audit, 0.005 for
 // the inclinometer's share) and at a designed 0.2 (0.1 for the inclinometer) so that the
 // observed rate can be compared with it on few seeds. The rate is an upper bound
