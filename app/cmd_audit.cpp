@@ -13,9 +13,10 @@ namespace {
 McmsCommand audit_command([](CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "audit",
-      "Audit a model against measured data: `audit cameras DIR` (a recording: images, rig, target) or `audit robot "
-      "LOG.csv` (a robot's joint values and externally measured positions). Shows where the nominal model and the "
-      "measurements disagree, names the effects that explain it and their held-out gain.");
+      "Audit a model against measured data: `audit cameras DIR` (a recording: images, rig, target), `audit robot "
+      "LOG.csv` (a robot's joint values and externally measured positions) or `audit fusion` (the logs of `mcms "
+      "fuse`: tracker, robot, inclinometer). Shows where the nominal model and the measurements disagree, names the "
+      "effects that explain it and their held-out gain.");
   cmd->require_subcommand(1);
   auto modes = std::make_shared<std::vector<std::pair<CLI::App*, Runner>>>();
   modes->push_back(AddAuditCameras(*cmd));

@@ -11,7 +11,6 @@
 #include <numeric>
 #include <sstream>
 
-#include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 #include <boost/math/distributions/normal.hpp>
 #include <ceres/ceres.h>
@@ -23,6 +22,7 @@
 #include "core/io.h"
 #include "core/output_folder.h"
 #include "core/svg_plot.h"
+#include "model/model_selection.h"
 
 namespace mcms {
 namespace {
@@ -695,7 +695,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   const int K = std::min(o.folds, N / 4);
   std::vector<std::vector<int>> train(K), test(K);
   for (int i = 0; i < N; ++i) {
-    const int f = static_cast<int>(static_cast<long>(i) * K / N);
+    const int f = TimeBlockFold(i, N, K);
     for (int k = 0; k < K; ++k) (k == f ? test : train)[k].push_back(i);
   }
 
@@ -854,9 +854,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     const int M = cands.size();
     if (M == 0) break;
     std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.linear_bic > b.linear_bic; });
-    const auto Threshold = [&](int k) {
-      return boost::math::quantile(boost::math::complement(boost::math::chi_squared(k), alpha_effects / M));
-    };
+    const auto Threshold = [&](int k) { return ChiSquareThreshold(k, alpha_effects / M); };
     // The model with candidate c added, in its starting state.
     const auto WithCandidate = [&](const Cand& c, const std::vector<double>& start, std::vector<Extension>* ext,
                                    State* st) {
@@ -880,7 +878,14 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       FitOut fit;
       double lr = 0, bic = 0, ll_cv = 0, rms_cv = 0;
     };
-    std::vector<Tried> passed;
+    SelectionRule rule;
+    rule.alpha = alpha_effects;
+    rule.ln_n = logN;
+    rule.close_bic = 10.0;
+    rule.undecided_heldout = 1.0;
+    rule.undecided_bic = 2.0;
+    rule.undecided_bic_relative = 0.005;
+    std::vector<Tried> tried;
     for (int i = 0; i < M && i < o.max_full_fits; ++i) {
       const Cand& c = cands[i];
       const Option& op = options[c.option];
@@ -912,43 +917,40 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
         if (f.loglik > t.fit.loglik) t.fit = f;
       }
       t.lr = 2.0 * (t.fit.loglik - cur.loglik);
-      t.bic = t.lr - c.k * logN;
+      t.bic = BicGain(t.lr, c.k, logN);
       char b[200];
       std::snprintf(b, sizeof b, "step %d: %s: likelihood ratio %.1f (threshold %.1f), BIC gain %.1f", step + 1,
                     op.key.c_str(), t.lr, Threshold(c.k), t.bic);
       say(b);
-      if (t.lr > Threshold(c.k) && t.bic > 0) passed.push_back(t);
+      tried.push_back(t);
     }
-    if (passed.empty()) break;
-    // Ranked by BIC gain: a candidate with more parameters must explain more.
-    std::sort(passed.begin(), passed.end(), [](const Tried& a, const Tried& b) { return a.bic > b.bic; });
-    if (!cv_done) {
-      CrossValidate(model, cur.st, &cur_ll_cv, &cur_rms_cv);
-      cv_done = true;
+    // The decision (model/model_selection.h): every robot candidate explains the same
+    // residual (one group); held-out gains by cross-validation when the rule asks.
+    std::vector<SelectionCandidate> sel(tried.size());
+    for (size_t i = 0; i < tried.size(); ++i) {
+      sel[i].k = tried[i].c.k;
+      sel[i].lr = tried[i].lr;
     }
-    // Those close to the best are all cross-validated; held-out log-likelihood decides
-    // between them (time-blocked folds separate a drift from a geometric error).
-    const double kClose = 10.0;
-    std::vector<Tried*> close;
-    for (auto& t : passed)
-      if (t.bic >= passed.front().bic - kClose) close.push_back(&t);
-    for (Tried* t : close) {
-      say("step " + std::to_string(step + 1) + ": cross-validating " + options[t->c.option].key);
-      CrossValidate(t->ext, t->fit.st, &t->ll_cv, &t->rms_cv);
-    }
-    std::sort(close.begin(), close.end(), [](const Tried* a, const Tried* b) { return a->ll_cv > b->ll_cv; });
-    Tried& best = *close.front();
-    if (!(best.ll_cv > cur_ll_cv)) {
-      rep.notes.push_back(options[best.c.option].key +
+    const StepDecision dec = DecideStep(sel, M, rule, [&](int i) {
+      if (!cv_done) {
+        CrossValidate(model, cur.st, &cur_ll_cv, &cur_rms_cv);
+        cv_done = true;
+      }
+      Tried& t = tried[i];
+      say("step " + std::to_string(step + 1) + ": cross-validating " + options[t.c.option].key);
+      CrossValidate(t.ext, t.fit.st, &t.ll_cv, &t.rms_cv);
+      return t.ll_cv - cur_ll_cv;
+    });
+    if (dec.outcome == StepOutcome::kNothingPasses) break;
+    if (dec.outcome == StepOutcome::kNoHeldoutGain) {
+      rep.notes.push_back(options[tried[dec.best].c.option].key +
                           " passed the likelihood-ratio test on all data but did not gain held-out log-likelihood (" +
-                          std::to_string(best.ll_cv - cur_ll_cv) + "): not named");
+                          std::to_string(sel[dec.best].heldout_gain) + "): not named");
       break;
     }
-    // Candidates that explain the same residual equally well, on all data and held out.
-    std::vector<std::string> group{options[best.c.option].key};
-    for (size_t i = 1; i < close.size(); ++i)
-      if (best.ll_cv - close[i]->ll_cv < 1.0 && std::abs(best.bic - close[i]->bic) < 2.0 + 0.005 * best.lr)
-        group.push_back(options[close[i]->c.option].key);
+    Tried& best = tried[dec.best];
+    std::vector<std::string> group;
+    for (int i : dec.group) group.push_back(options[tried[i].c.option].key);
     const Option& op = options[best.c.option];
     Step sp;
     sp.block = op.block >= 0 ? op.block : static_cast<int>(model.size());
@@ -959,7 +961,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     sp.ll_gain = best.ll_cv - cur_ll_cv;
     sp.rms_before = cur_rms_cv;
     sp.rms_after = best.rms_cv;
-    sp.undecided = group.size() > 1;
+    sp.undecided = dec.outcome == StepOutcome::kUndecided;
     if (sp.undecided) rep.undecided.push_back(group);
     steps.push_back(sp);
     taken.insert(op.key);

@@ -24,15 +24,13 @@
 //     move, temperature);
 //  2. greedy forward selection over the catalog: every candidate is screened by the
 //     chi-square its linearised fit removes (one Jacobian for all), the most promising
-//     are fitted in full (Ceres, Sigma re-estimated), and a candidate is accepted when
-//       - its likelihood-ratio statistic exceeds the chi-square quantile at
-//         false_alarm / 2 / (candidates at this step) (Bonferroni: the designed
-//         false-alarm rate of the whole audit on a clean log is at most false_alarm),
-//       - its BIC gain is positive, and
-//       - it gains held-out log-likelihood in k-fold cross-validation whose folds are
-//         contiguous blocks of time (drift cannot leak from the training blocks);
-//     the best accepted is added and the step repeats; candidates whose statistic is
-//     within a small margin of the best are reported as undecided, not guessed.
+//     are fitted in full (Ceres, Sigma re-estimated), and the step's decision is the
+//     audit's one selection rule (model/model_selection.h DecideStep): likelihood ratio
+//     past chi-square at false_alarm / 2 / (candidates screened at this step), BIC gain
+//     > 0, held-out log-likelihood gain > 0 in k-fold cross-validation whose folds are
+//     contiguous blocks of time (drift cannot leak from the training blocks), the best
+//     held-out gain among those close in BIC, and candidates within a small margin of
+//     the best reported as undecided, not guessed;
 //  3. each named effect with its size +- sigma, held-out RMS before and after and the
 //     held-out log-likelihood gain; the extended model.
 #pragma once

@@ -28,6 +28,20 @@ std::string Fmt(const char* fmt, double v) {
 
 }  // namespace
 
+void AuditReport::Merge(const AuditReport& o) {
+  const long n = nominal_n + o.nominal_n;
+  if (n > 0) nominal_chi2_per_dof = (nominal_chi2_per_dof * nominal_n + o.nominal_chi2_per_dof * o.nominal_n) / n;
+  nominal_n = n;
+  clean = clean && o.clean;
+  tests.insert(tests.end(), o.tests.begin(), o.tests.end());
+  for (AuditEffect e : o.effects) {
+    if (e.rms_unit.empty() && o.rms_unit != rms_unit) e.rms_unit = o.rms_unit;
+    effects.push_back(e);
+  }
+  undecided.insert(undecided.end(), o.undecided.begin(), o.undecided.end());
+  notes.insert(notes.end(), o.notes.begin(), o.notes.end());
+}
+
 std::string AuditReport::ToJson() const {
   nlohmann::json j;
   j["mode"] = mode;
@@ -39,7 +53,7 @@ std::string AuditReport::ToJson() const {
     j["tests"].push_back(
         {{"name", t.name}, {"statistic", Number(t.statistic)}, {"p_value", Number(t.p_value)}, {"failed", t.failed}});
   j["effects"] = nlohmann::json::array();
-  for (const auto& e : effects)
+  for (const auto& e : effects) {
     j["effects"].push_back({{"name", e.name},
                             {"where", e.where},
                             {"parameters", Map(e.parameters)},
@@ -48,6 +62,8 @@ std::string AuditReport::ToJson() const {
                             {"heldout_rms_after", Number(e.heldout_rms_after)},
                             {"heldout_loglik_gain", Number(e.heldout_loglik_gain)},
                             {"bic_gain", Number(e.bic_gain)}});
+    if (!e.rms_unit.empty()) j["effects"].back()["rms_unit"] = e.rms_unit;
+  }
   j["undecided"] = undecided;
   j["notes"] = notes;
   return j.dump(2) + "\n";
@@ -71,7 +87,7 @@ std::string AuditReport::Text() const {
       if (k < e.sigma.size()) o << " +- " << Fmt("%.2g", e.sigma[k].second);
     }
     o << "\n    held-out RMS " << Fmt("%.4g", e.heldout_rms_before) << " -> " << Fmt("%.4g", e.heldout_rms_after) << " "
-      << rms_unit << ", held-out log-likelihood gain " << Fmt("%.1f", e.heldout_loglik_gain) << ", BIC gain "
+      << (e.rms_unit.empty() ? rms_unit : e.rms_unit) << ", held-out log-likelihood gain " << Fmt("%.1f", e.heldout_loglik_gain) << ", BIC gain "
       << Fmt("%.1f", e.bic_gain) << "\n";
   }
   for (const auto& g : undecided) {

@@ -33,6 +33,7 @@ struct AuditEffect {
   double heldout_rms_before = 0.0, heldout_rms_after = 0.0;
   double heldout_loglik_gain = 0.0;  // summed over held-out measurements (nats)
   double bic_gain = 0.0;             // BIC(before) - BIC(after) on all data (> 0 = earns its place)
+  std::string rms_unit;              // unit of the held-out RMS when not the report's (fusion: rad)
 };
 
 struct AuditReport {
@@ -46,6 +47,10 @@ struct AuditReport {
   std::vector<std::vector<std::string>> undecided;  // groups of "name at where" labels
   std::vector<std::string> notes;                   // what the audit could not test, and why
 
+  // Appends another audit of the same data set (fusion: the inclinometer beside the
+  // tracker and robot): its tests, effects (with its rms_unit), undecided groups and notes;
+  // clean when both are; the nominal chi2/dof is the average over both's residuals.
+  void Merge(const AuditReport& other);
   std::string ToJson() const;
   // Human text: the tests, each effect with its size +- sigma and gains, the undecided groups.
   std::string Text() const;

@@ -244,13 +244,14 @@ Eigen::Matrix<T, 3, 1> MovedBallT(const Vec3& ball_target, const T* p) {
 // ---- inclinometer and clocks --------------------------------------------------------
 // The inclinometer reading (tilts [x, y], rad; model/inclinometer.h) of a sensor mounted
 // at R_flange_incl, misaligned by Exp(misalignment) (3, flange frame; null = none), with
-// the bias (2; null = none), at flange orientation R_base_flange.
+// the bias (2; null = none), at flange orientation R_base_flange (a function of the
+// parameters too, e.g. of a clock offset: InclinometerReadingOfT).
 template <typename T>
-Eigen::Matrix<T, 2, 1> InclinometerReadingT(const Mat3& R_base_flange, const Mat3& R_flange_incl,
-                                            const T* misalignment, const T* bias) {
+Eigen::Matrix<T, 2, 1> InclinometerReadingOfT(const Eigen::Matrix<T, 3, 3>& R_base_flange, const Mat3& R_flange_incl,
+                                              const T* misalignment, const T* bias) {
   Eigen::Matrix<T, 3, 3> M = Eigen::Matrix<T, 3, 3>::Identity();
   if (misalignment) ceres::AngleAxisToRotationMatrix(misalignment, M.data());
-  const Eigen::Matrix<T, 3, 3> R_base_incl = R_base_flange.cast<T>() * M * R_flange_incl.cast<T>();
+  const Eigen::Matrix<T, 3, 3> R_base_incl = R_base_flange * M * R_flange_incl.cast<T>();
   // up in the sensor frame = row 2 of R_base_incl; tilt_k = asin(e_k . up).
   using std::asin;
   Eigen::Matrix<T, 2, 1> tilt(asin(R_base_incl(2, 0)), asin(R_base_incl(2, 1)));
@@ -259,6 +260,11 @@ Eigen::Matrix<T, 2, 1> InclinometerReadingT(const Mat3& R_base_flange, const Mat
     tilt[1] += bias[1];
   }
   return tilt;
+}
+template <typename T>
+Eigen::Matrix<T, 2, 1> InclinometerReadingT(const Mat3& R_base_flange, const Mat3& R_flange_incl,
+                                            const T* misalignment, const T* bias) {
+  return InclinometerReadingOfT<T>(R_base_flange.cast<T>(), R_flange_incl, misalignment, bias);
 }
 
 // A sensor's time stamp on the reference clock: clock_offset t + p0; clock_drift

@@ -1,7 +1,13 @@
-// `mcms audit fusion`: the tracker's poses against the robot's joints through the setup.
-// Logs of a moving robot (joints at 100 Hz, tracker at 10 Hz with noise); a seed hides a
-// clock offset of the joint log of 3..6 ms: the audit must name clock_offset at the robot
-// with its size within 3 sigma; the same logs without it are clean.
+// `mcms audit fusion`: the tracker's poses against the robot's joints through the setup,
+// and the inclinometer's readings against the tracker's flange orientation. Logs of a
+// moving robot (tests/fuse_logs.h AuditLogOptions: 40 s, joints at 100 Hz, tracker at
+// 10 Hz with noise, inclinometer at 50 Hz with its 0.01 deg noise).
+//  - a seed hides a clock offset of the joint log of 3..6 ms: named at the robot;
+//  - a seed hides one inclinometer effect (bias, misalignment or a clock offset of its
+//    log) of a size that is detectable but not obvious: named at the inclinometer, each
+//    parameter within 3 of its sigmas, positive held-out gain;
+//  - clean controls: the inclinometer audit on many clean seeds (library calls), the
+//    observed false-alarm rate against the designed one.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -10,92 +16,34 @@
 #include <fstream>
 #include <sstream>
 
+#include "calib/inclinometer_audit.h"
 #include "core/random.h"
-#include "fuse_logs.h"
-#include "test_util.h"
+#include "fusion/sensor_logs.h"
+#include "tests/cli_runner.h"
+#include "tests/fuse_logs.h"
 
 namespace mcms {
 namespace {
 
 namespace fs = std::filesystem;
 
-int RunCli(const std::string& args, const fs::path& cwd, std::string* out) {
-  const std::string cmd = "cd " + cwd.string() + " && " + std::string(MCMS_CLI) + " " + args + " > out.txt 2> err.txt";
-  const int status = std::system(cmd.c_str());
-  *out = "";
-  for (const char* f : {"out.txt", "err.txt"}) {
-    std::ifstream in(cwd / f);
-    std::stringstream s;
-    s << in.rdbuf();  // sets failbit on s when the file is empty: one stream per file
-    *out += s.str();
-  }
-  return WEXITSTATUS(status);
-}
-
-// Writes poses.csv, joints.csv, setup.yaml: 40 s of motion, the joint log's stamps late by
-// `offset_s` on the tracker's clock.
-void WriteLogs(const fs::path& dir, double offset_s, uint64_t seed) {
-  test::Logs l = test::CleanLogs();  // its setup.yaml
-  Rng rng(seed);
-  const RobotModel robot = RobotModel::Default();
-  Eigen::VectorXd q0(6);
-  q0 << 0.1, -0.6, 0.9, 0.2, 0.7, 0.1;
-  const auto q_at = [&](double t) {
-    Eigen::VectorXd q = q0;
-    for (int j = 0; j < 6; ++j) q[j] += 0.4 * std::sin((0.15 + 0.05 * j) * t + j);
-    return q;
-  };
-  Pose T_base_rig;
-  T_base_rig.R = ExpSO3(Vec3(0.0, 0.0, 0.4));
-  T_base_rig.t = Vec3(2.0, -1.0, 0.5);
-  Pose T_flange_target;
-  T_flange_target.t = Vec3(0.0, 0.0, 0.1);
-  test::Lines& j = l.files["joints.csv"];
-  j = {"time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad"};
-  for (int k = 0; k <= 4100; ++k) {
-    const double t = k / 100.0;
-    const Eigen::VectorXd q = q_at(t - offset_s);  // stamped late: the value of an earlier moment
-    std::string row = test::N(t);
-    for (int i = 0; i < 6; ++i) (row += ",") += test::N(q[i]);
-    j.push_back(row);
-  }
-  test::Lines& p = l.files["poses.csv"];
-  std::string header = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz";
-  const char* ax[6] = {"rx", "ry", "rz", "px", "py", "pz"};
-  for (auto& a : ax)
-    for (auto& b : ax) header += std::string(",cov_") + a + "_" + b;
-  p = {header};
-  const double sr = 5e-5, sp = 3e-5;
-  for (int m = 0; m < 400; ++m) {
-    const double t = 0.5 + m / 10.0;
-    Pose T = T_base_rig.Inverse() * robot.T_base_flange(q_at(t)) * T_flange_target;
-    T.R = ExpSO3(Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * sr) * T.R;
-    T.t += Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * sp;
-    const auto q = T.Quaternion();
-    std::string row = std::to_string(m) + "," + test::N(t) + ",ok,\"\"," + test::N(T.t.x()) + "," + test::N(T.t.y()) +
-                      "," + test::N(T.t.z()) + "," + test::N(q.w()) + "," + test::N(q.x()) + "," + test::N(q.y()) +
-                      "," + test::N(q.z());
-    for (int r = 0; r < 6; ++r)
-      for (int c = 0; c < 6; ++c) (row += ",") += test::N(r != c ? 0.0 : r < 3 ? sr * sr : sp * sp);
-    p.push_back(row);
-  }
-  l.files.erase("incl.csv");
-  test::Write(dir, l);
-}
+const char* kAudit = "audit fusion -q --tracker poses.csv --robot joints.csv --setup setup.yaml --json a.json";
 
 TEST(AppAuditFusion, FindsAClockOffsetOfTheJointLog) {
   for (uint64_t seed : {1, 2}) {
     Rng pick(seed * 31);
     const double offset = (pick.Uniform() < 0.5 ? -1 : 1) * (0.003 + 0.003 * pick.Uniform());
     const fs::path d = test::ScratchDir("audit_fusion_" + std::to_string(seed));
-    WriteLogs(d, offset, seed);
-    std::string out;
-    ASSERT_EQ(RunCli("audit fusion -q --tracker poses.csv --robot joints.csv --setup setup.yaml --json a.json", d, &out), 0)
-        << out;
-    std::printf("hidden clock offset %.4f s\n%s", offset, out.c_str());
+    test::LogOptions o = test::AuditLogOptions(seed);
+    o.joint_late_s = offset;
+    o.with_incl = false;
+    test::Write(d, test::MovingLogs(o));
+    const test::CliRun run = test::Mcms(d, kAudit);
+    ASSERT_EQ(run.code, 0) << run.out << run.err;
+    std::printf("hidden clock offset %.4f s\n%s", offset, run.out.c_str());
     const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "a.json"));
     EXPECT_EQ(j["mode"], "fusion");
-    ASSERT_GE(j["effects"].size(), 1u) << out;
+    ASSERT_GE(j["effects"].size(), 1u) << run.out;
     EXPECT_EQ(j["effects"][0]["name"], "clock_offset");
     EXPECT_EQ(j["effects"][0]["where"], "robot");
     const double est = j["effects"][0]["parameters"]["offset_s"].get<double>();
@@ -108,33 +56,186 @@ TEST(AppAuditFusion, FindsAClockOffsetOfTheJointLog) {
 
 TEST(AppAuditFusion, SameLogsWithoutTheOffsetAreClean) {
   const fs::path d = test::ScratchDir("audit_fusion_clean");
-  WriteLogs(d, 0.0, 5);
-  std::string out;
-  ASSERT_EQ(RunCli("audit fusion -q --tracker poses.csv --robot joints.csv --setup setup.yaml --json a.json", d, &out), 0)
-      << out;
+  test::LogOptions o = test::AuditLogOptions(5);
+  o.with_incl = false;
+  test::Write(d, test::MovingLogs(o));
+  const test::CliRun run = test::Mcms(d, kAudit);
+  ASSERT_EQ(run.code, 0) << run.out << run.err;
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "a.json"));
-  EXPECT_TRUE(j["clean"].get<bool>()) << out;
+  EXPECT_TRUE(j["clean"].get<bool>()) << run.out;
 }
 
 TEST(AppAuditFusion, LogsOnDifferentClocksAreRefused) {
   const fs::path d = test::ScratchDir("audit_fusion_bad");
-  WriteLogs(d, 0.0, 6);
+  test::LogOptions o = test::AuditLogOptions(6);
+  o.with_incl = false;
+  test::Logs l = test::MovingLogs(o);
   // Joint log shifted by an hour: no tracked frame falls inside it.
-  std::ifstream in(d / "joints.csv");
-  std::ostringstream o;
-  std::string line;
-  std::getline(in, line);
-  o << line << "\n";
-  while (std::getline(in, line)) {
+  for (size_t i = 1; i < l.files["joints.csv"].size(); ++i) {
+    std::string& line = l.files["joints.csv"][i];
     const auto c = line.find(',');
-    o << test::N(std::stod(line.substr(0, c)) + 3600.0) << line.substr(c) << "\n";
+    line = test::N(std::stod(line.substr(0, c)) + 3600.0) + line.substr(c);
   }
-  in.close();
-  std::ofstream(d / "joints.csv") << o.str();
-  std::string out;
-  EXPECT_NE(RunCli("audit fusion -q --tracker poses.csv --robot joints.csv --setup setup.yaml --json a.json", d, &out), 0);
-  EXPECT_NE(out.find("same clock"), std::string::npos) << out;
+  test::Write(d, l);
+  const test::CliRun run = test::Mcms(d, kAudit);
+  EXPECT_NE(run.code, 0);
+  EXPECT_NE(run.err.find("same clock"), std::string::npos) << run.err;
   EXPECT_FALSE(fs::exists(d / "a.json"));
+}
+
+// ---- the inclinometer -----------------------------------------------------------
+
+// The inclinometer audit of logs written to `d`, through the library (as the command
+// reads them).
+InclinometerAuditResult AuditInclinometerLogs(const fs::path& d, double false_alarm = 0.01, bool with_motion = true) {
+  const FusionSetup setup = ReadFusionSetup(d / "setup.yaml");
+  const TrackerLog tracker = ReadTrackerLog(d / "poses.csv");
+  const InclinometerLog incl = ReadInclinometerLog(d / "incl.csv");
+  CellGeometry cell;
+  cell.T_base_rig = setup.T_base_rig;
+  cell.T_base_rig_covariance = setup.T_base_rig_covariance;
+  cell.T_flange_target = setup.T_flange_target;
+  std::vector<OrientationReference> ref;
+  for (const TrackerSample& s : tracker.samples)
+    ref.push_back(CameraOrientationReference(cell, s.time_s, s.T_rig_target, s.covariance, s.line));
+  std::vector<InclinometerReadingSample> z;
+  for (const InclinometerSample& s : incl.samples) z.push_back({s.time_s, s.reading, s.line});
+  InclinometerAuditOptions io;
+  io.false_alarm = false_alarm;
+  std::vector<OrientationSample> motion;
+  if (with_motion)
+    for (const JointSample& s : ReadJointLog(d / "joints.csv", setup.robot).samples)
+      motion.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
+  return AuditInclinometer(setup.inclinometer, ref, z, io, motion);
+}
+
+// A seed picks the effect and its size: a bias of 4..8e-5 rad (0.0023..0.0046 deg) in a
+// random direction, a misalignment of 1.5..3e-4 rad about a random axis, or a late
+// inclinometer log by 0.6..1.5 ms; each is a few times to ten times its sigma here.
+struct Hidden {
+  std::string name;
+  test::LogOptions o;
+  std::map<std::string, double> truth;
+};
+
+Hidden PickEffect(uint64_t seed) {
+  Rng pick(1000 + seed);
+  Hidden h;
+  h.o = test::AuditLogOptions(seed);
+  h.o.joint_end_s = h.o.incl_end_s = 30.0;
+  h.o.frames = 290;
+  const int kind = static_cast<int>(seed % 3);
+  if (kind == 0) {
+    const double a = pick.Uniform(0, 2 * 3.14159265358979323846), m = pick.Uniform(4e-5, 8e-5);
+    h.name = "inclinometer_bias";
+    h.o.incl_bias = Vec2(m * std::cos(a), m * std::sin(a));
+    h.truth = {{"bias_x_rad", h.o.incl_bias.x()}, {"bias_y_rad", h.o.incl_bias.y()}};
+  } else if (kind == 1) {
+    Vec3 axis(pick.Normal(), pick.Normal(), pick.Normal());
+    h.name = "inclinometer_misalignment";
+    h.o.incl_misalignment = axis.normalized() * pick.Uniform(1.5e-4, 3e-4);
+    h.truth = {{"rx_rad", h.o.incl_misalignment.x()},
+               {"ry_rad", h.o.incl_misalignment.y()},
+               {"rz_rad", h.o.incl_misalignment.z()}};
+  } else {
+    h.name = "clock_offset";
+    h.o.incl_late_s = (pick.Uniform() < 0.5 ? -1 : 1) * pick.Uniform(0.6e-3, 1.5e-3);
+    h.truth = {{"offset_s", h.o.incl_late_s}};
+  }
+  return h;
+}
+
+void ExpectFound(const Hidden& h, const AuditReport& rep, const std::string& where) {
+  ASSERT_GE(rep.effects.size(), 1u) << rep.Text();
+  const AuditEffect& e = rep.effects[0];
+  EXPECT_EQ(e.name, h.name) << rep.Text();
+  EXPECT_EQ(e.where, where);
+  EXPECT_GT(e.heldout_loglik_gain, 0.0);
+  EXPECT_GT(e.bic_gain, 0.0);
+  if (e.name != h.name) return;
+  for (size_t k = 0; k < e.parameters.size(); ++k) {
+    const auto& [name, est] = e.parameters[k];
+    const double sig = e.sigma[k].second, truth = h.truth.at(name);
+    EXPECT_LT(std::abs(est - truth), 3 * sig) << name << ": true " << truth << ", estimated " << est << " +- " << sig;
+    std::printf("hidden %s %s: true %.4g, estimated %.4g +- %.2g (%.1f sigma off), held-out gain %.1f\n",
+                h.name.c_str(), name.c_str(), truth, est, sig, (est - truth) / sig, e.heldout_loglik_gain);
+  }
+}
+
+TEST(AppAuditFusion, FindsAHiddenInclinometerEffect) {
+  for (uint64_t seed = 1; seed <= 9; ++seed) {
+    SCOPED_TRACE(seed);
+    const Hidden h = PickEffect(seed);
+    const fs::path d = test::ScratchDir("audit_fusion_incl_" + std::to_string(seed));
+    test::Write(d, test::MovingLogs(h.o));
+    const InclinometerAuditResult r = AuditInclinometerLogs(d);
+    ExpectFound(h, r.report, "inclinometer");
+    EXPECT_EQ(r.report.effects.size(), 1u) << r.report.Text();
+  }
+}
+
+TEST(AppAuditFusion, TheCommandAuditsTheInclinometer) {
+  // Through the command: the tracker and robot agree, the inclinometer is biased.
+  Hidden h = PickEffect(3);
+  const fs::path d = test::ScratchDir("audit_fusion_incl_cli");
+  test::Write(d, test::MovingLogs(h.o));
+  const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv -o out"));
+  ASSERT_EQ(run.code, 0) << run.out << run.err;
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "a.json"));
+  EXPECT_FALSE(j["clean"].get<bool>());
+  ASSERT_EQ(j["effects"].size(), 1u) << run.out;
+  EXPECT_EQ(j["effects"][0]["name"], h.name);
+  EXPECT_EQ(j["effects"][0]["where"], "inclinometer");
+  EXPECT_EQ(j["effects"][0]["rms_unit"], "rad");
+  for (const char* f : {"report.txt", "report.json", "inclinometer_residuals.csv",
+                        "plots/inclinometer_residuals_vs_time.svg", "plots/inclinometer_residuals_vs_tilt.svg"})
+    EXPECT_TRUE(fs::exists(d / "out" / f)) << f;
+  EXPECT_NE(run.out.find("effect inclinometer_bias at inclinometer"), std::string::npos) << run.out;
+}
+
+TEST(AppAuditFusion, AnInclinometerLogOnAnotherClockIsRefused) {
+  Hidden h = PickEffect(3);
+  const fs::path d = test::ScratchDir("audit_fusion_incl_bad");
+  test::Logs l = test::MovingLogs(h.o);
+  for (size_t i = 1; i < l.files["incl.csv"].size(); ++i) {
+    std::string& line = l.files["incl.csv"][i];
+    const auto c = line.find(',');
+    line = test::N(std::stod(line.substr(0, c)) + 3600.0) + line.substr(c);
+  }
+  test::Write(d, l);
+  const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv -o out"));
+  EXPECT_NE(run.code, 0);
+  EXPECT_NE(run.err.find("incl.csv"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("same clock"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(d / "a.json"));
+  EXPECT_FALSE(fs::exists(d / "out"));
+}
+
+// Clean logs: at the default designed rate (0.01 for the whole fusion audit, 0.005 for
+// the inclinometer's share) and at a designed 0.2 (0.1 for the inclinometer) so that the
+// observed rate can be compared with it on few seeds. The rate is an upper bound
+// (Bonferroni): the observed count must not exceed the binomial's 99.9 % quantile.
+TEST(AppAuditFusion, CleanInclinometerLogsRarelyRaiseAnAlarm) {
+  const int seeds = 60;
+  int alarms_default = 0, alarms_high = 0;
+  for (int seed = 100; seed < 100 + seeds; ++seed) {
+    test::LogOptions o = test::AuditLogOptions(seed);
+    o.joint_end_s = o.incl_end_s = 20.0;
+    o.frames = 190;
+    const fs::path d = test::ScratchDir("audit_fusion_incl_clean");
+    test::Write(d, test::MovingLogs(o));
+    const InclinometerAuditResult r = AuditInclinometerLogs(d, 0.01 / 2);
+    if (!r.report.clean) {
+      ++alarms_default;
+      std::printf("seed %d: %s", seed, r.report.Text().c_str());
+    }
+    alarms_high += !AuditInclinometerLogs(d, 0.2 / 2).report.clean;
+  }
+  std::printf("clean inclinometer logs: %d of %d not clean at the designed 0.005, %d of %d at the designed 0.1\n",
+              alarms_default, seeds, alarms_high, seeds);
+  // Binomial(60, 0.005): P(X >= 3) = 3e-3; Binomial(60, 0.1): P(X >= 14) = 1e-3.
+  EXPECT_LE(alarms_default, 2);
+  EXPECT_LE(alarms_high, 13);
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <ceres/ceres.h>
 
 #include "core/error.h"
+#include "model/model_selection.h"
 #include "tracking/pose_refinement.h"
 #include "vision/sphere_projection.h"
 #include "vision/triangulation.h"
@@ -196,7 +197,7 @@ class Auditor {
       med = dts[dts.size() / 2];
     }
     for (size_t i = 0; i < frames_.size(); ++i) {
-      frames_[i].block = static_cast<int>(o.folds * i / frames_.size());
+      frames_[i].block = TimeBlockFold(static_cast<long>(i), static_cast<long>(frames_.size()), o.folds);
       size_t a = i, b = i;
       if (i > 0 && frames_[i].t - frames_[i - 1].t <= 3 * med) a = i - 1;
       if (i + 1 < frames_.size() && frames_[i + 1].t - frames_[i].t <= 3 * med) b = i + 1;
@@ -427,10 +428,7 @@ struct Candidate {
   std::string label;
 };
 
-double ChiSquareUpper(double x, double k) {
-  if (!(x > 0)) return 1.0;
-  return boost::math::cdf(boost::math::complement(boost::math::chi_squared(k), x));
-}
+double ChiSquareUpper(double x, double k) { return ChiSquareUpperTail(x, k); }
 
 }  // namespace
 
@@ -542,7 +540,6 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       cands.push_back(x);
     }
     if (cands.empty()) break;
-    const double m = static_cast<double>(cands.size());
 
     // The current model of each unit, fitted on all data and on each fold, once.
     auto unit_free = [&](bool cam_unit, int u) {
@@ -633,17 +630,12 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       const Base& bs = base[{x.camera_unit, x.unit}];
       const double ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
       x.lr = 2 * (ll_all - bs.ll_all);
-      x.bic_gain = x.lr - x.k * ln_n;
       double ll_h, sq_h;
       long n_h;
       heldout(x.camera_unit, x.unit, t, free, mode, &ll_h, &sq_h, &n_h);
       x.heldout_gain = ll_h - bs.ll_held;
       x.rms_before = bs.n_held > 0 ? std::sqrt(bs.sq_held / bs.n_held) : 0;
       x.rms_after = n_h > 0 ? std::sqrt(sq_h / n_h) : 0;
-      // Part-way moves: the change time is scanned, so Bonferroni over the scan as well.
-      const double mult = x.step ? options.change_points : 1;
-      x.p_value = ChiSquareUpper(x.lr, x.k);
-      x.eligible = x.p_value < options.false_alarm / (2 * m * mult) && x.bic_gain > 0 && x.heldout_gain > 0;
       x.fitted = fit.terms;
       x.scale = fit.scale;
       x.term = fit.terms.back();
@@ -662,9 +654,29 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       if (x.step)
         x.label += " from t = " + std::to_string(x.term.from_time_s) + " s";
     }
-    std::vector<Candidate*> ok;
-    for (auto& x : cands)
-      if (x.eligible) ok.push_back(&x);
+    // The decision (model/model_selection.h): candidates on the same data (the same camera,
+    // or the same ball) explain the same residual and may tie; candidates elsewhere are
+    // each taken in their turn. Part-way moves scan the change time: Bonferroni over it.
+    SelectionRule rule;
+    rule.alpha = options.false_alarm / 2;
+    rule.ln_n = ln_n;
+    rule.close_bic = 2 * options.undecided_nats;
+    rule.undecided_heldout = options.undecided_nats;
+    rule.undecided_bic = 2 * options.undecided_nats;
+    std::vector<SelectionCandidate> sel(cands.size());
+    for (size_t i = 0; i < cands.size(); ++i) {
+      sel[i].k = cands[i].k;
+      sel[i].lr = cands[i].lr;
+      sel[i].group = cands[i].camera_unit ? cands[i].unit : -1 - cands[i].unit;
+      sel[i].multiplicity = cands[i].step ? options.change_points : 1;
+      sel[i].heldout_gain = cands[i].heldout_gain;
+    }
+    const StepDecision dec = DecideStep(sel, static_cast<int>(cands.size()), rule);
+    for (size_t i = 0; i < cands.size(); ++i) {
+      cands[i].bic_gain = sel[i].bic_gain;
+      cands[i].p_value = sel[i].p_value;
+      cands[i].eligible = sel[i].passes && sel[i].heldout_gain > 0;
+    }
     if (log) {
       std::string line = "round " + std::to_string(round + 1) + ":";
       std::vector<const Candidate*> sorted;
@@ -678,23 +690,10 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       }
       log(line);
     }
-    if (ok.empty()) break;
-    std::sort(ok.begin(), ok.end(), [](auto* p, auto* q) { return p->bic_gain > q->bic_gain; });
-    const Candidate& best = *ok[0];
-    std::vector<const Candidate*> tie{&best};
-    for (size_t i = 1; i < ok.size(); ++i) {
-      const Candidate& o = *ok[i];
-      const bool same = o.term.extension.effect == best.term.extension.effect &&
-                        o.term.extension.index == best.term.extension.index;
-      // Only candidates on the same data (the same camera, or the same ball) explain the same
-      // residual; candidates elsewhere are each taken in their turn.
-      if (o.camera_unit != best.camera_unit || o.unit != best.unit) continue;
-      // Equal on held-out data and in BIC (which counts the parameters: a simpler
-      // candidate that fits as well is preferred, not a tie).
-      if (!same && o.heldout_gain >= best.heldout_gain - options.undecided_nats &&
-          o.bic_gain >= best.bic_gain - 2 * options.undecided_nats)
-        tie.push_back(&o);
-    }
+    if (dec.outcome == StepOutcome::kNothingPasses || dec.outcome == StepOutcome::kNoHeldoutGain) break;
+    const Candidate& best = cands[dec.best];
+    std::vector<const Candidate*> tie;
+    for (int i : dec.group) tie.push_back(&cands[i]);
     if (tie.size() > 1) {
       std::vector<std::string> group;
       for (const Candidate* c : tie) group.push_back(c->term.extension.Label(rig.names));
@@ -760,7 +759,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       const double lr = 2 * (a.Evaluate(s, f1.terms, s1, -1, false).ll - a.Evaluate(s, f0.terms, s0, -1, false).ll);
       const int kp = x.NumParameters() + (terms[k].from_time_s > -std::numeric_limits<double>::infinity() ? 1 : 0);
       const double m = static_cast<double>(nc * 7 + nb);
-      if (ChiSquareUpper(lr, kp) < options.false_alarm / (2 * m) && lr - kp * ln_n > 0) continue;
+      if (EarnsPlace(lr, kp, options.false_alarm / (2 * m), ln_n)) continue;
       const std::string label = x.Label(rig.names);
       rep.notes.push_back(label + " was named, then no longer earned its place once the other effects were in " +
                           "(likelihood ratio " + std::to_string(lr) + "): removed");

@@ -20,19 +20,22 @@
 // ball, and camera_moved from a change time on: a camera bumped part-way through) is fitted
 // with the unit's effects already named (Ceres least squares through the extension units,
 // numeric derivatives of the mrcal projection), on all data and on k folds that are
-// contiguous blocks of time. A candidate earns its place when, on all data, its likelihood
-// ratio passes chi-square at alpha / (2 m) (m candidates: Bonferroni, so a clean recording
-// is flagged with probability <= alpha together with the chi-square tests at
-// alpha / (2 cameras)), its BIC gain is > 0, and its held-out log-likelihood gain is > 0.
-// Greedy forward selection adds the best by BIC gain, re-fits the leave-one-out poses with
-// the extended model, and repeats; at the end an effect that no longer earns its place
-// with the others in is removed (backward pruning, said in the notes). When a candidate of
-// another kind on the same data (the same camera, or the same ball) is within
-// `undecided_nats` of the best's held-out gain and of its BIC gain, neither is named: the
-// group is reported as undecided (the best of it is kept in the model, unnamed, so that
-// its residual does not leak into the other cameras' poses) and that place is not searched
-// further. A simpler candidate that fits as well wins on BIC and is no tie (a small tilt
-// of a camera and a principal-point shift are the same image shift: principal_point).
+// contiguous blocks of time. The decision of each round is the audit's one selection
+// rule (model/model_selection.h DecideStep): a candidate passes when, on all data, its
+// likelihood ratio passes chi-square at alpha / (2 m) (m candidates, times the scanned
+// change times for a part-way move: Bonferroni, so a clean recording is flagged with
+// probability <= alpha together with the chi-square tests at alpha / (2 cameras)) and its
+// BIC gain is > 0; among those within 2 undecided_nats of the best BIC gain with a
+// positive held-out gain, the largest held-out gain is named. Greedy forward selection
+// re-fits the leave-one-out poses with the extended model and repeats; at the end an
+// effect that no longer earns its place with the others in is removed (backward pruning,
+// said in the notes). When a candidate of another kind on the same data (the same
+// camera, or the same ball) is within `undecided_nats` of the best's held-out gain and
+// 2 undecided_nats of its BIC gain, neither is named: the group is reported as
+// undecided (the best of it is kept in the model, unnamed, so that its residual does not
+// leak into the other cameras' poses) and that place is not searched further. A simpler
+// candidate that fits as well wins on BIC and is no tie (a small tilt of a camera and a
+// principal-point shift are the same image shift: principal_point).
 // A late camera's effect on the other cameras' poses is removed by moving its blobs back
 // by the named offset; target_geometry is not written into the rig (ExtendedTarget).
 #pragma once

@@ -1,0 +1,97 @@
+#include "model/model_selection.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <boost/math/distributions/chi_squared.hpp>
+
+#include "core/error.h"
+
+namespace mcms {
+
+double ChiSquareUpperTail(double x, double k) {
+  if (!(x > 0)) return 1.0;
+  return boost::math::cdf(boost::math::complement(boost::math::chi_squared(k), x));
+}
+
+double ChiSquareThreshold(double k, double alpha) {
+  return boost::math::quantile(boost::math::complement(boost::math::chi_squared(k), alpha));
+}
+
+bool EarnsPlace(double lr, double k, double alpha, double ln_n) {
+  return ChiSquareUpperTail(lr, k) < alpha && BicGain(lr, k, ln_n) > 0;
+}
+
+int TimeBlockFold(long i, long n, int folds) { return static_cast<int>(i * folds / std::max(1L, n)); }
+
+bool SelectionRule::IsValid(std::string* why) const {
+  const auto fail = [&](const char* w) {
+    if (why) *why = w;
+    return false;
+  };
+  if (!(alpha > 0 && alpha < 1)) return fail("alpha must be in (0, 1)");
+  if (!(ln_n >= 0)) return fail("ln_n must be >= 0");
+  if (!(close_bic >= 0) || !(undecided_heldout >= 0) || !(undecided_bic >= 0) || !(undecided_bic_relative >= 0))
+    return fail("margins must be >= 0");
+  return true;
+}
+
+StepDecision DecideStep(std::vector<SelectionCandidate>& cands, int m, const SelectionRule& rule,
+                        const std::function<double(int)>& heldout_gain) {
+  std::string why;
+  if (!rule.IsValid(&why)) Throw("selection rule: ", why);
+  m = std::max<int>(m, static_cast<int>(cands.size()));
+  std::vector<int> passing;
+  for (size_t i = 0; i < cands.size(); ++i) {
+    SelectionCandidate& c = cands[i];
+    c.bic_gain = BicGain(c.lr, c.k, rule.ln_n);
+    c.p_value = ChiSquareUpperTail(c.lr, c.k);
+    c.passes = c.k > 0 && c.p_value < rule.alpha / (m * std::max(1.0, c.multiplicity)) && c.bic_gain > 0;
+    if (c.passes) passing.push_back(static_cast<int>(i));
+  }
+  StepDecision d;
+  if (passing.empty()) return d;
+  std::stable_sort(passing.begin(), passing.end(),
+                   [&](int a, int b) { return cands[a].bic_gain > cands[b].bic_gain; });
+  const auto Gain = [&](int i) {
+    if (std::isnan(cands[i].heldout_gain)) {
+      if (!heldout_gain) Throw("selection: held-out gain of candidate ", i, " unknown and no way to compute it");
+      cands[i].heldout_gain = heldout_gain(i);
+    }
+    return cands[i].heldout_gain;
+  };
+  // The bar: the best BIC gain among the candidates that gain held-out.
+  double bar = std::nan("");
+  for (int i : passing)
+    if (Gain(i) > 0) {
+      bar = cands[i].bic_gain;
+      break;
+    }
+  if (std::isnan(bar)) {
+    d.outcome = StepOutcome::kNoHeldoutGain;
+    d.best = passing.front();
+    return d;
+  }
+  std::vector<int> contenders;
+  for (int i : passing)
+    if (cands[i].bic_gain >= bar - rule.close_bic && Gain(i) > 0) contenders.push_back(i);
+  int best = contenders.front();
+  for (int i : contenders)
+    if (cands[i].heldout_gain > cands[best].heldout_gain) best = i;
+  d.best = best;
+  d.group = {best};
+  const SelectionCandidate& b = cands[best];
+  for (int i : passing) {
+    if (i == best || cands[i].group != b.group) continue;
+    if (!(cands[i].bic_gain >= bar - rule.close_bic)) continue;
+    const double h = Gain(i);
+    if (std::abs(h - b.heldout_gain) <= rule.undecided_heldout &&
+        std::abs(cands[i].bic_gain - b.bic_gain) <= rule.undecided_bic + rule.undecided_bic_relative * b.lr)
+      d.group.push_back(i);
+  }
+  d.outcome = d.group.size() > 1 ? StepOutcome::kUndecided : StepOutcome::kNamed;
+  return d;
+}
+
+}  // namespace mcms
