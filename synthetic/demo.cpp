@@ -210,7 +210,13 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
                    FormatLabTable(res.lab);
   res.reduction_sd = BootstrapReductionSd(res.lab);
   res.paper_report = FormatPaperComparison(res.lab, res.reduction_sd, model);
-  res.lab_report = "Camera model: " + model.Describe() + "\n" + res.lab_report + res.paper_report;
+  std::string model_text = "Camera model: " + model.Describe() + "\n";
+  if (!model.VisitSigma().isZero())
+    model_text +=
+        "  (every frame of a visit reports the visit's covariance times the visit's frame count, so the tracker's\n"
+        "  'predicted' per-frame position error below is inflated by that; the fused camera estimate of a dwell\n"
+        "  reports the visit's covariance, which the camera's NEES in the table checks)\n";
+  res.lab_report = model_text + res.lab_report + res.paper_report;
   print("\n" + res.lab_report);
   WriteFileAtomically(out / "summary.txt", [&](std::ostream& s) { s << res.lab_report; });
   WritePointErrors(out, res.lab, lo.points);
