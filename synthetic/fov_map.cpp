@@ -502,24 +502,33 @@ void WriteFovMap(const FovMap& map, const fs::path& dir, const std::vector<FovSi
     }
   });
 
-  // One heat map per z plane of the grid.
+  // One heat map per z plane of the grid, and one x and one y slice through the middle of
+  // the grid (vertical sections: z against y, z against x), all on one colour scale.
   const FovGrid& g = map.options.grid;
   double vmin = INFINITY, vmax = -INFINITY;
   for (const auto& p : map.points)
     if (p.prediction.trackable) vmin = std::min(vmin, p.sigma_d() * 1e3), vmax = std::max(vmax, p.sigma_d() * 1e3);
-  for (int iz = 0; iz < g.n[2]; ++iz) {
+  const char* axis_name[3] = {"x", "y", "z"};
+  // The slice where axis `fixed` is at grid index `at`; its horizontal axis is the first
+  // of the other two, its vertical the second.
+  const auto slice = [&](int fixed, int at, const fs::path& file) {
+    const int u = fixed == 0 ? 1 : 0, v = fixed == 2 ? 1 : 2;
     HeatMap h;
     char title[200];
-    std::snprintf(title, sizeof(title), "Predicted sigma_d of the target position, plane z = %.3f m", g.Coord(2, iz));
+    std::snprintf(title, sizeof(title), "Predicted sigma_d of the target position, plane %s = %.3f m", axis_name[fixed],
+                  g.Coord(fixed, at));
     h.title = title;
-    h.x_label = "x (m, rig frame)";
-    h.y_label = "y (m, rig frame)";
+    h.x_label = std::string(axis_name[u]).append(" (m, rig frame)");
+    h.y_label = std::string(axis_name[v]).append(" (m, rig frame)");
     h.value_label = "sigma_d (mm)";
-    for (int i = 0; i < g.n[0]; ++i) h.x.push_back(g.Coord(0, i));
-    for (int i = 0; i < g.n[1]; ++i) h.y.push_back(g.Coord(1, i));
-    for (int iy = 0; iy < g.n[1]; ++iy)
-      for (int ix = 0; ix < g.n[0]; ++ix) {
-        const auto& p = map.points[(static_cast<size_t>(iz) * g.n[1] + iy) * g.n[0] + ix];
+    for (int i = 0; i < g.n[u]; ++i) h.x.push_back(g.Coord(u, i));
+    for (int i = 0; i < g.n[v]; ++i) h.y.push_back(g.Coord(v, i));
+    int idx[3];
+    idx[fixed] = at;
+    for (int iv = 0; iv < g.n[v]; ++iv)
+      for (int iu = 0; iu < g.n[u]; ++iu) {
+        idx[u] = iu, idx[v] = iv;
+        const auto& p = map.points[(static_cast<size_t>(idx[2]) * g.n[1] + idx[1]) * g.n[0] + idx[0]];
         h.values.push_back(p.prediction.trackable ? p.sigma_d() * 1e3 : kNaN);
       }
     if (std::isfinite(vmin)) {
@@ -528,10 +537,15 @@ void WriteFovMap(const FovMap& map, const fs::path& dir, const std::vector<FovSi
       h.log_scale = vmax > 5 * vmin;
     }
     h.threshold = map.options.threshold_mm;
+    h.WriteSvg(file);
+  };
+  for (int iz = 0; iz < g.n[2]; ++iz) {
     char name[64];
     std::snprintf(name, sizeof(name), "heatmap_z%02d.svg", iz);
-    h.WriteSvg(dir / name);
+    slice(2, iz, dir / name);
   }
+  slice(0, (g.n[0] - 1) / 2, dir / "heatmap_x_centre.svg");
+  slice(1, (g.n[1] - 1) / 2, dir / "heatmap_y_centre.svg");
 
   Plot plot;
   plot.title = "Predicted precision against the mean distance to the cameras that see the target";

@@ -129,7 +129,8 @@ std::vector<FovSimulatedPoint> SimulateFovPoints(const FovMap& map, const std::v
 
 // Writes into `dir` (created; files replaced atomically one by one; the CLI writes into a
 // temporary folder and renames it): map.csv, heatmap_z<k>.svg per z plane of the grid,
-// sigma_vs_distance.svg, region.txt (the region where sigma_d < threshold), and, when
+// heatmap_x_centre.svg and heatmap_y_centre.svg (vertical slices through the grid's middle
+// x and middle y: z against y, z against x; same colour scale), sigma_vs_distance.svg, region.txt (the region where sigma_d < threshold), and, when
 // given, simulated.csv and simulated.svg.
 void WriteFovMap(const FovMap& map, const std::filesystem::path& dir,
                  const std::vector<FovSimulatedPoint>& simulated = {});

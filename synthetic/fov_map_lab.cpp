@@ -3,7 +3,6 @@
 #include <cmath>
 #include <cstdio>
 
-#include <Eigen/Eigenvalues>
 
 #include "core/random.h"
 #include "synthetic/lab_experiment.h"
@@ -12,21 +11,13 @@
 namespace mcms {
 
 namespace {
-// A draw from N(0, C) (C symmetric positive semi-definite).
-Vec6 Draw(const Mat6& C, Rng* rng) {
-  Eigen::SelfAdjointEigenSolver<Mat6> es(C);
-  Vec6 z;
-  for (int i = 0; i < 6; ++i) z[i] = rng->Normal() * std::sqrt(std::max(0.0, es.eigenvalues()[i]));
-  return es.eigenvectors() * z;
-}
-
 double Get(const LabResult& r, const std::string& method) {
   for (const auto& s : r.summary)
     if (s.name == method) return s.position_3sigma_m;
   return std::nan("");
 }
 
-LabReduction RunOne(const LabScenario& lab, const std::string& label, bool use_fit, const Mat6& fitted, const Mat6& nominal_cov,
+LabReduction RunOne(const LabScenario& lab, const std::string& label, const CameraErrorModel& model, const Mat6& nominal_cov,
                     int seeds) {
   const int points = lab.options.points;
   const size_t nf = lab.vision.NumFrames();
@@ -39,18 +30,24 @@ LabReduction RunOne(const LabScenario& lab, const std::string& label, bool use_f
   red.seeds = seeds;
   std::vector<double> rm, rk;
   for (int s = 0; s < seeds; ++s) {
-    Rng rng(1000 + 17 * s + (use_fit ? 1 : 0));
-    std::vector<Vec6> visit(points);
-    for (auto& v : visit) v = Draw(fitted, &rng);
+    Rng rng(1000 + 17 * s + (model.IsIdeal() ? 0 : 1));
+    std::vector<Vec3> visit(points);
+    for (auto& v : visit) v = model.DrawVisit(&rng);
     std::vector<FrameResult> tracked(nf);
     for (size_t k = 0; k < nf; ++k) {
       FrameResult& f = tracked[k];
       f.frame = k;
       f.time_s = lab.vision.times[k];
       const int p = lab.point_of_frame[k];
-      const Vec6 e = use_fit ? (p >= 0 ? visit[p] : Draw(fitted, &rng)) : Draw(nominal_cov, &rng);
-      f.T_rig_target = BoxPlus(lab.vision.T_rig_target[k], e);
-      f.cov = use_fit ? Mat6(fitted * (p >= 0 ? frames_of_point[p] : 1)) : nominal_cov;
+      // What the rendered demo does (synthetic/demo.cpp): the visit's rigid error in what
+      // the cameras see, the nominal tracker's error, then the pixel-noise excess.
+      Pose T = lab.vision.T_rig_target[k];
+      T.t += p >= 0 ? visit[p] : model.DrawVisit(&rng);
+      T = BoxPlus(T, DrawNormal(nominal_cov, &rng));
+      f.cov = nominal_cov;
+      model.ScalePixelNoise(&T, &f.cov, &rng);
+      model.AddVisitCovariance(&f.cov, p >= 0 ? frames_of_point[p] : 1);
+      f.T_rig_target = T;
       f.status = FrameStatus::kOk;
       f.balls_identified = 5;
     }
@@ -76,18 +73,14 @@ LabReduction RunOne(const LabScenario& lab, const std::string& label, bool use_f
 }
 }  // namespace
 
-std::vector<LabReduction> PredictLabReductions(const NoiseModelFit& fit, const Mat6& nominal_cov, int seeds, int points,
+std::vector<LabReduction> PredictLabReductions(const CameraErrorModel& model, const Mat6& nominal_cov, int seeds, int points,
                                                double paper_robot_3sigma_m) {
   LabOptions lo;
   lo.points = points;
   const LabScenario lab = MakeLabScenario(lo);
-  Mat6 fitted = Mat6::Zero();
-  fitted.topLeftCorner<3, 3>() = fit.scale * fit.scale * nominal_cov.topLeftCorner<3, 3>();
-  fitted.bottomRightCorner<3, 3>() = fit.scale * fit.scale * nominal_cov.bottomRightCorner<3, 3>();
-  fitted.bottomRightCorner<3, 3>().diagonal() += Vec3::Constant(fit.floor * fit.floor) + fit.anisotropy.cwiseAbs2();
   std::vector<LabReduction> out;
-  out.push_back(RunOne(lab, "nominal camera, forward-model robot", false, fitted, nominal_cov, seeds));
-  out.push_back(RunOne(lab, "fitted camera, forward-model robot", true, fitted, nominal_cov, seeds));
+  out.push_back(RunOne(lab, "nominal camera, forward-model robot", CameraErrorModel{}, nominal_cov, seeds));
+  out.push_back(RunOne(lab, "fitted camera, forward-model robot", model, nominal_cov, seeds));
   if (paper_robot_3sigma_m > 0) {
     // The robot made as bad as the paper's: its DH errors scaled so that its three-sigma
     // position error matches (the error is linear in them to first order).
@@ -98,7 +91,7 @@ std::vector<LabReduction> PredictLabReductions(const NoiseModelFit& fit, const M
     const LabScenario lab2 = MakeLabScenario(bad);
     char label[160];
     std::snprintf(label, sizeof(label), "fitted camera, robot DH errors x%.1f (the paper's robot)", ratio);
-    out.push_back(RunOne(lab2, label, true, fitted, nominal_cov, seeds));
+    out.push_back(RunOne(lab2, label, model, nominal_cov, seeds));
   }
   return out;
 }

@@ -5,20 +5,20 @@
 //
 // Camera models. Nominal: the predicted pose covariance of the rig at the lab's sphere
 // centre, drawn independently per frame (what the rendered demo's tracker achieves).
-// Fitted: Table 1's sigmas are the spread of repeated VISITS of a point, so the fitted
-// position covariance (pixel-noise scale^2 x nominal + floor^2 + anisotropy^2) is drawn
-// once per visit (dwell) and shared by its frames; the orientation covariance is the
-// nominal one times the pixel-noise scale^2 (a floor of vibration or robot repeatability
-// moves the target rigidly; Table 1 says nothing about orientation). Each frame then
-// reports the visit covariance times the dwell's frame count, so that the dwell average
-// reports the visit covariance. Misidentified points are left out (the paper used the
-// points of its effective field of view).
+// Fitted: the camera error model (synthetic/camera_error_model.h, the one definition the
+// rendered demo `mcms demo --camera-model` also uses): per frame, the nominal pose
+// covariance times the pixel-noise scale^2; per visit (dwell), one rigid translation error
+// (floor and anisotropy, rig axes) shared by its frames. Each frame reports the pixel
+// covariance plus the visit covariance times the dwell's frame count, so that the dwell's
+// frames fused as independent report the visit covariance. Misidentified points are left
+// out (the paper used the points of its effective field of view).
 #pragma once
 
 #include <string>
 #include <vector>
 
 #include "core/pose_math.h"
+#include "synthetic/camera_error_model.h"
 #include "synthetic/fov_map_measured.h"
 
 namespace mcms {
@@ -33,7 +33,7 @@ using LabReduction = LabReductionResult;
 // itself is the default one). Rows: nominal camera, fitted camera (forward-model robot),
 // and, when paper_robot_3sigma_m > 0, the fitted camera with the robot's DH errors scaled
 // until its three-sigma position error is the paper's (Table 4: 3.379 mm).
-std::vector<LabReduction> PredictLabReductions(const NoiseModelFit& fit, const Mat6& nominal_cov, int seeds = 5,
+std::vector<LabReduction> PredictLabReductions(const CameraErrorModel& model, const Mat6& nominal_cov, int seeds = 5,
                                                int points = 76, double paper_robot_3sigma_m = 3.379e-3);
 
 }  // namespace mcms

@@ -858,7 +858,8 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
   // The paper's lab experiment with the fitted camera (and the nominal one beside it).
   if (opt.lab_seeds > 0) {
     const std::vector<FovMapPoint> centre = PredictFovPoints(rig, target, mo, {Vec3(0.0, 0.0, 0.5)});
-    if (centre[0].prediction.trackable) R.lab = PredictLabReductions(R.fit, centre[0].prediction.cov, opt.lab_seeds);
+    if (centre[0].prediction.trackable) R.lab = PredictLabReductions(CameraErrorModelFromFit(R.fit, "fitted", "this fit"), centre[0].prediction.cov,
+                                   opt.lab_seeds);
   }
 
   // How much the conclusion depends on the layout (Table 1 only).

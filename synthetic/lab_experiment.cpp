@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/random.h"
 #include "synthetic/evaluation.h"
 
 namespace mcms {
@@ -153,6 +154,33 @@ LabResult RunLabExperiment(const LabScenario& lab, const std::vector<FrameResult
   StreamFusionOptions so;
   so.windows = LabWindows(lab);
   return EvaluateLabExperiment(lab, logs, setup, FuseStream(logs, setup, so));
+}
+
+std::vector<double> BootstrapReductionSd(const LabResult& r, int draws, uint64_t seed) {
+  const size_t methods = r.summary.size();
+  std::vector<double> sum(methods, 0), sum2(methods, 0);
+  if (methods == 0 || r.estimates.empty() || r.estimates[0].empty() || draws < 2) return std::vector<double>(methods, 0);
+  const size_t n = r.estimates[0].size();
+  Rng rng(seed);
+  for (int d = 0; d < draws; ++d) {
+    std::vector<size_t> pick(n);
+    for (auto& i : pick) i = std::min(n - 1, static_cast<size_t>(rng.Uniform() * n));
+    std::vector<double> three(methods);
+    for (size_t m = 0; m < methods; ++m) {
+      std::vector<PointEstimate> v;
+      for (size_t i : pick) v.push_back(r.estimates[m][i]);
+      three[m] = Summarize(r.summary[m].name, v, false).position_3sigma_m;
+    }
+    for (size_t m = 0; m < methods; ++m) {
+      const double red = three[0] > 0 ? 1 - three[m] / three[0] : 0;
+      sum[m] += red;
+      sum2[m] += red * red;
+    }
+  }
+  std::vector<double> sd(methods);
+  for (size_t m = 0; m < methods; ++m)
+    sd[m] = std::sqrt(std::max(0.0, (sum2[m] - sum[m] * sum[m] / draws) / (draws - 1)));
+  return sd;
 }
 
 std::string FormatLabTable(const LabResult& r) {

@@ -68,6 +68,11 @@ LabResult EvaluateLabExperiment(const LabScenario& lab, const SensorLogs& logs, 
 LabResult RunLabExperiment(const LabScenario& lab, const std::vector<FrameResult>& tracked,
                            const LabExperimentOptions& options = {});
 
+// The sampling standard deviation of each method's reduction relative to the camera
+// (1 - method's / camera's three-sigma position error), by a bootstrap over the points (the
+// same resampled points for every method), in the order of r.summary (the camera's is 0).
+std::vector<double> BootstrapReductionSd(const LabResult& r, int draws = 400, uint64_t seed = 1);
+
 // The table, in mm and degrees.
 std::string FormatLabTable(const LabResult& r);
 

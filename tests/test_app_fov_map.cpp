@@ -39,8 +39,14 @@ TEST(FovMapCli, DefaultRigMapWithPromisedColumns) {
     EXPECT_GT(t.Number(i, cd), 0.005);
     EXPECT_LT(t.Number(i, cd), 0.06);
   }
-  for (const char* f : {"heatmap_z00.svg", "heatmap_z10.svg", "sigma_vs_distance.svg", "region.txt"})
+  for (const char* f : {"heatmap_z00.svg", "heatmap_z10.svg", "heatmap_x_centre.svg", "heatmap_y_centre.svg",
+                        "sigma_vs_distance.svg", "region.txt"})
     EXPECT_TRUE(fs::exists(s / "map" / f)) << f;
+  // The vertical slices: z against y at the middle x, z against x at the middle y.
+  const std::string xs = test::ReadAll(s / "map" / "heatmap_x_centre.svg");
+  EXPECT_NE(xs.find("plane x = 0.000 m"), std::string::npos);
+  EXPECT_NE(xs.find("z (m, rig frame)"), std::string::npos);
+  EXPECT_NE(test::ReadAll(s / "map" / "heatmap_y_centre.svg").find("plane y = 0.000 m"), std::string::npos);
   // No temporary folder left beside the output.
   for (const auto& e : fs::directory_iterator(s)) EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos);
   // A rerun replaces the earlier map.
