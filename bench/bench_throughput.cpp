@@ -23,7 +23,13 @@
 // runs, for one thread). At the end, the results of ours on N threads are compared with
 // those on 1 thread (they must be identical, in frame order).
 //
-//   bench_throughput [--frames N] [--threads N] [--repeat N] [--keep DIR]
+//   bench_throughput [--frames N] [--threads N] [--repeat N] [--keep DIR | --recording DIR]
+//                    [--poses FILE]
+//
+// --keep DIR renders into DIR and keeps it; --recording DIR uses a recording made before
+// (by --keep or `mcms render`: rig.yaml, target.yaml, frames.csv, images/) instead of
+// rendering, all its frames unless --frames is given. --poses FILE writes the poses of ours
+// (the pose CSV of `mcms track`), to compare builds.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -78,9 +84,10 @@ Timing Measure(int repeat, const std::function<void()>& fn) {
   return {wall[wall.size() / 2], cpu[cpu.size() / 2]};
 }
 
-TrackerOptions OurOptions(const Scenario& sc) {
+// The tracker of bench_pipeline: the renderer's gain for the photon-noise term.
+TrackerOptions OurOptions(double gain_e_per_dn) {
   TrackerOptions o;
-  o.detector.gain_e_per_dn = sc.render.gain_e_per_dn;
+  o.detector.gain_e_per_dn = gain_e_per_dn;
   return o;
 }
 
@@ -92,7 +99,8 @@ struct Row {
 
 int Usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s [--frames N (>= 2, default 40)] [--threads N (default: all cores)] "
-               "[--repeat N (default 3)] [--keep DIR (render into DIR and keep it)]\n", argv0);
+               "[--repeat N (default 3)] [--keep DIR (render into DIR and keep it) | --recording DIR (use it)] "
+               "[--poses FILE]\n", argv0);
   return 2;
 }
 
@@ -100,7 +108,8 @@ int Main(int argc, char** argv) {
   size_t frames = 40;
   int max_threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   int repeat = 3;
-  fs::path keep;
+  fs::path keep, recording, poses;
+  bool frames_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) return Usage(argv[0]);
@@ -108,14 +117,20 @@ int Main(int argc, char** argv) {
     char* end = nullptr;
     const long n = std::strtol(v.c_str(), &end, 10);
     const bool number = !v.empty() && *end == '\0';
-    if (a == "--frames" && number && n >= 2 && n <= 120)
+    if (a == "--frames" && number && n >= 2 && n <= 100000) {
       frames = static_cast<size_t>(n);
+      frames_given = true;
+    }
     else if (a == "--threads" && number && n >= 1 && n <= 1024)
       max_threads = static_cast<int>(n);
     else if (a == "--repeat" && number && n >= 1 && n <= 100)
       repeat = static_cast<int>(n);
-    else if (a == "--keep")
+    else if (a == "--keep" && recording.empty())
       keep = v;
+    else if (a == "--recording" && keep.empty())
+      recording = v;
+    else if (a == "--poses")
+      poses = v;
     else
       return Usage(argv[0]);
   }
@@ -123,24 +138,38 @@ int Main(int argc, char** argv) {
 
   // 1. The recording: the first `frames` frames of the default scenario, as PNG files.
   Scenario sc = Scenario::Default();
+  if (frames > sc.NumFrames() && recording.empty()) {
+    std::fprintf(stderr, "--frames %zu: the default scenario has %zu frames\n", frames, sc.NumFrames());
+    return 2;
+  }
   sc.times.resize(frames);
   sc.T_rig_target.resize(frames);
-  const fs::path dir = !keep.empty() ? keep
-                                     : fs::temp_directory_path() / ("mcms_bench_throughput_" + std::to_string(::getpid()));
+  const fs::path dir = !recording.empty() ? recording
+                       : !keep.empty()    ? keep
+                                          : fs::temp_directory_path() / ("mcms_bench_throughput_" + std::to_string(::getpid()));
   struct Cleanup {
     fs::path d;
     ~Cleanup() {
       std::error_code ec;
       if (!d.empty()) fs::remove_all(d, ec);
     }
-  } cleanup{keep.empty() ? dir : fs::path()};
-  std::printf("rendering %zu frames of Scenario::Default() into %s ...\n", frames, dir.string().c_str());
-  std::fflush(stdout);
-  RenderSequence(sc, dir, true, max_threads);
+  } cleanup{keep.empty() && recording.empty() ? dir : fs::path()};
+  if (recording.empty()) {
+    std::printf("rendering %zu frames of Scenario::Default() into %s ...\n", frames, dir.string().c_str());
+    std::fflush(stdout);
+    RenderSequence(sc, dir, true, max_threads);
+  }
 
+  const double gain = fs::exists(dir / "scenario.yaml") ? Scenario::Read(dir / "scenario.yaml").render.gain_e_per_dn
+                                                        : sc.render.gain_e_per_dn;
   const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
   const Target target = Target::Read(dir / "target.yaml");
-  const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", 10.0}, rig);
+  ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", 10.0}, rig);
+  if (frames_given && seq.frames.size() > frames) {
+    seq.frames.resize(frames);
+    seq.times_s.resize(frames);
+    seq.image_names.resize(frames * seq.cameras());
+  }
   const size_t n = seq.frames.size();
   const size_t ncam = seq.cameras();
   uintmax_t file_bytes = 0;
@@ -173,7 +202,7 @@ int Main(int argc, char** argv) {
   bool identical = true;
   size_t max_held = 0;
   auto ours = [&](const FrameSource& src, int threads, bool check) {
-    Tracker tracker(rig, target, OurOptions(sc));
+    Tracker tracker(rig, target, OurOptions(gain));
     size_t k = 0;
     const size_t held = TrackFramesStreaming(
         src, tracker,
@@ -206,6 +235,7 @@ int Main(int argc, char** argv) {
   };
 
   ours(memory, 1, true);  // the reference (and a warm-up)
+  if (!poses.empty()) WritePoseCsv(poses, reference);
   std::vector<Row> rows;
   for (const bool from_files : {true, false})
     for (int t = 1; t <= max_threads; ++t) {

@@ -175,7 +175,9 @@ inline bool AnyPass(const T* p, int t) {
 // overlapping runs of the previous row (8-connectivity). Returns runs and their parents.
 template <typename T, bool kDark>
 void LabelRuns(const cv::Mat& img, int t, std::vector<Run>* runs, std::vector<int>* parent) {
-  constexpr int kChunk = 64 / sizeof(T);
+  // Blocks of 256 bytes are skipped first (one horizontal reduction per block), then
+  // chunks of 64 bytes within the block that passed, then single pixels.
+  constexpr int kChunk = 64 / sizeof(T), kBlock = 4 * kChunk;
   const int W = img.cols, H = img.rows;
   int prev_begin = 0, prev_end = 0;
   for (int y = 0; y < H; ++y) {
@@ -183,6 +185,7 @@ void LabelRuns(const cv::Mat& img, int t, std::vector<Run>* runs, std::vector<in
     const int row_begin = static_cast<int>(runs->size());
     int x = 0;
     while (x < W) {
+      while (x + kBlock <= W && !AnyPass<T, kDark, kBlock>(row + x, t)) x += kBlock;
       while (x + kChunk <= W && !AnyPass<T, kDark, kChunk>(row + x, t)) x += kChunk;
       const int end = std::min(W, x + kChunk);
       while (x < end && !Pass<kDark>(row[x], t)) ++x;
@@ -220,19 +223,59 @@ double Median(std::vector<V>& v) {
   return 0.5 * (lower + upper);
 }
 
-// Median of non-negative ints below 256, by counting (no reordering, no log factor).
-double MedianByte(const std::vector<int>& v) {
-  int hist[256] = {0};
-  for (int x : v) ++hist[x];
-  const size_t lo_rank = (v.size() - 1) / 2, hi_rank = v.size() / 2;
+// Median of the counts hist[0..bins) over `total` samples (the mean of the two middle
+// ranks for an even total), by counting: no reordering, no log factor.
+double MedianOfHistogram(const int* hist, int bins, size_t total) {
+  const size_t lo_rank = (total - 1) / 2, hi_rank = total / 2;
   size_t seen = 0;
   int lo = -1;
-  for (int i = 0; i < 256; ++i) {
+  for (int i = 0; i < bins; ++i) {
     seen += hist[i];
     if (lo < 0 && seen > lo_rank) lo = i;
     if (seen > hi_rank) return 0.5 * (lo + i);
   }
   return lo;
+}
+
+// SampleStats for 8-bit images, by histograms of the sampled values and of the signed
+// differences (the same sample and the same results as the general code, without storing
+// or sorting the samples).
+void SampleStatsByte(const cv::Mat& img, int step, double* background, double* noise) {
+  const int W = img.cols, H = img.rows;
+  int values[256] = {0}, diffs[511] = {0};  // diffs[255 + d], d in [-255, 255]
+  size_t nv = 0, nd = 0;
+  for (int y = std::min(step / 2, H - 1); y < H; y += step) {
+    const uint8_t* row = img.ptr<uint8_t>(y);
+    const uint8_t* below = y + 1 < H ? img.ptr<uint8_t>(y + 1) : nullptr;
+    for (int x = std::min(step / 2, W - 1); x < W; x += step) {
+      ++values[row[x]];
+      ++nv;
+      if (x + 1 < W) {
+        ++diffs[255 + row[x + 1] - row[x]];
+        ++nd;
+      } else if (below) {
+        ++diffs[255 + below[x] - row[x]];
+        ++nd;
+      }
+    }
+  }
+  *background = MedianOfHistogram(values, 256, nv);
+  double sigma = 0;
+  if (nd > 0) {
+    int absd[256] = {0};
+    for (int d = -255; d <= 255; ++d) absd[std::abs(d)] += diffs[255 + d];
+    const double scale = 1.4826 * MedianOfHistogram(absd, 256, nd);  // sigma of a difference, robustly
+    const double clip = std::max(3.5 * scale, 2.0);
+    double s2 = 0;
+    int n = 0;
+    for (int d = -255; d <= 255; ++d)
+      if (diffs[255 + d] > 0 && std::abs(d) <= clip) {
+        s2 += static_cast<double>(diffs[255 + d]) * d * d;
+        n += diffs[255 + d];
+      }
+    if (n > 0) sigma = std::sqrt(s2 / n / 2.0);  // a difference has twice a pixel's variance
+  }
+  *noise = std::max(sigma, kQuantSigma);
 }
 
 // Global background (median) and noise of about 4096 pixels on a sparse grid. The noise
@@ -243,6 +286,10 @@ template <typename T>
 void SampleStats(const cv::Mat& img, double* background, double* noise) {
   const int W = img.cols, H = img.rows;
   const int step = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(W) * H / 4096.0)));
+  if constexpr (sizeof(T) == 1) {
+    SampleStatsByte(img, step, background, noise);
+    return;
+  }
   std::vector<int> values, diffs;
   values.reserve(static_cast<size_t>(W / step + 1) * (H / step + 1));
   diffs.reserve(values.capacity());
@@ -258,13 +305,12 @@ void SampleStats(const cv::Mat& img, double* background, double* noise) {
         diffs.push_back(static_cast<int>(below[x]) - row[x]);
     }
   }
-  constexpr bool kByte = sizeof(T) == 1;
-  *background = kByte ? MedianByte(values) : Median(values);
+  *background = Median(values);
   double sigma = 0;
   if (!diffs.empty()) {
     std::vector<int> absd(diffs.size());
     for (size_t i = 0; i < diffs.size(); ++i) absd[i] = std::abs(diffs[i]);
-    const double scale = 1.4826 * (kByte ? MedianByte(absd) : Median(absd));  // sigma of a difference, robustly
+    const double scale = 1.4826 * Median(absd);  // sigma of a difference, robustly
     const double clip = std::max(3.5 * scale, 2.0);
     double s2 = 0;
     int n = 0;
