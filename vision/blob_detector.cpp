@@ -171,18 +171,48 @@ inline bool AnyPass(const T* p, int t) {
   return Pass<kDark>(m, t);
 }
 
-// One pass over the image: the runs of above-threshold pixels of each row, united with the
-// overlapping runs of the previous row (8-connectivity). Returns runs and their parents.
+// True when any pixel of the row passes the threshold.
 template <typename T, bool kDark>
-void LabelRuns(const cv::Mat& img, int t, std::vector<Run>* runs, std::vector<int>* parent) {
+bool RowPasses(const T* row, int W, int t) {
+  constexpr int kBlock = 256 / sizeof(T);
+  int x = 0;
+  for (; x + kBlock <= W; x += kBlock)
+    if (AnyPass<T, kDark, kBlock>(row + x, t)) return true;
+  for (; x < W; ++x)
+    if (Pass<kDark>(row[x], t)) return true;
+  return false;
+}
+
+// The runs of above-threshold pixels of each row, united with the overlapping runs of the
+// previous row (8-connectivity). Returns runs and their parents.
+//
+// With skip_single_rows, regions that lie within one row may be left out (those that
+// touch a row next to a row with a region pixel are still found): a first pass reads only
+// the even rows, and only even rows that hold a pixel beyond the threshold and the odd
+// rows next to them are labelled. Every region that spans two rows or more is found
+// whole, because each of its odd rows has a neighbouring even row in the region. For the
+// detector's usual options no one-row region can be accepted (DetectBlobs), and the
+// first pass reads half of the image's memory.
+template <typename T, bool kDark>
+void LabelRuns(const cv::Mat& img, int t, bool skip_single_rows, std::vector<Run>* runs, std::vector<int>* parent) {
   // Blocks of 256 bytes are skipped first (one horizontal reduction per block), then
   // chunks of 64 bytes within the block that passed, then single pixels.
   constexpr int kChunk = 64 / sizeof(T), kBlock = 4 * kChunk;
   const int W = img.cols, H = img.rows;
+  // label[y]: row y is labelled.
+  std::vector<char> label(H, 1);
+  if (skip_single_rows) {
+    for (int y = 0; y < H; y += 2) label[y] = RowPasses<T, kDark>(img.ptr<T>(y), W, t);
+    for (int y = 1; y < H; y += 2) label[y] = label[y - 1] || (y + 1 < H && label[y + 1]);
+  }
   int prev_begin = 0, prev_end = 0;
   for (int y = 0; y < H; ++y) {
-    const T* row = img.ptr<T>(y);
     const int row_begin = static_cast<int>(runs->size());
+    if (!label[y]) {  // no runs here: the next row has no previous runs to join
+      prev_begin = prev_end = row_begin;
+      continue;
+    }
+    const T* row = img.ptr<T>(y);
     int x = 0;
     while (x < W) {
       while (x + kBlock <= W && !AnyPass<T, kDark, kBlock>(row + x, t)) x += kBlock;
@@ -587,7 +617,12 @@ std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobI
 
   std::vector<Run> runs;
   std::vector<int> parent;
-  LabelRuns<T, kDark>(img, t, &runs, &parent);
+  // A region within one row of length L has circularity 1/L (second moments L^2/12 and
+  // 1/12): it passes min_area_px <= L <= 1/min_circularity, which is impossible when
+  // min_area_px * min_circularity > 1 (3 * 0.5 by default). Then one-row regions need not
+  // be labelled, and the scan reads only the even rows and the rows next to a hit.
+  const bool skip_single_rows = o.min_area_px * o.min_circularity > 1.0 + 1e-6;
+  LabelRuns<T, kDark>(img, t, skip_single_rows, &runs, &parent);
 
   std::vector<int> region_of(runs.size(), -1), next_run(runs.size(), -1);
   std::vector<Region> regions;
