@@ -192,7 +192,7 @@ bool RowPasses(const T* row, int W, int t) {
 // rows next to them are labelled. Every region that spans two rows or more is found
 // whole, because each of its odd rows has a neighbouring even row in the region. For the
 // detector's usual options no one-row region can be accepted (DetectBlobs), and the
-// first pass reads half of the image's memory.
+// first pass tests half of the image's rows.
 template <typename T, bool kDark>
 void LabelRuns(const cv::Mat& img, int t, bool skip_single_rows, std::vector<Run>* runs, std::vector<int>* parent) {
   // Blocks of 256 bytes are skipped first (one horizontal reduction per block), then
