@@ -166,6 +166,63 @@ TEST(Stream, FramesArriveInOrderAndTheSequenceHoldsAtMostItsWindow) {
   EXPECT_EQ(ok, n) << "every frame of the rendered recording has a pose";
 }
 
+// Frames from memory (a FrameSource over decoded images, as bench_throughput runs it) on
+// 1 to 3 threads: every field of every result identical to the file path on 1 thread, in
+// frame order, and a missing image still reported as the frame's problem.
+TEST(Stream, FramesFromMemoryGiveTheSameResultsOnAnyThreadCount) {
+  const size_t n = 30;
+  const Recorded s(LongRecording("memory", n));
+  Tracker t1 = s.MakeTracker();
+  const std::vector<FrameResult> reference = TrackImageSequence(s.seq, t1, {}, 1);
+  ASSERT_EQ(reference.size(), n);
+  std::vector<std::vector<cv::Mat>> decoded(n);
+  for (size_t i = 0; i < n; ++i) {
+    std::vector<std::string> problems;
+    decoded[i] = LoadFrameImages(s.seq, i, &problems);
+  }
+  const size_t gap = 17;  // camera 2 of this frame is missing
+  FrameSource memory;
+  memory.count = n;
+  memory.frame = [&](size_t i) { return s.seq.frames[i]; };
+  memory.time_s = [&](size_t i) { return s.seq.times_s[i]; };
+  memory.images = [&](size_t i, std::vector<std::string>* problems) {
+    std::vector<cv::Mat> images = decoded[i];
+    if (i == gap) {
+      images[2] = cv::Mat();
+      (*problems)[2] = "dropped in memory";
+    }
+    return images;
+  };
+  for (int threads : {1, 2, 3}) {
+    Tracker tracker = s.MakeTracker();
+    size_t next = 0;
+    TrackFramesStreaming(
+        memory, tracker,
+        [&](FrameResult&& r) {
+          ASSERT_LT(next, n);
+          const FrameResult& e = reference[next];
+          EXPECT_EQ(r.frame, e.frame) << "frame order, threads " << threads;
+          if (next == gap) {
+            EXPECT_NE(r.reason.find("dropped in memory"), std::string::npos) << r.reason;
+          } else {
+            EXPECT_EQ(r.status, e.status) << "frame " << next << ", threads " << threads;
+            EXPECT_EQ(r.reason, e.reason);
+            EXPECT_EQ(r.points_triangulated, e.points_triangulated);
+            EXPECT_EQ(r.observations, e.observations);
+            EXPECT_EQ(r.cov, e.cov) << "frame " << next << ", threads " << threads;
+            ASSERT_EQ(r.T_rig_target.has_value(), e.T_rig_target.has_value());
+            if (r.T_rig_target) {
+              EXPECT_EQ(r.T_rig_target->R, e.T_rig_target->R);
+              EXPECT_EQ(r.T_rig_target->t, e.T_rig_target->t);
+            }
+          }
+          ++next;
+        },
+        {}, threads);
+    EXPECT_EQ(next, n) << "threads " << threads;
+  }
+}
+
 TEST(Stream, AnErrorInTheCallbackStopsEveryThreadAndLeavesNoPoseCsv) {
   const fs::path rec = LongRecording("callback_error", 60);
   const Recorded s(rec);

@@ -320,6 +320,48 @@ TEST(BlobDetector, EightBitAndColourInputs) {
   for (size_t i = 0; i < blobs.size(); ++i) EXPECT_LT((from_bgr[i].centre - blobs[i].centre).norm(), 1e-12);
 }
 
+// With the default options (min_area_px * min_circularity > 1) the scan reads only the
+// even rows and labels the rows around their hits: every region of two rows or more, on
+// any row parity and at the last row, must still be found whole, giving the same blobs as
+// the full scan (forced here by a lower min_circularity, whose extra candidates are then
+// filtered out), in 8 and 16 bits.
+TEST(BlobDetector, EvenRowScanFindsTheSameBlobsAsTheFullScan) {
+  const std::vector<EllipseShape> shapes = {{{20.3, 20.8}, 4, 4, 0},   {{60.6, 21.2}, 3, 2.2, 0.3},
+                                            {{100.1, 40.5}, 5, 4, 1},  {{30.2, 61.0}, 1.4, 1.4, 0},
+                                            {{80.7, 62.0}, 1.2, 1.0, 0}, {{120.4, 77.6}, 3, 3, 0}};
+  const cv::Mat expected = RenderExpected(140, 80, shapes, 10, 200, 0.8);
+  for (int depth : {CV_8U, CV_16U}) {
+    Rng rng(11);
+    cv::Mat img = AddNoise(expected, 0, 1.5, depth, &rng);
+    // A one-row streak of 6 px on an odd row whose neighbours hold no blob (circularity 1/6).
+    for (int x = 40; x < 46; ++x) {
+      if (depth == CV_8U)
+        img.at<uint8_t>(51, x) = 220;
+      else
+        img.at<uint16_t>(51, x) = 220;
+    }
+    BlobDetectorOptions fast;  // the defaults: min_area_px 3 x min_circularity 0.5 > 1
+    ASSERT_GT(fast.min_area_px * fast.min_circularity, 1.0);
+    BlobDetectorOptions full = fast;
+    full.min_circularity = 0.3;  // 3 x 0.3 < 1: every row is labelled
+    BlobImageStats fast_stats, full_stats;
+    const std::vector<Blob> a = DetectBlobs(img, fast, &fast_stats);
+    std::vector<Blob> b = DetectBlobs(img, full, &full_stats);
+    b.erase(std::remove_if(b.begin(), b.end(), [&](const Blob& x) { return x.circularity < fast.min_circularity; }),
+            b.end());
+    EXPECT_EQ(full_stats.num_regions, fast_stats.num_regions + 1) << "the lone streak is only seen by the full scan";
+    EXPECT_GE(a.size(), 5u);
+    ASSERT_EQ(a.size(), b.size()) << "depth " << depth;
+    for (size_t i = 0; i < a.size(); ++i) {
+      EXPECT_EQ(a[i].centre, b[i].centre) << i;
+      EXPECT_EQ(a[i].cov, b[i].cov) << i;
+      EXPECT_EQ(a[i].flux, b[i].flux) << i;
+      EXPECT_EQ(a[i].area_px, b[i].area_px) << i;
+      EXPECT_EQ(a[i].crowded, b[i].crowded) << i;
+    }
+  }
+}
+
 TEST(BlobDetector, FlagsSaturationAndTheBorder) {
   const std::vector<EllipseShape> shapes = {{{20.2, 20.4}, 4, 4, 0}, {{2.5, 30.3}, 4, 4, 0}};
   // 8-bit with a peak of 10 + 400 DN: the first disc clips at 255.

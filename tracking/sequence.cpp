@@ -258,21 +258,37 @@ void ParallelFor(size_t begin, size_t end, int threads, const std::function<void
 
 size_t SequenceWindow(int threads) { return 4 * static_cast<size_t>(std::max(threads, 1)); }
 
+FrameSource FilesOf(const ImageSequence& seq) {
+  FrameSource s;
+  s.count = seq.frames.size();
+  s.frame = [&seq](size_t i) { return seq.frames[i]; };
+  s.time_s = [&seq](size_t i) { return seq.times_s[i]; };
+  s.images = [&seq](size_t i, std::vector<std::string>* problems) { return LoadFrameImages(seq, i, problems); };
+  return s;
+}
+
 size_t TrackImageSequenceStreaming(const ImageSequence& seq, Tracker& tracker,
                                    const std::function<void(FrameResult&&)>& on_frame,
                                    const std::function<void(size_t, size_t)>& progress, int threads) {
-  const size_t n = seq.frames.size();
+  return TrackFramesStreaming(FilesOf(seq), tracker, on_frame, progress, threads);
+}
+
+size_t TrackFramesStreaming(const FrameSource& source, Tracker& tracker,
+                            const std::function<void(FrameResult&&)>& on_frame,
+                            const std::function<void(size_t, size_t)>& progress, int threads) {
+  const size_t n = source.count;
   threads = std::max(threads, 1);
   struct Detected {
     std::vector<std::optional<std::vector<ImagePoint>>> points;
     std::vector<std::string> problems;
   };
   auto detect = [&](size_t i, Detected* d) {
-    const std::vector<cv::Mat> images = LoadFrameImages(seq, i, &d->problems);
+    d->problems.assign(tracker.rig().size(), std::string());
+    const std::vector<cv::Mat> images = source.images(i, &d->problems);
     d->points = tracker.DetectPoints(images, &d->problems);
   };
   auto deliver = [&](size_t i, const Detected& d) {
-    on_frame(tracker.ProcessPoints(seq.frames[i], seq.times_s[i], d.points, d.problems));
+    on_frame(tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems));
     if (progress) progress(i + 1, n);
   };
   if (threads == 1 || n <= 1) {

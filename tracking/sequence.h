@@ -64,6 +64,31 @@ void ParallelFor(size_t begin, size_t end, int threads, const std::function<void
 // yet handed to on_frame) on `threads` threads: its reorder window, 4 per thread.
 size_t SequenceWindow(int threads);
 
+// Where TrackFramesStreaming gets its frames from: `count` frame sets, index i has the
+// frame number frame(i), the time time_s(i) and the images images(i, problems) (one per
+// rig camera: an empty Mat when missing, with the reason in (*problems)[c]). images is
+// called from several threads at once and must be thread-safe.
+struct FrameSource {
+  size_t count = 0;
+  std::function<size_t(size_t)> frame;
+  std::function<double(size_t)> time_s;
+  std::function<std::vector<cv::Mat>(size_t, std::vector<std::string>*)> images;
+};
+
+// A FrameSource reading the image files of `seq` (LoadFrameImages); seq must outlive it.
+FrameSource FilesOf(const ImageSequence& seq);
+
+// Runs the tracker over every frame of `source`: the images are fetched and their blobs
+// detected on `threads` threads, at most SequenceWindow(threads) frames ahead of the frame
+// being delivered, and the frames are processed (matching, identification, pose) in order
+// in the calling thread, so the results do not depend on `threads`. Each frame's result
+// goes to on_frame as soon as it is finished, in frame order. progress(done, total) is
+// called after each frame. An exception from fetching, detection or on_frame stops every
+// thread and is rethrown. Returns the greatest number of frames held at once.
+size_t TrackFramesStreaming(const FrameSource& source, Tracker& tracker,
+                            const std::function<void(FrameResult&&)>& on_frame,
+                            const std::function<void(size_t, size_t)>& progress = {}, int threads = 1);
+
 // Runs the tracker over every frame (missing or undecodable images become per-frame
 // problems) and hands each frame's result to on_frame as soon as it is finished, in frame
 // order; nothing of a frame is kept after on_frame returns, so memory does not grow with

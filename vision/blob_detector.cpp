@@ -171,18 +171,51 @@ inline bool AnyPass(const T* p, int t) {
   return Pass<kDark>(m, t);
 }
 
-// One pass over the image: the runs of above-threshold pixels of each row, united with the
-// overlapping runs of the previous row (8-connectivity). Returns runs and their parents.
+// True when any pixel of the row passes the threshold.
 template <typename T, bool kDark>
-void LabelRuns(const cv::Mat& img, int t, std::vector<Run>* runs, std::vector<int>* parent) {
-  constexpr int kChunk = 64 / sizeof(T);
+bool RowPasses(const T* row, int W, int t) {
+  constexpr int kBlock = 256 / sizeof(T);
+  int x = 0;
+  for (; x + kBlock <= W; x += kBlock)
+    if (AnyPass<T, kDark, kBlock>(row + x, t)) return true;
+  for (; x < W; ++x)
+    if (Pass<kDark>(row[x], t)) return true;
+  return false;
+}
+
+// The runs of above-threshold pixels of each row, united with the overlapping runs of the
+// previous row (8-connectivity). Returns runs and their parents.
+//
+// With skip_single_rows, regions that lie within one row may be left out (those that
+// touch a row next to a row with a region pixel are still found): a first pass reads only
+// the even rows, and only even rows that hold a pixel beyond the threshold and the odd
+// rows next to them are labelled. Every region that spans two rows or more is found
+// whole, because each of its odd rows has a neighbouring even row in the region. For the
+// detector's usual options no one-row region can be accepted (DetectBlobs), and the
+// first pass tests half of the image's rows.
+template <typename T, bool kDark>
+void LabelRuns(const cv::Mat& img, int t, bool skip_single_rows, std::vector<Run>* runs, std::vector<int>* parent) {
+  // Blocks of 256 bytes are skipped first (one horizontal reduction per block), then
+  // chunks of 64 bytes within the block that passed, then single pixels.
+  constexpr int kChunk = 64 / sizeof(T), kBlock = 4 * kChunk;
   const int W = img.cols, H = img.rows;
+  // label[y]: row y is labelled.
+  std::vector<char> label(H, 1);
+  if (skip_single_rows) {
+    for (int y = 0; y < H; y += 2) label[y] = RowPasses<T, kDark>(img.ptr<T>(y), W, t);
+    for (int y = 1; y < H; y += 2) label[y] = label[y - 1] || (y + 1 < H && label[y + 1]);
+  }
   int prev_begin = 0, prev_end = 0;
   for (int y = 0; y < H; ++y) {
-    const T* row = img.ptr<T>(y);
     const int row_begin = static_cast<int>(runs->size());
+    if (!label[y]) {  // no runs here: the next row has no previous runs to join
+      prev_begin = prev_end = row_begin;
+      continue;
+    }
+    const T* row = img.ptr<T>(y);
     int x = 0;
     while (x < W) {
+      while (x + kBlock <= W && !AnyPass<T, kDark, kBlock>(row + x, t)) x += kBlock;
       while (x + kChunk <= W && !AnyPass<T, kDark, kChunk>(row + x, t)) x += kChunk;
       const int end = std::min(W, x + kChunk);
       while (x < end && !Pass<kDark>(row[x], t)) ++x;
@@ -220,19 +253,59 @@ double Median(std::vector<V>& v) {
   return 0.5 * (lower + upper);
 }
 
-// Median of non-negative ints below 256, by counting (no reordering, no log factor).
-double MedianByte(const std::vector<int>& v) {
-  int hist[256] = {0};
-  for (int x : v) ++hist[x];
-  const size_t lo_rank = (v.size() - 1) / 2, hi_rank = v.size() / 2;
+// Median of the counts hist[0..bins) over `total` samples (the mean of the two middle
+// ranks for an even total), by counting: no reordering, no log factor.
+double MedianOfHistogram(const int* hist, int bins, size_t total) {
+  const size_t lo_rank = (total - 1) / 2, hi_rank = total / 2;
   size_t seen = 0;
   int lo = -1;
-  for (int i = 0; i < 256; ++i) {
+  for (int i = 0; i < bins; ++i) {
     seen += hist[i];
     if (lo < 0 && seen > lo_rank) lo = i;
     if (seen > hi_rank) return 0.5 * (lo + i);
   }
   return lo;
+}
+
+// SampleStats for 8-bit images, by histograms of the sampled values and of the signed
+// differences (the same sample and the same results as the general code, without storing
+// or sorting the samples).
+void SampleStatsByte(const cv::Mat& img, int step, double* background, double* noise) {
+  const int W = img.cols, H = img.rows;
+  int values[256] = {0}, diffs[511] = {0};  // diffs[255 + d], d in [-255, 255]
+  size_t nv = 0, nd = 0;
+  for (int y = std::min(step / 2, H - 1); y < H; y += step) {
+    const uint8_t* row = img.ptr<uint8_t>(y);
+    const uint8_t* below = y + 1 < H ? img.ptr<uint8_t>(y + 1) : nullptr;
+    for (int x = std::min(step / 2, W - 1); x < W; x += step) {
+      ++values[row[x]];
+      ++nv;
+      if (x + 1 < W) {
+        ++diffs[255 + row[x + 1] - row[x]];
+        ++nd;
+      } else if (below) {
+        ++diffs[255 + below[x] - row[x]];
+        ++nd;
+      }
+    }
+  }
+  *background = MedianOfHistogram(values, 256, nv);
+  double sigma = 0;
+  if (nd > 0) {
+    int absd[256] = {0};
+    for (int d = -255; d <= 255; ++d) absd[std::abs(d)] += diffs[255 + d];
+    const double scale = 1.4826 * MedianOfHistogram(absd, 256, nd);  // sigma of a difference, robustly
+    const double clip = std::max(3.5 * scale, 2.0);
+    double s2 = 0;
+    int n = 0;
+    for (int d = -255; d <= 255; ++d)
+      if (diffs[255 + d] > 0 && std::abs(d) <= clip) {
+        s2 += static_cast<double>(diffs[255 + d]) * d * d;
+        n += diffs[255 + d];
+      }
+    if (n > 0) sigma = std::sqrt(s2 / n / 2.0);  // a difference has twice a pixel's variance
+  }
+  *noise = std::max(sigma, kQuantSigma);
 }
 
 // Global background (median) and noise of about 4096 pixels on a sparse grid. The noise
@@ -243,6 +316,10 @@ template <typename T>
 void SampleStats(const cv::Mat& img, double* background, double* noise) {
   const int W = img.cols, H = img.rows;
   const int step = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(W) * H / 4096.0)));
+  if constexpr (sizeof(T) == 1) {
+    SampleStatsByte(img, step, background, noise);
+    return;
+  }
   std::vector<int> values, diffs;
   values.reserve(static_cast<size_t>(W / step + 1) * (H / step + 1));
   diffs.reserve(values.capacity());
@@ -258,13 +335,12 @@ void SampleStats(const cv::Mat& img, double* background, double* noise) {
         diffs.push_back(static_cast<int>(below[x]) - row[x]);
     }
   }
-  constexpr bool kByte = sizeof(T) == 1;
-  *background = kByte ? MedianByte(values) : Median(values);
+  *background = Median(values);
   double sigma = 0;
   if (!diffs.empty()) {
     std::vector<int> absd(diffs.size());
     for (size_t i = 0; i < diffs.size(); ++i) absd[i] = std::abs(diffs[i]);
-    const double scale = 1.4826 * (kByte ? MedianByte(absd) : Median(absd));  // sigma of a difference, robustly
+    const double scale = 1.4826 * Median(absd);  // sigma of a difference, robustly
     const double clip = std::max(3.5 * scale, 2.0);
     double s2 = 0;
     int n = 0;
@@ -541,7 +617,12 @@ std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobI
 
   std::vector<Run> runs;
   std::vector<int> parent;
-  LabelRuns<T, kDark>(img, t, &runs, &parent);
+  // A region within one row of length L has circularity 1/L (second moments L^2/12 and
+  // 1/12): it passes min_area_px <= L <= 1/min_circularity, which is impossible when
+  // min_area_px * min_circularity > 1 (3 * 0.5 by default). Then one-row regions need not
+  // be labelled, and the scan reads only the even rows and the rows next to a hit.
+  const bool skip_single_rows = o.min_area_px * o.min_circularity > 1.0 + 1e-6;
+  LabelRuns<T, kDark>(img, t, skip_single_rows, &runs, &parent);
 
   std::vector<int> region_of(runs.size(), -1), next_run(runs.size(), -1);
   std::vector<Region> regions;

@@ -25,11 +25,16 @@
 // between background and blob levels; the local tests (ring noise, shape) then reject the
 // clutter that passes.
 //
-// Cost: one pass over the image (a row scan that skips chunks of pixels below the
+// Cost: one pass over the image (a row scan that skips blocks of pixels below the
 // threshold with a vectorizable max/min test, run-length labelling with union-find), a
 // sparse sample of about 4096 pixels for the global background and noise, and per blob
-// a local pass over its window and ring. About 0.06 ms for a 1280x1024 8-bit image plus
-// about 10 us per blob on one core.
+// a local pass over its window and ring. When no region within a single row can be
+// accepted (min_area_px * min_circularity > 1, as by default: such a region of length L
+// has circularity 1/L), the pass tests only the even rows, and labels only the rows
+// with a pixel beyond the threshold and their neighbours: half the work on an image in
+// the cache (from main memory the hardware prefetcher still brings in the odd rows, and
+// the pass stays bound by memory bandwidth). About 0.025 ms for a cached 1280x1024 8-bit
+// image without blobs, plus about 10 us per blob, on one core.
 #pragma once
 
 #include <string>
@@ -111,7 +116,9 @@ struct BlobImageStats {
   double background_dn = 0;  // median of the sparse sample
   double noise_dn = 0;       // noise std used for the automatic threshold
   double threshold_dn = 0;   // detection threshold used, DN beyond background_dn
-  int num_regions = 0;       // connected regions beyond the threshold, before any filter
+  // Connected regions beyond the threshold, before any filter (without the one-row regions
+  // the scan leaves out when none of them can be accepted: see Cost above).
+  int num_regions = 0;
 };
 
 // Accepts CV_8U and CV_16U images with 1 channel (3 or 4 channels are converted to gray).

@@ -83,13 +83,14 @@ Vec2 CameraModel::Project(const Vec3& p_cam, Eigen::Matrix<double, 2, 3>* dq_dp,
 }
 
 std::vector<Vec2> CameraModel::Project(const std::vector<Vec3>& p_cam) const {
-  std::vector<mrcal_point3_t> p(p_cam.size());
-  for (size_t i = 0; i < p.size(); ++i) p[i] = mrcal_point3_t{{p_cam[i].x(), p_cam[i].y(), p_cam[i].z()}};
-  std::vector<mrcal_point2_t> q(p.size());
-  if (!p.empty())
-    mrcal_project(q.data(), nullptr, nullptr, p.data(), static_cast<int>(p.size()), &Lens(lensmodel_), intrinsics_.data());
-  std::vector<Vec2> out(p.size());
-  for (size_t i = 0; i < p.size(); ++i) out[i] = {q[i].x, q[i].y};
+  // Eigen's fixed-size vectors of doubles are laid out as mrcal's points (no padding):
+  // mrcal reads and writes them in place.
+  static_assert(sizeof(Vec3) == sizeof(mrcal_point3_t) && sizeof(Vec2) == sizeof(mrcal_point2_t));
+  std::vector<Vec2> out(p_cam.size());
+  if (!p_cam.empty())
+    mrcal_project(reinterpret_cast<mrcal_point2_t*>(out.data()), nullptr, nullptr,
+                  reinterpret_cast<const mrcal_point3_t*>(p_cam.data()), static_cast<int>(p_cam.size()),
+                  &Lens(lensmodel_), intrinsics_.data());
   return out;
 }
 

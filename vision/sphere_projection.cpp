@@ -2,8 +2,26 @@
 
 #include <Eigen/Eigenvalues>
 #include <cmath>
+#include <map>
 
 namespace mcms {
+
+namespace {
+// (cos, sin) of 2 pi i / n for i = 0..n-1, computed once per n and thread: the outline of
+// every sphere uses the same angles (the bias is evaluated ~100 times per frame set).
+const std::vector<Vec2>& UnitCircle(int n) {
+  thread_local std::map<int, std::vector<Vec2>> cache;
+  std::vector<Vec2>& v = cache[n];
+  if (v.empty()) {
+    v.reserve(n);
+    for (int i = 0; i < n; ++i) {
+      const double phi = 2.0 * M_PI * i / n;
+      v.emplace_back(std::cos(phi), std::sin(phi));
+    }
+  }
+  return v;
+}
+}  // namespace
 
 std::vector<Vec3> SphereSilhouetteRays(const Vec3& c, double r, int n) {
   const double d = c.norm();
@@ -16,10 +34,7 @@ std::vector<Vec3> SphereSilhouetteRays(const Vec3& c, double r, int n) {
   const Vec3 e2 = axis.cross(e1);
   const double sin_a = r / d, cos_a = std::sqrt(1.0 - sin_a * sin_a);
   rays.reserve(n);
-  for (int i = 0; i < n; ++i) {
-    const double phi = 2.0 * M_PI * i / n;
-    rays.push_back(cos_a * axis + sin_a * (std::cos(phi) * e1 + std::sin(phi) * e2));
-  }
+  for (const Vec2& cs : UnitCircle(n)) rays.push_back(cos_a * axis + sin_a * (cs.x() * e1 + cs.y() * e2));
   return rays;
 }
 

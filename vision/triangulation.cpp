@@ -73,6 +73,14 @@ std::optional<Vec3> NearestPointToRays(const std::vector<Vec3>& origins, const s
   return A.ldlt().solve(b);
 }
 
+// TriangulateNView with the rays of the observations (origin and direction in the rig
+// frame, one per observation) already computed.
+std::optional<TriangulatedPoint> TriangulateFromRays(const CameraRig& rig,
+                                                     const std::vector<std::vector<ImagePoint>>& points,
+                                                     const std::vector<PointObservation>& obs,
+                                                     const TriangulationOptions& options,
+                                                     const std::vector<Vec3>& origins, const std::vector<Vec3>& dirs);
+
 }  // namespace
 
 std::optional<TriangulatedPoint> TriangulateNView(const CameraRig& rig,
@@ -88,6 +96,16 @@ std::optional<TriangulatedPoint> TriangulateNView(const CameraRig& rig,
     origins.push_back(c);
     dirs.push_back(*d);
   }
+  return TriangulateFromRays(rig, points, obs, options, origins, dirs);
+}
+
+namespace {
+
+std::optional<TriangulatedPoint> TriangulateFromRays(const CameraRig& rig,
+                                                     const std::vector<std::vector<ImagePoint>>& points,
+                                                     const std::vector<PointObservation>& obs,
+                                                     const TriangulationOptions& options,
+                                                     const std::vector<Vec3>& origins, const std::vector<Vec3>& dirs) {
   auto p0 = NearestPointToRays(origins, dirs);
   if (!p0) return std::nullopt;
   Vec3 p = *p0;
@@ -136,8 +154,6 @@ std::optional<TriangulatedPoint> TriangulateNView(const CameraRig& rig,
   t.rms_px = std::sqrt(sq / obs.size());
   return t;
 }
-
-namespace {
 
 struct Candidate {
   Vec3 p;
@@ -235,6 +251,17 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
   std::vector<std::vector<bool>> used(ncam);
   for (int c = 0; c < ncam; ++c) used[c].assign(points[c].size(), false);
   std::vector<TriangulatedPoint> out;
+  // TriangulateNView on the rays computed above (the same ones it would compute).
+  const auto triangulate = [&](const std::vector<PointObservation>& obs) -> std::optional<TriangulatedPoint> {
+    if (obs.size() < 2) return std::nullopt;
+    std::vector<Vec3> o, d;
+    for (const auto& v : obs) {
+      if (!dirs[v.camera][v.index]) return std::nullopt;
+      o.push_back(centres[v.camera]);
+      d.push_back(*dirs[v.camera][v.index]);
+    }
+    return TriangulateFromRays(rig, points, obs, options.triangulation, o, d);
+  };
   for (const Candidate& cand : cands) {
     std::vector<PointObservation> obs;
     for (const auto& o : cand.obs)
@@ -242,7 +269,7 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
     // A candidate that lost views to better points is only kept if it keeps them all
     // or still has enough views; re-ranking is not needed for the few points we see.
     if (static_cast<int>(obs.size()) < options.min_views || obs.size() < cand.obs.size()) continue;
-    std::optional<TriangulatedPoint> t = TriangulateNView(rig, points, obs, options.triangulation);
+    std::optional<TriangulatedPoint> t = triangulate(obs);
     // Remove outlier views while the fit is poor and views remain.
     while (t && t->views() > options.min_views &&
            t->chi2 / std::max(1, 2 * t->views() - 3) > options.max_chi2_per_dof) {
@@ -260,7 +287,7 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
       }
       auto reduced = t->observations;
       reduced.erase(reduced.begin() + worst);
-      t = TriangulateNView(rig, points, reduced, options.triangulation);
+      t = triangulate(reduced);
     }
     if (!t) continue;
     const int dof = 2 * t->views() - 3;

@@ -1,0 +1,299 @@
+// Throughput of processing a recording, frame sets per second, against the OpenCV baseline
+// in the same process, on 1 to N threads.
+//
+//   from files  every frame set read from its 4 PNG files (decoding included), as
+//               `mcms track` reads a recording;
+//   in memory   the same frame sets decoded once beforehand (the images handed over as
+//               cv::Mat, no copy).
+//
+//   OURS        TrackFramesStreaming (tracking/sequence.h), the pipeline of `mcms track`:
+//               PNG decoding and DetectBlobs on `threads` worker threads, a reorder window,
+//               then matching, triangulation, identification and the pose bundle adjustment
+//               with its covariance, frame after frame in the calling thread.
+//   BASELINE    the OpenCV pipeline of bench_pipeline (bench/opencv_baseline.h): cv::imread,
+//               cv::SimpleBlobDetector and cv::undistortPoints on the 4 images, epipolar
+//               matching, cv::triangulatePoints and the closed-form pose; frame sets spread
+//               over `threads` threads (each frame set on one thread, OpenCV itself held to
+//               one thread so that the two pipelines parallelize the same way).
+//
+// The recording is a run of consecutive frames of Scenario::Default() (4 cameras, 1280 x
+// 1024, 8-bit PNG) rendered into a temporary folder with the project's renderer. Every
+// configuration runs --repeat times; the figures are the median wall-clock rate, and the
+// process CPU time per frame set (the figure that does not depend on what else the machine
+// runs, for one thread). At the end, the results of ours on N threads are compared with
+// those on 1 thread (they must be identical, in frame order).
+//
+//   bench_throughput [--frames N] [--threads N] [--repeat N] [--keep DIR | --recording DIR]
+//                    [--poses FILE]
+//
+// --keep DIR renders into DIR and keeps it; --recording DIR uses a recording made before
+// (by --keep or `mcms render`: rig.yaml, target.yaml, frames.csv, images/) instead of
+// rendering, all its frames unless --frames is given. --poses FILE writes the poses of ours
+// (the pose CSV of `mcms track`), to compare builds.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <unistd.h>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "bench/opencv_baseline.h"
+#include "synthetic/renderer.h"
+#include "synthetic/scenario.h"
+#include "tracking/sequence.h"
+#include "tracking/tracker.h"
+
+namespace fs = std::filesystem;
+
+namespace mcms {
+namespace {
+
+double CpuSeconds() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+struct Timing {
+  double wall_s = 0, cpu_s = 0;
+};
+
+// Runs fn `repeat` times; the median wall time and the median CPU time.
+Timing Measure(int repeat, const std::function<void()>& fn) {
+  std::vector<double> wall, cpu;
+  for (int r = 0; r < repeat; ++r) {
+    const double c0 = CpuSeconds();
+    const auto t0 = std::chrono::steady_clock::now();
+    fn();
+    wall.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    cpu.push_back(CpuSeconds() - c0);
+  }
+  std::sort(wall.begin(), wall.end());
+  std::sort(cpu.begin(), cpu.end());
+  return {wall[wall.size() / 2], cpu[cpu.size() / 2]};
+}
+
+// The tracker of bench_pipeline: the renderer's gain for the photon-noise term.
+TrackerOptions OurOptions(double gain_e_per_dn) {
+  TrackerOptions o;
+  o.detector.gain_e_per_dn = gain_e_per_dn;
+  return o;
+}
+
+struct Row {
+  std::string source;
+  int threads;
+  Timing ours, base;
+};
+
+int Usage(const char* argv0) {
+  std::fprintf(stderr, "usage: %s [--frames N (>= 2, default 40)] [--threads N (default: all cores)] "
+               "[--repeat N (default 3)] [--keep DIR (render into DIR and keep it) | --recording DIR (use it)] "
+               "[--poses FILE]\n", argv0);
+  return 2;
+}
+
+int Main(int argc, char** argv) {
+  size_t frames = 40;
+  int max_threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int repeat = 3;
+  fs::path keep, recording, poses;
+  bool frames_given = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (i + 1 >= argc) return Usage(argv[0]);
+    const std::string v = argv[++i];
+    char* end = nullptr;
+    const long n = std::strtol(v.c_str(), &end, 10);
+    const bool number = !v.empty() && *end == '\0';
+    if (a == "--frames" && number && n >= 2 && n <= 100000) {
+      frames = static_cast<size_t>(n);
+      frames_given = true;
+    }
+    else if (a == "--threads" && number && n >= 1 && n <= 1024)
+      max_threads = static_cast<int>(n);
+    else if (a == "--repeat" && number && n >= 1 && n <= 100)
+      repeat = static_cast<int>(n);
+    else if (a == "--keep" && recording.empty())
+      keep = v;
+    else if (a == "--recording" && keep.empty())
+      recording = v;
+    else if (a == "--poses")
+      poses = v;
+    else
+      return Usage(argv[0]);
+  }
+  cv::setNumThreads(1);
+
+  // 1. The recording: the first `frames` frames of the default scenario, as PNG files.
+  Scenario sc = Scenario::Default();
+  if (frames > sc.NumFrames() && recording.empty()) {
+    std::fprintf(stderr, "--frames %zu: the default scenario has %zu frames\n", frames, sc.NumFrames());
+    return 2;
+  }
+  sc.times.resize(frames);
+  sc.T_rig_target.resize(frames);
+  const fs::path dir = !recording.empty() ? recording
+                       : !keep.empty()    ? keep
+                                          : fs::temp_directory_path() / ("mcms_bench_throughput_" + std::to_string(::getpid()));
+  struct Cleanup {
+    fs::path d;
+    ~Cleanup() {
+      std::error_code ec;
+      if (!d.empty()) fs::remove_all(d, ec);
+    }
+  } cleanup{keep.empty() && recording.empty() ? dir : fs::path()};
+  if (recording.empty()) {
+    std::printf("rendering %zu frames of Scenario::Default() into %s ...\n", frames, dir.string().c_str());
+    std::fflush(stdout);
+    RenderSequence(sc, dir, true, max_threads);
+  }
+
+  const double gain = fs::exists(dir / "scenario.yaml") ? Scenario::Read(dir / "scenario.yaml").render.gain_e_per_dn
+                                                        : sc.render.gain_e_per_dn;
+  const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
+  const Target target = Target::Read(dir / "target.yaml");
+  ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", 10.0}, rig);
+  if (frames_given && seq.frames.size() > frames) {
+    seq.frames.resize(frames);
+    seq.times_s.resize(frames);
+    seq.image_names.resize(frames * seq.cameras());
+  }
+  const size_t n = seq.frames.size();
+  const size_t ncam = seq.cameras();
+  uintmax_t file_bytes = 0;
+  std::vector<std::vector<cv::Mat>> decoded(n);
+  for (size_t i = 0; i < n; ++i) {
+    std::vector<std::string> problems;
+    decoded[i] = LoadFrameImages(seq, i, &problems);
+    for (size_t c = 0; c < ncam; ++c) {
+      if (decoded[i][c].empty()) {
+        std::fprintf(stderr, "frame %zu camera %zu: %s\n", i, c, problems[c].c_str());
+        return 1;
+      }
+      file_bytes += fs::file_size(seq.ImagePath(i, c));
+    }
+  }
+  const cv::Mat& first = decoded[0][0];
+  std::printf("%zu frame sets x %zu cameras %dx%d %s; PNG files %.1f MB, decoded %.1f MB\n", n, ncam, first.cols,
+              first.rows, first.depth() == CV_8U ? "8-bit" : "16-bit", static_cast<double>(file_bytes) / 1e6,
+              static_cast<double>(n * ncam * first.total() * first.elemSize()) / 1e6);
+
+  // 2. The two pipelines, each from files and from memory.
+  FrameSource memory;
+  memory.count = n;
+  memory.frame = [&](size_t i) { return seq.frames[i]; };
+  memory.time_s = [&](size_t i) { return seq.times_s[i]; };
+  memory.images = [&](size_t i, std::vector<std::string>*) { return decoded[i]; };
+  const FrameSource files = FilesOf(seq);
+
+  std::vector<FrameResult> reference;  // ours, in memory, 1 thread
+  bool identical = true;
+  size_t max_held = 0;
+  auto ours = [&](const FrameSource& src, int threads, bool check) {
+    Tracker tracker(rig, target, OurOptions(gain));
+    size_t k = 0;
+    const size_t held = TrackFramesStreaming(
+        src, tracker,
+        [&](FrameResult&& r) {
+          if (check) {
+            if (reference.size() < n) {
+              reference.push_back(std::move(r));
+            } else {
+              const FrameResult& e = reference[k];
+              identical = identical && r.frame == e.frame && r.status == e.status &&
+                          r.T_rig_target.has_value() == e.T_rig_target.has_value() && r.cov == e.cov &&
+                          (!r.T_rig_target || (r.T_rig_target->R == e.T_rig_target->R && r.T_rig_target->t == e.T_rig_target->t));
+            }
+          }
+          ++k;
+        },
+        {}, threads);
+    max_held = std::max(max_held, held);
+  };
+  std::atomic<size_t> posed_baseline{0};
+  auto baseline = [&](bool from_files, int threads) {
+    ParallelFor(0, n, threads, [&](size_t i) {
+      const bench::Baseline base(rig, target);  // per frame set: nothing shared between threads
+      std::vector<cv::Mat> images(ncam);
+      for (size_t c = 0; c < ncam; ++c)
+        images[c] = from_files ? cv::imread(seq.ImagePath(i, c).string(), cv::IMREAD_UNCHANGED) : decoded[i][c];
+      const bench::Baseline::Result r = base.Process(images);
+      posed_baseline += r.id.has_value();
+    });
+  };
+
+  ours(memory, 1, true);  // the reference (and a warm-up)
+  if (!poses.empty()) WritePoseCsv(poses, reference);
+  std::vector<Row> rows;
+  for (const bool from_files : {true, false})
+    for (int t = 1; t <= max_threads; ++t) {
+      Row row{from_files ? "files" : "memory", t, {}, {}};
+      row.ours = Measure(repeat, [&] { ours(from_files ? files : memory, t, true); });
+      row.base = Measure(repeat, [&] { baseline(from_files, t); });
+      rows.push_back(row);
+      std::printf("  measured %-6s %d thread(s)\n", row.source.c_str(), t);
+      std::fflush(stdout);
+    }
+  Timing decode1 = Measure(repeat, [&] {
+    for (size_t i = 0; i < n; ++i) {
+      std::vector<std::string> problems;
+      const auto images = LoadFrameImages(seq, i, &problems);
+    }
+  });
+
+  // 3. The table.
+  const double dn = static_cast<double>(n);
+  std::printf("\n==== bench_throughput: %zu frame sets of %zu cameras, %d core(s), median of %d runs ====\n", n, ncam,
+              static_cast<int>(std::thread::hardware_concurrency()), repeat);
+  std::printf("%-7s %7s | %12s %12s %8s | %14s %14s %8s\n", "source", "threads", "ours fps", "baseline fps",
+              "ratio", "ours CPU ms/set", "base CPU ms/set", "CPU ratio");
+  for (const Row& r : rows) {
+    const double of = dn / r.ours.wall_s, bf = dn / r.base.wall_s;
+    std::printf("%-7s %7d | %12.1f %12.1f %7.1fx | %14.3f %14.3f %7.1fx\n", r.source.c_str(), r.threads, of, bf, of / bf,
+                1e3 * r.ours.cpu_s / dn, 1e3 * r.base.cpu_s / dn, r.base.cpu_s / r.ours.cpu_s);
+  }
+  std::printf("scaling, wall-clock rate on %d threads / on 1 thread:\n", max_threads);
+  for (const std::string src : {"files", "memory"}) {
+    const Row *one = nullptr, *all = nullptr;
+    for (const Row& r : rows)
+      if (r.source == src) {
+        if (r.threads == 1) one = &r;
+        if (r.threads == max_threads) all = &r;
+      }
+    if (one && all)
+      std::printf("  %-6s ours %.2fx, baseline %.2fx\n", src.c_str(), one->ours.wall_s / all->ours.wall_s,
+                  one->base.wall_s / all->base.wall_s);
+  }
+  std::printf("PNG decoding alone (LoadFrameImages, 1 thread): %.1f frame sets/s, %.3f ms CPU per set\n",
+              dn / decode1.wall_s, 1e3 * decode1.cpu_s / dn);
+  size_t posed = 0;
+  for (const FrameResult& r : reference) posed += r.T_rig_target.has_value();
+  std::printf("ours posed %zu/%zu frame sets; results on every thread count and source identical to 1 thread "
+              "in memory, in frame order: %s; at most %zu frame sets held at once\n",
+              posed, n, identical ? "yes" : "NO", max_held);
+  return identical ? 0 : 1;
+}
+
+}  // namespace
+}  // namespace mcms
+
+int main(int argc, char** argv) {
+  try {
+    return mcms::Main(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_throughput: %s\n", e.what());
+    return 1;
+  }
+}
