@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -49,7 +50,8 @@ bool CalibrationBoard::IsValid(std::string* why) const {
     else if (!(square_m > 0.0) || !std::isfinite(square_m)) s << "chessboard square size must be > 0 m (got " << square_m << ")";
   } else {
     if (tag_cols < 1 || tag_rows < 1) s << "an AprilGrid needs at least 1x1 tags (got " << tag_cols << "x" << tag_rows << ")";
-    else if (tag_cols * tag_rows > 587) s << "tag36h11 has 587 ids; the grid has " << tag_cols * tag_rows;
+    // In 64 bits: tagCols: 100000 x tagRows: 100000 overflowed int (found by fuzz/fuzz_target).
+    else if (int64_t{tag_cols} * tag_rows > 587) s << "tag36h11 has 587 ids; the grid has " << int64_t{tag_cols} * tag_rows;
     else if (!(tag_size_m > 0.0) || !std::isfinite(tag_size_m)) s << "tagSize must be > 0 m (got " << tag_size_m << ")";
     else if (!(tag_spacing >= 0.0) || !std::isfinite(tag_spacing)) s << "tagSpacing must be >= 0 (got " << tag_spacing << ")";
   }

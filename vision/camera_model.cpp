@@ -22,8 +22,9 @@ namespace fs = std::filesystem;
 static_assert(sizeof(mrcal_lensmodel_t) <= 32, "lensmodel storage too small");
 
 namespace {
-constexpr double kMaxIntrinsic = 1e6;
-constexpr double kMinBaseline = 1e-3;  // m between two camera centres  // px for fx, fy, cx, cy; unitless for distortion
+constexpr double kMaxIntrinsic = 1e6;  // px for fx, fy, cx, cy; unitless for distortion
+constexpr double kMinBaseline = 1e-3;  // m between two camera centres
+constexpr int kMaxSplineKnots = 200;   // per axis of a splined model (mrcal's own use 10..30)
 const mrcal_lensmodel_t& Lens(const unsigned char* raw) {
   return *reinterpret_cast<const mrcal_lensmodel_t*>(raw);
 }
@@ -41,6 +42,18 @@ void CameraModel::InitLens() {
     Throw("unknown or unconfigured lens model '", lensmodel_name_,
           "'; expected an mrcal model name such as LENSMODEL_PINHOLE, LENSMODEL_OPENCV8 or "
           "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=100");
+  if (lens.type == MRCAL_LENSMODEL_SPLINED_STEREOGRAPHIC) {
+    // libmrcal asserts (aborts the process) when it projects with a spline of another
+    // order or with fewer knots than the order needs, and a field of view of 0 or 360
+    // degrees and more gives an infinite or negative knot spacing: refuse them here.
+    const auto& c = lens.LENSMODEL_SPLINED_STEREOGRAPHIC__config;
+    const int min_knots = c.order == 2 ? 3 : 4;
+    if ((c.order != 2 && c.order != 3) || c.Nx < min_knots || c.Ny < min_knots || c.Nx > kMaxSplineKnots ||
+        c.Ny > kMaxSplineKnots || c.fov_x_deg < 1 || c.fov_x_deg > 359)
+      Throw("lens model '", lensmodel_name_, "': order=", c.order, " Nx=", c.Nx, " Ny=", c.Ny, " fov_x_deg=", c.fov_x_deg,
+            "; expected order 2 or 3, Nx and Ny from ", min_knots, " to ", kMaxSplineKnots,
+            " (at least 3 for order 2, 4 for order 3) and fov_x_deg from 1 to 359");
+  }
   if (!mrcal_lensmodel_metadata(&lens).has_gradients)
     Throw("lens model '", lensmodel_name_, "' has no gradients in mrcal and cannot be used for estimation");
   const int n = mrcal_lensmodel_num_params(&lens);
@@ -183,6 +196,26 @@ std::string LensFromDistortionCount(int n, const fs::path& path) {
   }
   Throw(path.string(), ": distortion_coefficients has ", n, " values; expected 0, 4, 5, 8 or 12");
 }
+
+// An !!opencv-matrix field, its declared size checked first: OpenCV allocates rows x cols
+// before it reads the data, so a file claiming 2^31 rows asked for 17 GB (found by
+// fuzz/fuzz_camera). Every matrix of a camera file is small (3x3, at most 1x14).
+constexpr int kMaxOpenCvMatrixSide = 16;
+cv::Mat ReadSmallMatrix(const cv::FileNode& n, const char* field, const fs::path& path) {
+  cv::Mat m;
+  if (n.empty() || n.isNone()) return m;
+  if (n.isMap()) {
+    const auto side = [](const cv::FileNode& d) { return d.isInt() ? static_cast<int>(d) : -1; };
+    const int rows = side(n["rows"]), cols = side(n["cols"]);
+    if (rows < 0 || cols < 0 || rows > kMaxOpenCvMatrixSide || cols > kMaxOpenCvMatrixSide)
+      Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " declares ", rows < 0 ? "no whole number of " : "",
+            "rows", rows < 0 ? std::string() : std::string(" ").append(std::to_string(rows)), " and ", cols < 0 ? "no whole number of " : "", "cols",
+            cols < 0 ? std::string() : std::string(" ").append(std::to_string(cols)), "; expected rows and cols from 0 to ", kMaxOpenCvMatrixSide,
+            " (a camera matrix is 3x3)");
+  }
+  n >> m;
+  return m;
+}
 }  // namespace
 
 CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
@@ -200,30 +233,40 @@ CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   } catch (const cv::Exception& e) {
     Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.err,
           " (expected an OpenCV FileStorage file starting with %YAML:1.0)");
+  } catch (const std::exception& e) {
+    // OpenCV's parser also lets standard exceptions through (std::length_error from a
+    // malformed key, found by fuzz/fuzz_camera).
+    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.what(),
+          " (expected an OpenCV FileStorage file starting with %YAML:1.0)");
   }
   if (!fs_in.isOpened()) Throw("cannot open OpenCV YAML ", path.string());
   try {
-    fs_in["camera_matrix"] >> K;
+    K = ReadSmallMatrix(fs_in["camera_matrix"], field, path);
     if (K.empty()) {
       field = "M1";
-      fs_in["M1"] >> K;
+      K = ReadSmallMatrix(fs_in["M1"], field, path);
     }
     field = "distortion_coefficients";
-    fs_in["distortion_coefficients"] >> D;
+    D = ReadSmallMatrix(fs_in["distortion_coefficients"], field, path);
     if (D.empty()) {
       field = "D1";
-      fs_in["D1"] >> D;
+      D = ReadSmallMatrix(fs_in["D1"], field, path);
     }
     field = "image_width";
     fs_in["image_width"] >> w;
     field = "image_height";
     fs_in["image_height"] >> h;
     field = "rvec";
-    fs_in["rvec"] >> rvec;
+    rvec = ReadSmallMatrix(fs_in["rvec"], field, path);
     field = "tvec";
-    fs_in["tvec"] >> tvec;
+    tvec = ReadSmallMatrix(fs_in["tvec"], field, path);
+  } catch (const InputError&) {
+    throw;
   } catch (const cv::Exception& e) {
     Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " is malformed (", e.err,
+          "); expected e.g. camera_matrix as a 3x3 !!opencv-matrix with 9 numbers");
+  } catch (const std::exception& e) {
+    Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " is malformed (", e.what(),
           "); expected e.g. camera_matrix as a 3x3 !!opencv-matrix with 9 numbers");
   }
   if (K.rows != 3 || K.cols != 3) Throw(path.string(), ": field camera_matrix missing or not 3x3");
@@ -336,7 +379,11 @@ CameraRig CameraRig::Read(const fs::path& path) {
       } else {
         if (!c["lensmodel"]) Throw("needs either 'model' (a file) or 'lensmodel', 'intrinsics', 'imagersize'");
         const auto size = NumberList(c["imagersize"], "imagersize", path);
-        if (size.size() != 2) Throw("'imagersize' must be [width, height]");
+        // Checked before the conversion to int (a double beyond int's range has no int value).
+        if (size.size() != 2 || size[0] != std::floor(size[0]) || size[1] != std::floor(size[1]) || size[0] < 1 ||
+            size[1] < 1 || size[0] > 100000 || size[1] > 100000)
+          Throw("'imagersize' must be [width, height] in whole pixels from 1 to 100000, got ", size.size(), " values",
+                size.size() == 2 ? std::string(" [").append(std::to_string(size[0])).append(", ").append(std::to_string(size[1])).append("]") : std::string());
         Pose T;
         if (c["rt_cam_rig"]) {
           const auto rt = NumberList(c["rt_cam_rig"], "rt_cam_rig", path);
