@@ -56,6 +56,26 @@ std::optional<std::array<int, 2>> PngHeaderSize(const fs::path& p) {
   return std::array<int, 2>{static_cast<int>(w), static_cast<int>(hh)};
 }
 
+// The first bytes of a file in one of the formats IsImageFile accepts (PNG, PGM/PNM, TIFF,
+// JPEG, BMP). cv::imread picks its decoder by content, not by name: a file named .png that
+// holds, say, a DICOM header goes to GDCM, which asserts on malformed input (a fuzz finding)
+// and would abort the whole run. Only these formats are handed to OpenCV.
+bool HasImageSignature(const fs::path& p) {
+  unsigned char h[8] = {0};
+  std::ifstream in(p, std::ios::binary);
+  in.read(reinterpret_cast<char*>(h), sizeof(h));
+  const std::streamsize n = in.gcount();
+  static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (n >= 8 && std::equal(kPng, kPng + 8, h)) return true;
+  if (n >= 2 && h[0] == 'P' && h[1] >= '1' && h[1] <= '6') return true;                  // PNM
+  if (n >= 4 && ((h[0] == 'I' && h[1] == 'I' && h[2] == 42 && h[3] == 0) ||              // TIFF
+                 (h[0] == 'M' && h[1] == 'M' && h[2] == 0 && h[3] == 42)))
+    return true;
+  if (n >= 3 && h[0] == 0xff && h[1] == 0xd8 && h[2] == 0xff) return true;                // JPEG
+  if (n >= 2 && h[0] == 'B' && h[1] == 'M') return true;                                  // BMP
+  return false;
+}
+
 constexpr double kMaxImagePixels = double(1 << 26);  // 67 MP: larger is not a camera frame of this tool
 
 // Reads an image; empty with the reason in *problem when it cannot be read, when its
@@ -71,6 +91,10 @@ cv::Mat ReadImage(const fs::path& p, const std::array<int, 2>* expected, std::st
       *problem = s.str();
       return {};
     }
+  }
+  if (!HasImageSignature(p)) {
+    *problem = "cannot decode " + p.string() + ": not a PNG/PGM/TIFF/JPEG/BMP file by its first bytes";
+    return {};
   }
   cv::Mat im;
   try {
