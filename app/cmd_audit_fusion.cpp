@@ -12,11 +12,11 @@
 #include <memory>
 
 #include "app/audit_modes.h"
-#include "calib/inclinometer_audit.h"
 #include "calib/robot_audit.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/output_folder.h"
+#include "fusion/log_audit.h"
 #include "fusion/sensor_logs.h"
 
 namespace mcms::app {
@@ -68,23 +68,12 @@ int RunAuditFusion(const AuditFusionArgs& a) {
     if (e.name == "clock_offset") e.where = "robot";
   InclinometerAuditResult ir;
   if (with_incl) {
-    CellGeometry cell;
-    cell.T_base_rig = setup.T_base_rig;
-    cell.T_base_rig_covariance = setup.T_base_rig_covariance;
-    cell.T_flange_target = setup.T_flange_target;
-    std::vector<OrientationReference> ref;
-    for (const TrackerSample& s : tracker.samples)
-      ref.push_back(CameraOrientationReference(cell, s.time_s, s.T_rig_target, s.covariance, s.line));
-    std::vector<InclinometerReadingSample> readings;
-    for (const InclinometerSample& s : incl_log.samples) readings.push_back({s.time_s, s.reading, s.line});
     InclinometerAuditOptions io;
     io.false_alarm = a.false_alarm / 2;
     io.progress = job.options.progress;
-    // The robot's joint log gives the motion's shape between the tracker's frames.
-    std::vector<OrientationSample> motion;
-    for (const JointSample& s : joints.samples) motion.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
     try {
-      ir = AuditInclinometer(setup.inclinometer, ref, readings, io, motion);
+      // The robot's joint log gives the motion's shape between the tracker's frames.
+      ir = AuditInclinometerLogs(setup, tracker, incl_log, &joints, io);
     } catch (const InputError& e) {
       Throw(a.inclinometer, " against ", a.tracker, ": ", e.what());
     }

@@ -18,6 +18,7 @@
 
 #include "calib/inclinometer_audit.h"
 #include "core/random.h"
+#include "fusion/log_audit.h"
 #include "fusion/sensor_logs.h"
 #include "tests/cli_runner.h"
 #include "tests/fuse_logs.h"
@@ -91,22 +92,11 @@ InclinometerAuditResult AuditInclinometerLogs(const fs::path& d, double false_al
   const FusionSetup setup = ReadFusionSetup(d / "setup.yaml");
   const TrackerLog tracker = ReadTrackerLog(d / "poses.csv");
   const InclinometerLog incl = ReadInclinometerLog(d / "incl.csv");
-  CellGeometry cell;
-  cell.T_base_rig = setup.T_base_rig;
-  cell.T_base_rig_covariance = setup.T_base_rig_covariance;
-  cell.T_flange_target = setup.T_flange_target;
-  std::vector<OrientationReference> ref;
-  for (const TrackerSample& s : tracker.samples)
-    ref.push_back(CameraOrientationReference(cell, s.time_s, s.T_rig_target, s.covariance, s.line));
-  std::vector<InclinometerReadingSample> z;
-  for (const InclinometerSample& s : incl.samples) z.push_back({s.time_s, s.reading, s.line});
   InclinometerAuditOptions io;
   io.false_alarm = false_alarm;
-  std::vector<OrientationSample> motion;
-  if (with_motion)
-    for (const JointSample& s : ReadJointLog(d / "joints.csv", setup.robot).samples)
-      motion.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
-  return AuditInclinometer(setup.inclinometer, ref, z, io, motion);
+  if (!with_motion) return AuditInclinometerLogs(setup, tracker, incl, nullptr, io);
+  const JointLog joints = ReadJointLog(d / "joints.csv", setup.robot);
+  return AuditInclinometerLogs(setup, tracker, incl, &joints, io);
 }
 
 // A seed picks the effect and its size: a bias of 4..8e-5 rad (0.0023..0.0046 deg) in a
