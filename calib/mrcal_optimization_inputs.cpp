@@ -145,12 +145,13 @@ using mrcal_io::Npy;
 std::string F64(const std::vector<double>& v) {
   std::string s(v.size() * sizeof(double), '\0');
   static_assert(sizeof(double) == 8);
-  std::memcpy(s.data(), v.data(), s.size());  // x86-64 and aarch64: little-endian
+  // An empty vector's data() may be null, which memcpy must not get even for 0 bytes (UBSan).
+  if (!v.empty()) std::memcpy(s.data(), v.data(), s.size());  // x86-64 and aarch64: little-endian
   return s;
 }
 std::string I32(const std::vector<int32_t>& v) {
   std::string s(v.size() * sizeof(int32_t), '\0');
-  std::memcpy(s.data(), v.data(), s.size());
+  if (!v.empty()) std::memcpy(s.data(), v.data(), s.size());
   return s;
 }
 std::string NpyF64(const std::vector<size_t>& shape, const std::vector<double>& v) { return Npy("<f8", shape, F64(v)); }
