@@ -47,6 +47,9 @@ bool CalibrationBoard::IsValid(std::string* why) const {
   std::ostringstream s;
   if (type == Type::kChessboard) {
     if (cols < 2 || rows < 2) s << "a chessboard needs at least 2x2 inner corners (got " << cols << "x" << rows << ")";
+    // Bounded so that NumPoints() and every per-corner buffer stay far from int overflow.
+    else if (cols > kMaxChessboardSide || rows > kMaxChessboardSide)
+      s << "a chessboard has at most " << kMaxChessboardSide << " inner corners per side (got " << cols << "x" << rows << ")";
     else if (!(square_m > 0.0) || !std::isfinite(square_m)) s << "chessboard square size must be > 0 m (got " << square_m << ")";
   } else {
     if (tag_cols < 1 || tag_rows < 1) s << "an AprilGrid needs at least 1x1 tags (got " << tag_cols << "x" << tag_rows << ")";

@@ -26,6 +26,7 @@ struct CalibrationBoard {
   Type type = Type::kChessboard;
   // Chessboard: inner corners per row (cols) and per column (rows), square size (m).
   int cols = 0, rows = 0;
+  static constexpr int kMaxChessboardSide = 500;
   double square_m = 0.0;
   // AprilGrid (tag36h11): tags per row and column, tag edge (m), gap between tags
   // as a fraction of the tag edge (Kalibr's tagSpacing).

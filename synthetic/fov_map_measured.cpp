@@ -1046,10 +1046,14 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
     o << "the paper's lab experiment (section 3.4; forward model: 76 points, 7 s dwells, KR 5 arc, inclinometer) with the "
          "camera error drawn from each model instead of rendering (three-sigma rule, mm; reductions relative to the camera, "
          "mean +- sd over "
-      << R.lab.front().seeds << " draws; the paper: MOIFA 38.2 %, KF 67.3 %, camera 3.940 mm):\n";
+      << R.lab.front().seeds << " draws; the paper: ";
+    std::snprintf(b, sizeof(b), "MOIFA %.1f %%, KF %.1f %%, camera %.3f mm):\n", 100 * PaperLabResult::moifa_reduction,
+                  100 * PaperLabResult::kf_reduction, 1e3 * PaperLabResult::camera_3sigma_m);
+    o << b;
     {
       // What two independent isotropic errors of the paper's sizes allow at best.
-      const double c = 3.940, r = 3.379, f = 1.0 / std::sqrt(1.0 / (c * c) + 1.0 / (r * r));
+      const double c = 1e3 * PaperLabResult::camera_3sigma_m, r = 1e3 * PaperLabResult::robot_3sigma_m,
+                   f = 1.0 / std::sqrt(1.0 / (c * c) + 1.0 / (r * r));
       std::snprintf(b, sizeof(b),
                     "  (two independent isotropic errors of the paper's camera %.3f and robot %.3f mm fuse at best to %.3f mm, "
                     "a %.1f %% reduction)\n",
@@ -1213,7 +1217,8 @@ void WriteMeasuredJson(const MeasuredReport& R, const fs::path& path) {
       << ", \"moifa_reduction_pct\": " << JsonNum(100 * l.moifa_reduction)
       << ", \"moifa_reduction_sd_pct\": " << JsonNum(100 * l.moifa_reduction_sd)
       << ", \"kf_reduction_pct\": " << JsonNum(100 * l.kf_reduction) << ", \"kf_reduction_sd_pct\": " << JsonNum(100 * l.kf_reduction_sd)
-      << ", \"paper_moifa_reduction_pct\": 38.2, \"paper_kf_reduction_pct\": 67.3}";
+      << ", \"paper_moifa_reduction_pct\": " << JsonNum(100 * PaperLabResult::moifa_reduction)
+      << ", \"paper_kf_reduction_pct\": " << JsonNum(100 * PaperLabResult::kf_reduction) << "}";
   }
   o << (R.lab.empty() ? "],\n" : "\n  ],\n");
   o << "  \"table2_prediction\": ";

@@ -13,6 +13,7 @@
 #include <map>
 #include <sstream>
 #include <unistd.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/io.h"
 #include "model/inclinometer.h"
@@ -275,6 +276,61 @@ TEST(Inputs, HugePngHeaderDegradesItsFrameOnly) {
   EXPECT_NE(t.rows[3][re].find("header says 60000x60000 but the rig says 1280x1024"), std::string::npos)
       << t.rows[3][re];
   EXPECT_FALSE(t.rows[3][t.Column("x_m")].empty()) << "three cameras still give a pose";
+}
+
+// The same for the other formats a frame may hold under its .png name (BMP, PGM, JPEG):
+// OpenCV would allocate whatever the header claims (up to 2^30 pixels) before decoding, so
+// every header's size is checked first, and that frame alone is degraded with the reason.
+TEST(Inputs, HugeHeaderOfEveryFormatDegradesItsFrameOnly) {
+  struct Case {
+    std::string ext, format;
+    std::function<void(std::vector<unsigned char>*)> patch;
+  };
+  const std::vector<Case> cases = {
+      {".bmp", "BMP",
+       [](std::vector<unsigned char>* b) {
+         for (int k = 0; k < 4; ++k) (*b)[18 + k] = (*b)[22 + k] = static_cast<unsigned char>((60000 >> (8 * k)) & 0xff);
+       }},
+      {".pgm", "PNM",
+       [](std::vector<unsigned char>* b) {
+         const std::string head = "P5\n60000 60000\n255\n";
+         const std::string old(b->begin(), b->end());
+         const size_t data = old.size() - 1280u * 1024u;  // binary PGM: header then the pixels
+         b->assign(head.begin(), head.end());
+         b->insert(b->end(), old.begin() + static_cast<long>(data), old.end());
+       }},
+      {".jpg", "JPEG",
+       [](std::vector<unsigned char>* b) {
+         for (size_t o = 2; o + 9 < b->size(); ++o)
+           if ((*b)[o] == 0xff && (*b)[o + 1] == 0xc0) {  // SOF0: length, precision, height, width
+             (*b)[o + 5] = (*b)[o + 7] = 0xea;
+             (*b)[o + 6] = (*b)[o + 8] = 0x60;
+             return;
+           }
+         FAIL() << "no SOF0 marker";
+       }},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.format);
+    const fs::path d = Copy("huge" + c.ext.substr(1));
+    const fs::path png = d / "images" / "cam2" / "000003.png";
+    const cv::Mat im = cv::imread(png.string(), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(im.empty());
+    std::vector<unsigned char> bytes;
+    ASSERT_TRUE(cv::imencode(c.ext, im, bytes));
+    c.patch(&bytes);
+    std::ofstream(png, std::ios::trunc | std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
+                                                                   static_cast<std::streamsize>(bytes.size()));
+    const CliRun r = Mcms("track --quiet " + d.string(), d);
+    ASSERT_EQ(r.code, 0) << r.err;
+    const CsvTable t = ReadCsv(d / "poses.csv");
+    ASSERT_EQ(t.rows.size(), 5u);
+    const int st = t.Column("status"), re = t.Column("reason");
+    EXPECT_EQ(t.rows[3][st], "degraded");
+    EXPECT_NE(t.rows[3][re].find("(" + c.format + ") header says 60000x60000 but the rig says 1280x1024"), std::string::npos)
+        << t.rows[3][re];
+    for (size_t f : {0u, 1u, 2u, 4u}) EXPECT_EQ(t.rows[f][st], "ok") << f;
+  }
 }
 
 TEST(Inputs, RenderOfAnEndlessFileIsBounded) {

@@ -261,6 +261,10 @@ TEST(CalibCameraSynthetic, BoardGeometryAndFile) {
   EXPECT_TRUE(c.Point(10).isApprox(Vec3(0.025, 0.025, 0.0)));
   std::string why;
   EXPECT_FALSE(CalibrationBoard::Chessboard(1, 6, 0.025).IsValid(&why));
+  // cols x rows of 100000 x 100000 overflowed int in NumPoints(): refused with the bound.
+  EXPECT_FALSE(CalibrationBoard::Chessboard(100000, 100000, 0.025).IsValid(&why));
+  EXPECT_NE(why.find("at most 500 inner corners per side"), std::string::npos) << why;
+  EXPECT_TRUE(CalibrationBoard::Chessboard(500, 2, 0.025).IsValid(&why)) << why;
   EXPECT_THROW(CalibrationBoard::Read("/nonexistent/board.yaml"), InputError);
 }
 
