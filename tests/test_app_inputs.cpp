@@ -278,7 +278,7 @@ TEST(Inputs, HugePngHeaderDegradesItsFrameOnly) {
   EXPECT_FALSE(t.rows[3][t.Column("x_m")].empty()) << "three cameras still give a pose";
 }
 
-// The same for the other formats a frame may hold under its .png name (BMP, PGM, JPEG):
+// The same for the other formats a frame may hold under its .png name (BMP, PGM, JPEG, TIFF):
 // OpenCV would allocate whatever the header claims (up to 2^30 pixels) before decoding, so
 // every header's size is checked first, and that frame alone is degraded with the reason.
 TEST(Inputs, HugeHeaderOfEveryFormatDegradesItsFrameOnly) {
@@ -309,6 +309,19 @@ TEST(Inputs, HugeHeaderOfEveryFormatDegradesItsFrameOnly) {
            }
          FAIL() << "no SOF0 marker";
        }},
+      {".tiff", "TIFF",
+       [](std::vector<unsigned char>* b) {  // little-endian, IFD at the offset in bytes 4-7
+         ASSERT_EQ((*b)[0], 'I');
+         const uint32_t ifd = (*b)[4] | ((*b)[5] << 8) | ((*b)[6] << 16) | (uint32_t{(*b)[7]} << 24);
+         const int count = (*b)[ifd] | ((*b)[ifd + 1] << 8);
+         for (int e = 0; e < count; ++e) {
+           unsigned char* t = b->data() + ifd + 2 + 12 * e;
+           const int tag = t[0] | (t[1] << 8);
+           if (tag != 256 && tag != 257) continue;
+           t[2] = 4, t[3] = 0;  // LONG
+           for (int k = 0; k < 4; ++k) t[8 + k] = static_cast<unsigned char>((60000 >> (8 * k)) & 0xff);
+         }
+       }},
   };
   for (const auto& c : cases) {
     SCOPED_TRACE(c.format);
@@ -318,6 +331,17 @@ TEST(Inputs, HugeHeaderOfEveryFormatDegradesItsFrameOnly) {
     ASSERT_FALSE(im.empty());
     std::vector<unsigned char> bytes;
     ASSERT_TRUE(cv::imencode(c.ext, im, bytes));
+    {  // unpatched, the format is decoded as any frame
+      const fs::path d0 = Copy("valid" + c.ext.substr(1));
+      const fs::path f0 = d0 / "images" / "cam2" / "000003.png";
+      std::ofstream(f0, std::ios::trunc | std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
+                                                                  static_cast<std::streamsize>(bytes.size()));
+      const CliRun r0 = Mcms("track --quiet " + d0.string(), d0);
+      ASSERT_EQ(r0.code, 0) << r0.err;
+      const CsvTable t0 = ReadCsv(d0 / "poses.csv");
+      ASSERT_EQ(t0.rows.size(), 5u);
+      EXPECT_EQ(t0.rows[3][t0.Column("status")], "ok") << t0.rows[3][t0.Column("reason")];
+    }
     c.patch(&bytes);
     std::ofstream(png, std::ios::trunc | std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()),
                                                                    static_cast<std::streamsize>(bytes.size()));

@@ -96,19 +96,25 @@ std::optional<ImageHeader> ReadImageHeader(const fs::path& p) {
   }
   const bool tiff_le = n >= 4 && h[0] == 'I' && h[1] == 'I' && h[2] == 42 && h[3] == 0;
   const bool tiff_be = n >= 4 && h[0] == 'M' && h[1] == 'M' && h[2] == 0 && h[3] == 42;
-  if (tiff_le || tiff_be) {  // the first IFD's ImageWidth (256) and ImageLength (257)
+  if (tiff_le || tiff_be) {  // the first IFD's ImageWidth (256) and ImageLength (257), wherever it is
     ImageHeader r{"TIFF", std::nullopt};
-    auto rd = [&](size_t o, int bytes) { return tiff_le ? le(o, bytes) : be(o, bytes); };
+    auto rd = [&](const unsigned char* b, int bytes) {
+      uint32_t v = 0;
+      for (int i = 0; i < bytes; ++i) v = tiff_le ? v | (uint32_t{b[i]} << (8 * i)) : (v << 8) | b[i];
+      return v;
+    };
     if (n < 8) return r;
-    const size_t ifd = rd(4, 4);
-    if (ifd + 2 > n) return r;  // an IFD beyond the first 4 KB: not a camera frame of this tool's
+    std::ifstream f(p, std::ios::binary);
+    unsigned char c[2];
+    f.seekg(rd(&h[4], 4));
+    if (!f.read(reinterpret_cast<char*>(c), 2)) return r;
     int64_t wh[2] = {-1, -1};
-    const uint32_t count = rd(ifd, 2);
-    for (uint32_t e = 0; e < count && ifd + 2 + 12 * (e + 1) <= n; ++e) {
-      const size_t o = ifd + 2 + 12 * e;
-      const uint32_t tag = rd(o, 2), type = rd(o + 2, 2);
-      if (tag != 256 && tag != 257) continue;
-      wh[tag - 256] = type == 3 ? rd(o + 8, 2) : type == 4 ? rd(o + 8, 4) : -1;
+    const uint32_t count = rd(c, 2);
+    for (uint32_t e = 0; e < count; ++e) {
+      unsigned char t[12];
+      if (!f.read(reinterpret_cast<char*>(t), 12)) return r;
+      const uint32_t tag = rd(t, 2), type = rd(t + 2, 2);
+      if (tag == 256 || tag == 257) wh[tag - 256] = type == 3 ? rd(t + 8, 2) : type == 4 ? rd(t + 8, 4) : -1;
     }
     if (wh[0] >= 0 && wh[1] >= 0) r.size = size_of(wh[0], wh[1]);
     return r;
