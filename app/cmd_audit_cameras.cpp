@@ -1,6 +1,7 @@
 // mcms audit cameras: track a recording, test every camera against the rest of the rig and
 // name what the camera model gets wrong from the catalog of model/extensions.h
-// (tracking/camera_audit.h); optionally write the report as JSON and the extended rig.
+// (tracking/camera_audit.h); optionally write the report as JSON, the extended rig and the
+// extended target.
 #include <cmath>
 #include <cstdio>
 
@@ -17,7 +18,7 @@ namespace mcms::app {
 namespace {
 
 struct AuditArgs {
-  std::string dir, repaired, json;
+  std::string dir, repaired, repaired_target, json;
   CameraAuditOptions audit;
   double rate = 10.0;
   bool quiet = false;
@@ -28,6 +29,7 @@ int RunAudit(const AuditArgs& a) {
   namespace fs = std::filesystem;
   const fs::path dir = a.dir;
   if (!a.repaired.empty()) RequireWritableFile(a.repaired, "audit --repaired-rig");
+  if (!a.repaired_target.empty()) RequireWritableFile(a.repaired_target, "audit --repaired-target");
   if (!a.json.empty()) RequireWritableFile(a.json, "audit --json");
   const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
   const Target target = Target::Read(dir / "target.yaml");
@@ -51,8 +53,12 @@ int RunAudit(const AuditArgs& a) {
     audit.report.WriteJson(a.json);
     std::printf("wrote the audit report to %s\n", a.json.c_str());
   }
-  bool noise = false;
-  for (const auto& t : audit.terms) noise = noise || t.extension.effect == Effect::kPixelNoiseScale;
+  bool noise = false, target_changes = false;
+  for (const auto& t : audit.terms) {
+    noise = noise || t.extension.effect == Effect::kPixelNoiseScale;
+    target_changes = target_changes || (t.extension.effect == Effect::kTargetGeometry && !t.undecided);
+  }
+  // Every repaired file asked for is checked before any is written.
   if (!a.repaired.empty() && !audit.report.effects.empty()) {
     if (!audit.ChangesRig()) {
       if (noise)
@@ -62,6 +68,15 @@ int RunAudit(const AuditArgs& a) {
       Throw("the effects found (time offset, target geometry) cannot be written into a rig; no repaired rig written");
     }
   }
+  if (!a.repaired_target.empty() && !audit.report.effects.empty() && !target_changes)
+    Throw("--repaired-target: no target_geometry effect was named (the effects found belong to the cameras or the "
+          "noise model); no repaired target written");
+  if (!a.repaired_target.empty() && target_changes) {
+    audit.ExtendedTarget(target).Write(a.repaired_target);
+    std::printf("wrote the target with the ball positions found to %s\n", a.repaired_target.c_str());
+  }
+  if (!a.repaired_target.empty() && audit.report.effects.empty())
+    std::printf("no effect named: no repaired target written (%s)\n", a.repaired_target.c_str());
   if (!a.repaired.empty() && audit.ChangesRig()) {
     audit.ExtendedRig(rig).Write(a.repaired);
     std::printf("wrote the rig extended by the effects found to %s\n", a.repaired.c_str());
@@ -93,6 +108,8 @@ std::pair<CLI::App*, Runner> AddAuditCameras(CLI::App& audit) {
   cmd->add_option("DIR", args->dir, "recording folder (images/, rig.yaml, target.yaml, optional frames.csv)")->required();
   cmd->add_option("--repaired-rig", args->repaired,
                   "write the rig extended by the effects found here (moved poses, focal length, principal point, k1)");
+  cmd->add_option("--repaired-target", args->repaired_target,
+                  "write the target with the ball positions found (target_geometry) here");
   cmd->add_option("--json", args->json, "write the audit report as JSON here (mode, nominal, clean, effects, undecided)");
   cmd->add_option("--false-alarm", args->audit.false_alarm,
                   "designed probability of naming an effect on a recording without one")

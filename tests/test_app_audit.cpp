@@ -5,9 +5,12 @@
 // find nothing.
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include "synthetic/evaluation.h"
 #include "synthetic/renderer.h"
 #include "synthetic/scenario.h"
+#include "tests/cli_runner.h"
 #include "tests/test_util.h"
 #include "tracking/audit.h"
 
@@ -76,6 +79,47 @@ TEST(Audit, FindsNothingOnCleanData) {
   std::printf("%s", audit.Report().c_str());
   EXPECT_EQ(audit.worst, -1);
   for (const auto& c : audit.cameras) EXPECT_TRUE(c.consistent) << c.name;
+}
+
+// `mcms audit cameras --repaired-target`: images rendered with ball 3 of the target 0.4 mm
+// away from where target.yaml says; the audit must name target_geometry at ball 3 and
+// write a target whose ball 3 is where the images put it (within 0.05 mm), the other
+// balls unchanged. Asked of a recording where nothing is named, it
+// writes nothing and says so; asked where only a camera effect is named, it refuses.
+TEST(AuditCli, RepairedTargetHoldsTheBallWhereTheImagesPutIt) {
+  const Scenario model = Short();
+  Scenario world = model;
+  const Vec3 shift(0.00025, -0.0002, 0.00025);
+  world.target.balls_target[2] += shift;
+  const auto dir = test::ScratchDir("audit_repaired_target");
+  RenderSequence(world, dir / "rec", true, 2);
+  model.target.Write(dir / "rec" / "target.yaml");  // the target as the user believes it
+  const test::CliRun r =
+      test::Mcms(dir, "audit cameras rec --quiet --json audit.json --repaired-target fixed.yaml");
+  ASSERT_EQ(r.code, 0) << r.out << r.err;
+  std::printf("%s", r.out.c_str());
+  const nlohmann::json j = nlohmann::json::parse(test::ReadAll(dir / "audit.json"));
+  bool named = false;
+  for (const auto& e : j["effects"]) named = named || (e["name"] == "target_geometry" && e["where"] == "ball 3");
+  EXPECT_TRUE(named) << j.dump(1);
+  ASSERT_TRUE(std::filesystem::exists(dir / "fixed.yaml")) << r.out;
+  const Target fixed = Target::Read(dir / "fixed.yaml");
+  ASSERT_EQ(fixed.balls_target.size(), model.target.balls_target.size());
+  EXPECT_LT((fixed.balls_target[2] - world.target.balls_target[2]).norm(), 5e-5)
+      << "found " << fixed.balls_target[2].transpose() << " truth " << world.target.balls_target[2].transpose();
+  EXPECT_LT((fixed.balls_target[2] - world.target.balls_target[2]).norm(),
+            0.5 * (model.target.balls_target[2] - world.target.balls_target[2]).norm());
+  for (size_t b = 0; b < fixed.balls_target.size(); ++b)
+    if (b != 2) {
+      EXPECT_LT((fixed.balls_target[b] - model.target.balls_target[b]).norm(), 1e-9) << b;
+    }
+
+  // Clean: nothing named, nothing written.
+  RenderSequence(model, dir / "clean", true, 2);
+  const test::CliRun c = test::Mcms(dir, "audit cameras clean --quiet --repaired-target clean.yaml");
+  ASSERT_EQ(c.code, 0) << c.out << c.err;
+  EXPECT_NE(c.out.find("no repaired target written"), std::string::npos) << c.out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "clean.yaml"));
 }
 
 }  // namespace
