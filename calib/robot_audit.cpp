@@ -497,25 +497,6 @@ std::vector<Covariate> Covariates(const RobotModel& robot, const RobotLog& log, 
   return cv;
 }
 
-double TwoSidedNormalP(double z) {
-  return 2.0 * boost::math::cdf(boost::math::complement(boost::math::normal(), std::abs(z)));
-}
-
-double Corr(const std::vector<double>& a, const Eigen::VectorXd& b) {
-  const int n = b.size();
-  double ma = 0, mb = 0;
-  for (int i = 0; i < n; ++i) ma += a[i], mb += b[i];
-  ma /= n, mb /= n;
-  double sab = 0, saa = 0, sbb = 0;
-  for (int i = 0; i < n; ++i) {
-    sab += (a[i] - ma) * (b[i] - mb);
-    saa += (a[i] - ma) * (a[i] - ma);
-    sbb += (b[i] - mb) * (b[i] - mb);
-  }
-  if (saa <= 0 || sbb <= 0) return std::nan("");
-  return sab / std::sqrt(saa * sbb);
-}
-
 // Groups of rows with the same joint values (repeats of a pose).
 std::vector<std::vector<int>> RepeatGroups(const RobotLog& log, double tol) {
   const int N = log.rows.size();
@@ -580,26 +561,14 @@ double TestResiduals(const RobotLog& log, const Setup& s, const FitOut& nominal,
     rep->notes.push_back("no repeated poses (or too few): the noise is estimated from the residuals with the model, "
                          "so the nominal model's chi-square cannot be tested on its own");
   }
-  // Lag-1 autocorrelation in time, per component.
+  // Lag-1 autocorrelation in time and trends against every covariate, per component.
   const char* comp[6] = {"x", "y", "z", "rx", "ry", "rz"};
   for (int k = 0; k < m; ++k) {
-    double num = 0, den = 0;
-    for (int i = 0; i < N; ++i) {
-      den += W(i, k) * W(i, k);
-      if (i + 1 < N) num += W(i, k) * W(i + 1, k);
-    }
-    const double r1 = den > 0 ? num / den : 0.0;
-    const double z = r1 * std::sqrt(static_cast<double>(N));
-    tests.push_back({std::string("autocorrelation in time (") + comp[k] + ")", r1, TwoSidedNormalP(z), false});
+    const std::vector<double> w(W.col(k).data(), W.col(k).data() + N);
+    tests.push_back(AutocorrelationTest(std::string("autocorrelation in time (") + comp[k] + ")", w));
+    for (const auto& c : cov)
+      if (auto t = TrendTest("trend vs " + c.name + " (" + comp[k] + ")", c.v, w)) tests.push_back(*t);
   }
-  // Trends against every covariate.
-  for (const auto& c : cov)
-    for (int k = 0; k < m; ++k) {
-      const double r = Corr(c.v, W.col(k));
-      if (!std::isfinite(r)) continue;
-      const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(std::max(1.0, N - 3.0));
-      tests.push_back({"trend vs " + c.name + " (" + comp[k] + ")", r, TwoSidedNormalP(z), false});
-    }
   const double per = alpha / std::max<size_t>(1, tests.size());
   for (auto& t : tests) t.failed = t.p_value < per;
   // Report the failed tests and the strongest few of the rest.

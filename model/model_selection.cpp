@@ -10,6 +10,40 @@
 
 namespace mcms {
 
+double TwoSidedNormalP(double z) { return std::erfc(std::abs(z) / std::sqrt(2.0)); }
+
+double Correlation(const std::vector<double>& x, const std::vector<double>& y) {
+  const size_t n = std::min(x.size(), y.size());
+  if (n < 3) return std::nan("");
+  const double mx = std::accumulate(x.begin(), x.begin() + n, 0.0) / n;
+  const double my = std::accumulate(y.begin(), y.begin() + n, 0.0) / n;
+  double sxy = 0, sxx = 0, syy = 0;
+  for (size_t i = 0; i < n; ++i) {
+    sxy += (x[i] - mx) * (y[i] - my);
+    sxx += (x[i] - mx) * (x[i] - mx);
+    syy += (y[i] - my) * (y[i] - my);
+  }
+  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
+}
+
+AuditTest AutocorrelationTest(const std::string& name, const std::vector<double>& w) {
+  double num = 0, den = 0;
+  for (size_t i = 0; i < w.size(); ++i) {
+    den += w[i] * w[i];
+    if (i + 1 < w.size()) num += w[i] * w[i + 1];
+  }
+  const double r1 = den > 0 ? num / den : 0.0;
+  return {name, r1, TwoSidedNormalP(r1 * std::sqrt(static_cast<double>(w.size()))), false};
+}
+
+std::optional<AuditTest> TrendTest(const std::string& name, const std::vector<double>& x, const std::vector<double>& w) {
+  const double r = Correlation(x, w);
+  if (!std::isfinite(r)) return std::nullopt;
+  const double n = static_cast<double>(std::min(x.size(), w.size()));
+  const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(std::max(1.0, n - 3.0));
+  return AuditTest{name, r, TwoSidedNormalP(z), false};
+}
+
 double ChiSquareUpperTail(double x, double k) {
   if (!(x > 0)) return 1.0;
   return boost::math::cdf(boost::math::complement(boost::math::chi_squared(k), x));

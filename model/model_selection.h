@@ -32,8 +32,11 @@
 
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
+
+#include "model/audit_report.h"
 
 namespace mcms {
 
@@ -49,6 +52,18 @@ inline double BicGain(double lr, double k, double ln_n) { return lr - k * ln_n; 
 bool EarnsPlace(double lr, double k, double alpha, double ln_n);
 // The fold (0..folds-1) of the i-th of n measurements in time order: contiguous blocks.
 int TimeBlockFold(long i, long n, int folds);
+
+// Residual tests of a nominal fit, one definition for every mode: whitened residuals w
+// (i.i.d. N(0, 1) under the model, in time order) tested for lag-1 autocorrelation
+// (z = r1 sqrt(n)) and for a trend against a covariate x (Pearson r, Fisher's z =
+// atanh(r) sqrt(n - 3)); two-sided normal p-values. A mode compares each p with its share
+// of the false-alarm rate (Bonferroni over its tests).
+double TwoSidedNormalP(double z);
+// Pearson correlation of x and y (same size); NaN when either is constant or n < 3.
+double Correlation(const std::vector<double>& x, const std::vector<double>& y);
+AuditTest AutocorrelationTest(const std::string& name, const std::vector<double>& w);
+// nullopt when the covariate (or w) is constant: nothing to test.
+std::optional<AuditTest> TrendTest(const std::string& name, const std::vector<double>& x, const std::vector<double>& w);
 
 struct SelectionRule {
   double alpha = 0.005;        // the selection's share of the designed false-alarm rate, per step

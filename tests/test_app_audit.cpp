@@ -116,10 +116,25 @@ TEST(AuditCli, RepairedTargetHoldsTheBallWhereTheImagesPutIt) {
 
   // Clean: nothing named, nothing written.
   RenderSequence(model, dir / "clean", true, 2);
-  const test::CliRun c = test::Mcms(dir, "audit cameras clean --quiet --repaired-target clean.yaml");
+  const test::CliRun c = test::Mcms(dir, "audit cameras clean --quiet --repaired-target clean.yaml -o out");
   ASSERT_EQ(c.code, 0) << c.out << c.err;
   EXPECT_NE(c.out.find("no repaired target written"), std::string::npos) << c.out;
   EXPECT_FALSE(std::filesystem::exists(dir / "clean.yaml"));
+  // -o: the report, the whitened residuals with their covariates and a plot per camera.
+  for (const char* f : {"report.txt", "report.json", "residuals.csv", "plots/cam0.svg", "plots/cam3.svg"})
+    EXPECT_TRUE(std::filesystem::exists(dir / "out" / f)) << f;
+  const std::string csv = test::ReadAll(dir / "out" / "residuals.csv");
+  EXPECT_EQ(csv.rfind("camera,ball,time_s,u_px,v_px,radius_px,range_m,w_u,w_v\n", 0), 0u);
+  EXPECT_GT(std::count(csv.begin(), csv.end(), '\n'), 4 * 40 * 3);
+  const std::string svg = test::ReadAll(dir / "out" / "plots" / "cam0.svg");
+  EXPECT_NE(svg.find("distance to the camera (m)"), std::string::npos);
+  // An existing folder that is not an audit output is refused before the work.
+  std::filesystem::create_directories(dir / "busy");
+  test::WriteText(dir / "busy" / "keep.txt", "mine\n");
+  const test::CliRun busy = test::Mcms(dir, "audit cameras clean --quiet -o busy");
+  EXPECT_NE(busy.code, 0);
+  EXPECT_NE(busy.err.find("busy"), std::string::npos) << busy.err;
+  EXPECT_TRUE(std::filesystem::exists(dir / "busy" / "keep.txt"));
 }
 
 }  // namespace

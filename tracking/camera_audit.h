@@ -24,7 +24,9 @@
 // rule (model/model_selection.h DecideStep): a candidate passes when, on all data, its
 // likelihood ratio passes chi-square at alpha / (2 m) (m candidates, times the scanned
 // change times for a part-way move: Bonferroni, so a clean recording is flagged with
-// probability <= alpha together with the chi-square tests at alpha / (2 cameras)) and its
+// probability <= alpha together with the chi-square tests at alpha / (4 cameras) and the
+// residual tests, lag-1 autocorrelation and trends against time, the position in the view
+// and the distance to the camera, at alpha / 4 over their number) and its
 // BIC gain is > 0; among those within 2 undecided_nats of the best BIC gain with a
 // positive held-out gain, the largest held-out gain is named. Greedy forward selection
 // re-fits the leave-one-out poses with the extended model and repeats; at the end an
@@ -74,8 +76,22 @@ struct CameraModelTerm {
   bool undecided = false;  // in an undecided group: kept in the audit's model, not named
 };
 
+// One leave-one-out ball image of the nominal model, whitened (under the model: two
+// i.i.d. N(0, 1) numbers), with its covariates.
+struct WhitenedResidual {
+  int camera = 0, ball = 0;
+  double time_s = 0.0;
+  Vec2 q = Vec2::Zero();  // predicted ball image (px)
+  Vec2 w = Vec2::Zero();  // whitened residual, observed - predicted (u, v)
+  double radius_px = 0.0; // distance of q from the image centre
+  double range_m = 0.0;   // distance of the ball from the camera
+};
+
 struct CameraAuditResult {
   AuditReport report;
+  // Per camera, the nominal model's whitened residuals (what the residual tests and
+  // the plots of `mcms audit cameras -o DIR` use).
+  std::vector<std::vector<WhitenedResidual>> residuals;
   std::vector<CameraModelTerm> terms;  // the named effects, in the order found
   std::vector<double> noise_scale;     // estimated factor on each camera's pixel sigma
   // The rig with the named geometric effects applied: camera_moved (the pose after a
