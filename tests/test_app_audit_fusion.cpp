@@ -228,5 +228,31 @@ TEST(AppAuditFusion, CleanInclinometerLogsRarelyRaiseAnAlarm) {
   EXPECT_LE(alarms_high, 13);
 }
 
+// The whole fusion audit through the command (robot and inclinometer), on clean logs of
+// 20 s: the designed rate is 0.01 per run (`--false-alarm`); on 100 seeds the count of
+// runs not clean must not exceed Binomial(100, 0.01)'s 99.9 % quantile (P(X >= 5) =
+// 3.4e-3, P(X >= 6) = 5.5e-4).
+TEST(AppAuditFusion, CleanLogsThroughTheCommandAtTheDesignedRate) {
+  const int seeds = 100;
+  int alarms = 0;
+  for (int seed = 300; seed < 300 + seeds; ++seed) {
+    test::LogOptions o = test::AuditLogOptions(seed);
+    o.joint_end_s = o.incl_end_s = 20.0;
+    o.frames = 190;
+    const fs::path d = test::ScratchDir("audit_fusion_all_clean");
+    test::Write(d, test::MovingLogs(o));
+    const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv"));
+    ASSERT_EQ(run.code, 0) << run.out << run.err;
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "a.json"));
+    if (!j["clean"].get<bool>()) {
+      ++alarms;
+      std::printf("seed %d:\n%s", seed, run.out.c_str());
+    }
+  }
+  std::printf("clean fusion logs through `mcms audit fusion --inclinometer`: %d of %d not clean (designed 0.01)\n", alarms,
+              seeds);
+  EXPECT_LE(alarms, 5);
+}
+
 }  // namespace
 }  // namespace mcms
