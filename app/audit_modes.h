@@ -3,6 +3,7 @@
 //   audit cameras DIR      app/cmd_audit_cameras.cpp
 //   audit robot LOG.csv    app/cmd_audit_robot.cpp
 //   audit fusion --tracker .. --robot .. --setup ..   app/cmd_audit_fusion.cpp
+//   audit lens MODEL.cameramodel   app/cmd_audit_lens.cpp
 #pragma once
 
 #include "app/commands.h"
@@ -12,5 +13,6 @@ namespace mcms::app {
 std::pair<CLI::App*, Runner> AddAuditCameras(CLI::App& audit);
 std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit);
 std::pair<CLI::App*, Runner> AddAuditFusion(CLI::App& audit);
+std::pair<CLI::App*, Runner> AddAuditLens(CLI::App& audit);
 
 }  // namespace mcms::app

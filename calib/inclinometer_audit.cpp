@@ -402,19 +402,6 @@ int HoldUnidentifiable(const Auditor& a, Model* m) {
   return free;
 }
 
-double Corr(const std::vector<double>& x, const std::vector<double>& y) {
-  const size_t n = x.size();
-  const double mx = std::accumulate(x.begin(), x.end(), 0.0) / n, my = std::accumulate(y.begin(), y.end(), 0.0) / n;
-  double sxy = 0, sxx = 0, syy = 0;
-  for (size_t i = 0; i < n; ++i) {
-    sxy += (x[i] - mx) * (y[i] - my);
-    sxx += (x[i] - mx) * (x[i] - mx);
-    syy += (y[i] - my) * (y[i] - my);
-  }
-  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : std::nan("");
-}
-
-double TwoSidedP(double z) { return std::erfc(std::abs(z) / std::sqrt(2.0)); }
 
 }  // namespace
 
@@ -484,20 +471,9 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
     }
     const char* ax[2] = {"x", "y"};
     for (int k = 0; k < 2; ++k) {
-      double num = 0, den = 0;
-      for (size_t i = 0; i < w[k].size(); ++i) {
-        den += w[k][i] * w[k][i];
-        if (i + 1 < w[k].size()) num += w[k][i] * w[k][i + 1];
-      }
-      const double r1 = den > 0 ? num / den : 0.0;
-      tests.push_back({where + ": autocorrelation in time (" + ax[k] + ")", r1,
-                       TwoSidedP(r1 * std::sqrt(static_cast<double>(N))), false});
-      for (const auto& [name, x] : cov) {
-        const double r = Corr(x, w[k]);
-        if (!std::isfinite(r)) continue;
-        const double z = std::atanh(std::clamp(r, -0.999999, 0.999999)) * std::sqrt(std::max(1.0, N - 3.0));
-        tests.push_back({where + ": trend vs " + name + " (" + ax[k] + ")", r, TwoSidedP(z), false});
-      }
+      tests.push_back(AutocorrelationTest(where + ": autocorrelation in time (" + ax[k] + ")", w[k]));
+      for (const auto& [name, x] : cov)
+        if (auto t = TrendTest(where + ": trend vs " + name + " (" + ax[k] + ")", x, w[k])) tests.push_back(*t);
     }
     const double per = alpha_tests / tests.size();
     for (auto& t : tests) t.failed = t.p_value < per;

@@ -20,7 +20,7 @@
 namespace mcms::fuzz {
 
 int FuzzCsv(const uint8_t* data, size_t size);     // core CSV, truth poses, ISO 9283 poses, fusion windows, fov-map measured points/lines
-int FuzzCamera(const uint8_t* data, size_t size);  // mrcal .cameramodel, OpenCV YAML camera, rig YAML
+int FuzzCamera(const uint8_t* data, size_t size);  // mrcal .cameramodel (and its optimization_inputs), OpenCV YAML camera, rig YAML
 int FuzzTarget(const uint8_t* data, size_t size);  // tracking target YAML, calibration board YAML
 int FuzzRobot(const uint8_t* data, size_t size);   // robot description YAML, robot measurement YAML
 int FuzzLogs(const uint8_t* data, size_t size);    // tracker/joint/inclinometer logs, robot audit log CSV

@@ -63,6 +63,7 @@ std::string AuditReport::ToJson() const {
                             {"heldout_loglik_gain", Number(e.heldout_loglik_gain)},
                             {"bic_gain", Number(e.bic_gain)}});
     if (!e.rms_unit.empty()) j["effects"].back()["rms_unit"] = e.rms_unit;
+    for (const auto& [key, value] : e.labels) j["effects"].back()["parameters"][key] = value;
   }
   j["undecided"] = undecided;
   j["notes"] = notes;
@@ -82,6 +83,7 @@ std::string AuditReport::Text() const {
   }
   for (const auto& e : effects) {
     o << "effect " << e.name << (e.where.empty() ? "" : " at " + e.where) << ":";
+    for (const auto& [key, value] : e.labels) o << " " << key << " = " << value;
     for (size_t k = 0; k < e.parameters.size(); ++k) {
       o << " " << e.parameters[k].first << " = " << Fmt("%.6g", e.parameters[k].second);
       if (k < e.sigma.size()) o << " +- " << Fmt("%.2g", e.sigma[k].second);

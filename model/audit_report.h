@@ -30,6 +30,9 @@ struct AuditEffect {
   std::string name;   // catalog name, e.g. "joint_offset"
   std::string where;  // "joint 2", "a2", "cam1", "ball 3", a sensor's name; empty when global
   std::vector<std::pair<std::string, double>> parameters, sigma;  // SI, in the unit's order
+  // Parameters that are names, not numbers (the lens audit: the chosen lens model);
+  // written into "parameters" beside the numbers.
+  std::vector<std::pair<std::string, std::string>> labels;
   double heldout_rms_before = 0.0, heldout_rms_after = 0.0;
   double heldout_loglik_gain = 0.0;  // summed over held-out measurements (nats)
   double bic_gain = 0.0;             // BIC(before) - BIC(after) on all data (> 0 = earns its place)
