@@ -41,7 +41,7 @@ int RunAuditLens(const AuditLensArgs& a) {
   std::printf("%s", r.report.Text().c_str());
   if (!a.output.empty()) {
     WriteLensAuditFiles(r, a.output);
-    std::printf("wrote %s (report.txt, report.json%s)\n", a.output.c_str(),
+    std::printf("wrote %s (report.txt, report.json, residuals.csv, plots/%s.svg%s)\n", a.output.c_str(), r.camera.c_str(),
                 r.chosen > 0 ? (", " + r.camera + ".cameramodel").c_str() : "");
   }
   if (!a.json.empty()) {
@@ -64,7 +64,8 @@ std::pair<CLI::App*, Runner> AddAuditLens(CLI::App& audit) {
       "lens_model) only when it earns its parameters.");
   cmd->add_option("MODEL", args->model, "a mrcal .cameramodel with optimization_inputs")->required();
   cmd->add_option("-o,--output", args->output,
-                  "output folder: report.txt, report.json and the named model as <camera>.cameramodel");
+                  "output folder: report.txt, report.json, residuals.csv, plots/<camera>.svg (residuals binned over the image "
+                  "and against the distance from the centre) and the named model as <camera>.cameramodel");
   cmd->add_option("--json", args->json, "write the machine-readable report here");
   cmd->add_option("--candidates", args->candidates,
                   "richer lens models to try (mrcal names; 'splined' = the default splined model)");

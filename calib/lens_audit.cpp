@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/output_folder.h"
+#include "core/svg_plot.h"
 #include "model/model_selection.h"
 #include "vision/camera_model.h"
 #include "vision/mrcal_c.h"
@@ -192,6 +193,8 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
   r.camera = "cam" + std::to_string(data.icam_intrinsics);
   r.width = p.width;
   r.height = p.height;
+  for (const mrcal_point3_t& q : p.pool) r.observed.push_back({q.x, q.y, q.z});
+  r.points_per_board = std::max(1, p.PointsPer());
   if (p.Nobs() < options.folds)
     Throw("audit lens: camera ", r.camera, " has ", p.Nobs(), " board observations, fewer than the ", options.folds,
           " folds");
@@ -269,6 +272,7 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
     f.converged = s.ok;
     f.intrinsics = s.intrinsics;
     f.rss = s.rss;
+    f.residuals = s.x;
     f.n = s.n;
     f.rms_px = s.n > 0 ? std::sqrt(s.rss / static_cast<double>(s.n)) : 0.0;
     log(c + ": RMS " + Fmt("%.4f", f.rms_px) + " px (" + Fmt("%.1f", Seconds(t0)) + " s); held-out folds:");
@@ -385,10 +389,146 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
   return r;
 }
 
+int LensAuditResult::Compared() const {
+  if (chosen > 0) return chosen;
+  int best = -1;
+  for (size_t i = 1; i < fits.size(); ++i)
+    if (fits[i].converged && (best < 0 || fits[i].heldout_loglik > fits[static_cast<size_t>(best)].heldout_loglik))
+      best = static_cast<int>(i);
+  return best;
+}
+
+namespace {
+
+// Mean residual vectors in a grid of cells over the image, and the radial component's
+// mean in rings of distance from the image centre.
+struct Binned {
+  std::vector<double> u, v, du, dv;  // cells with points
+  std::vector<double> radius, radial, radial_low, radial_high;
+};
+
+Binned Bin(const LensAuditResult& r, const std::vector<double>& x, int nx) {
+  const int ny = std::max(1, static_cast<int>(std::lround(nx * double(r.height) / r.width)));
+  std::vector<double> su(static_cast<size_t>(nx * ny)), sv(su.size()), cnt(su.size());
+  constexpr int kRings = 24;
+  const double cu = (r.width - 1) / 2.0, cv = (r.height - 1) / 2.0, rmax = std::hypot(cu, cv);
+  std::vector<double> rs(kRings), rss(kRings), rn(kRings);
+  for (size_t k = 0; k < r.observed.size() && 2 * k + 1 < x.size(); ++k) {
+    const auto& o = r.observed[k];
+    if (!(o[2] > 0)) continue;
+    const double ex = x[2 * k], ey = x[2 * k + 1];
+    const int i = std::clamp(static_cast<int>(o[0] / r.width * nx), 0, nx - 1);
+    const int j = std::clamp(static_cast<int>(o[1] / r.height * ny), 0, ny - 1);
+    const size_t c = static_cast<size_t>(j * nx + i);
+    su[c] += ex, sv[c] += ey, cnt[c] += 1;
+    const double du = o[0] - cu, dv = o[1] - cv, rad = std::hypot(du, dv);
+    if (rad < 1e-9) continue;
+    const double radial = (ex * du + ey * dv) / rad;
+    const size_t ring = static_cast<size_t>(std::clamp(static_cast<int>(rad / rmax * kRings), 0, kRings - 1));
+    rs[ring] += radial, rss[ring] += radial * radial, rn[ring] += 1;
+  }
+  Binned b;
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      const size_t c = static_cast<size_t>(j * nx + i);
+      if (cnt[c] < 3) continue;
+      b.u.push_back((i + 0.5) * r.width / nx);
+      b.v.push_back((j + 0.5) * r.height / ny);
+      b.du.push_back(su[c] / cnt[c]);
+      b.dv.push_back(sv[c] / cnt[c]);
+    }
+  for (int k = 0; k < kRings; ++k) {
+    if (rn[static_cast<size_t>(k)] < 10) continue;
+    const double n = rn[static_cast<size_t>(k)], m = rs[static_cast<size_t>(k)] / n;
+    const double sd = std::sqrt(std::max(0.0, rss[static_cast<size_t>(k)] / n - m * m));
+    b.radius.push_back((k + 0.5) * rmax / kRings);
+    b.radial.push_back(m);
+    b.radial_low.push_back(m - 2 * sd / std::sqrt(n));  // +-2 standard errors of the mean
+    b.radial_high.push_back(m + 2 * sd / std::sqrt(n));
+  }
+  return b;
+}
+
+std::string Short(const std::string& lensmodel) {
+  const size_t cut = lensmodel.find("_order=");
+  return (lensmodel.rfind("LENSMODEL_", 0) == 0 ? lensmodel.substr(10, cut == std::string::npos ? std::string::npos : cut - 10)
+                                                 : lensmodel);
+}
+
+}  // namespace
+
 void WriteLensAuditFiles(const LensAuditResult& r, const std::filesystem::path& dir) {
+  const int cmp = r.Compared();
+  const LensFit& nom = r.fits.at(0);
   WriteFolderAtomically(dir, {"report.json"}, "audit lens", "audit lens -o", [&](const std::filesystem::path& d) {
     WriteFileAtomically(d / "report.txt", [&](std::ostream& os) { os << r.report.Text(); });
     r.report.WriteJson(d / "report.json");
+    WriteFileAtomically(d / "residuals.csv", [&](std::ostream& os) {
+      os << "board,point,u_px,v_px,weight,nominal_ex_px,nominal_ey_px"
+         << (cmp > 0 ? ",candidate_ex_px,candidate_ey_px" : "") << "\n";
+      const size_t per = static_cast<size_t>(r.points_per_board);
+      char b[256];
+      for (size_t k = 0; k < r.observed.size() && 2 * k + 1 < nom.residuals.size(); ++k) {
+        const auto& o = r.observed[k];
+        std::snprintf(b, sizeof b, "%zu,%zu,%.4f,%.4f,%.4g,%.5f,%.5f", k / per, k % per, o[0], o[1], o[2],
+                      nom.residuals[2 * k], nom.residuals[2 * k + 1]);
+        os << b;
+        if (cmp > 0) {
+          const auto& c = r.fits[static_cast<size_t>(cmp)].residuals;
+          std::snprintf(b, sizeof b, ",%.5f,%.5f", c[2 * k], c[2 * k + 1]);
+          os << b;
+        }
+        os << "\n";
+      }
+    });
+    std::filesystem::create_directories(d / "plots");
+    std::vector<const LensFit*> shown = {&nom};
+    if (cmp > 0) shown.push_back(&r.fits[static_cast<size_t>(cmp)]);
+    const char* colors[2] = {"#d62728", "#1f77b4"};
+    std::vector<Plot> plots;
+    std::vector<Binned> bins;
+    double largest = 0.0;
+    for (const LensFit* f : shown) {
+      bins.push_back(Bin(r, f->residuals, 30));
+      for (size_t i = 0; i < bins.back().du.size(); ++i)
+        largest = std::max(largest, std::hypot(bins.back().du[i], bins.back().dv[i]));
+    }
+    // The largest mean vector drawn as 6 % of the image width, the same scale for both.
+    double scale = 1.0;
+    if (largest > 0) {  // a round magnification
+      const double want = 0.06 * r.width / largest, decade = std::pow(10.0, std::floor(std::log10(want)));
+      scale = want >= 5 * decade ? 5 * decade : want >= 2 * decade ? 2 * decade : decade;
+    }
+    for (size_t m = 0; m < shown.size(); ++m) {
+      Plot img;
+      char title[200];
+      std::snprintf(title, sizeof title, "%s %s: mean residual per cell, arrows x%g", r.camera.c_str(),
+                    Short(shown[m]->lensmodel).c_str(), scale);
+      img.title = title;
+      img.x_label = "u (px)";
+      img.y_label = "v (px)";
+      img.y_down = img.equal_scale = true;
+      img.x_range = std::make_pair(0.0, double(r.width));
+      img.y_range = std::make_pair(0.0, double(r.height));
+      PlotSeries vec{Short(shown[m]->lensmodel), bins[m].u, bins[m].v, colors[m], false};
+      vec.dx = bins[m].du;
+      vec.dy = bins[m].dv;
+      vec.vector_scale = scale;
+      img.series = {vec};
+      plots.push_back(img);
+    }
+    Plot radial;
+    radial.title = r.camera + ": radial residual against the distance from the image centre (mean, +-2 s.e.)";
+    radial.x_label = "distance from the image centre (px)";
+    radial.y_label = "radial residual (px)";
+    for (size_t m = 0; m < shown.size(); ++m) {
+      PlotSeries s{Short(shown[m]->lensmodel), bins[m].radius, bins[m].radial, colors[m], false};
+      s.y_low = bins[m].radial_low;
+      s.y_high = bins[m].radial_high;
+      radial.series.push_back(s);
+    }
+    plots.push_back(radial);
+    WritePlotGridSvg(d / "plots" / (r.camera + ".svg"), plots, 2, 560, 400);
     if (r.chosen > 0) {
       const LensFit& f = r.fits[static_cast<size_t>(r.chosen)];
       CameraModel(f.lensmodel, f.intrinsics, r.width, r.height).WriteCameramodel(d / (r.camera + ".cameramodel"));

@@ -28,6 +28,7 @@
 // 1 means "no richer model fits better".
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -70,6 +71,9 @@ struct LensFit {
   double heldout_rms_px = 0.0; // per coordinate, over every held-out board
   double heldout_loglik = 0.0; // nats, summed over the folds
   double seconds = 0.0;        // wall time of its fits
+  // All-data residuals (predicted - observed, weighted px), 2 per board point in the
+  // order of LensAuditResult::observed; 0 for the file's outliers.
+  std::vector<double> residuals;
 };
 
 struct LensAuditResult {
@@ -78,14 +82,24 @@ struct LensAuditResult {
   int width = 0, height = 0;
   std::vector<LensFit> fits;        // [0] the nominal, then the candidates in order
   int chosen = -1;                  // index into fits of the named model, -1 when none
+  // The board points: observed pixel (u, v) and weight (< 0: the file's outlier), per
+  // board observation of the camera, row-major over the board.
+  std::vector<std::array<double, 3>> observed;
+  int points_per_board = 1;
+  // The candidate the plots compare with the nominal: the named one, else the best by
+  // held-out log-likelihood; -1 without candidates.
+  int Compared() const;
 };
 
 // InputError for a problem without observations of the camera, invalid options or a
 // candidate name mrcal does not know.
 LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAuditOptions& options = {});
 
-// Writes report.txt, report.json and, when a richer model was named, <camera>.cameramodel
-// (the chosen model's intrinsics) into dir (created).
+// Writes report.txt, report.json, residuals.csv (every board point: observed pixel, the
+// nominal's and the compared candidate's residuals), plots/<camera>.svg (both models'
+// residuals binned over the image as magnified vectors, and their radial component
+// against the distance from the image centre) and, when a richer model was named,
+// <camera>.cameramodel (its intrinsics) into dir (a new folder, written atomically).
 void WriteLensAuditFiles(const LensAuditResult& r, const std::filesystem::path& dir);
 
 }  // namespace mcms

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -500,7 +501,13 @@ MrcalOptimizationInputsData ReadMrcalOptimizationInputs(const std::filesystem::p
     const size_t e = b == std::string::npos ? b : text.find('\'', b + 2);
     if (e == std::string::npos) Throw("'optimization_inputs' is not a bytes literal b'...'");
     const size_t ic = text.find("'icam_intrinsics'");
-    if (ic != std::string::npos) d.icam_intrinsics = std::atoi(text.c_str() + text.find(':', ic) + 1);
+    if (ic != std::string::npos) {
+      const size_t colon = text.find(':', ic);
+      if (colon == std::string::npos) Throw("'icam_intrinsics' has no value");
+      const long v = std::strtol(text.c_str() + colon + 1, nullptr, 10);
+      if (v < 0 || v > 1000000) Throw("'icam_intrinsics' is ", v, ", expected a camera index");
+      d.icam_intrinsics = static_cast<int>(v);
+    }
     std::map<std::string, std::string> members;
     try {
       members = mrcal_io::Unzip(mrcal_io::B85Decode(text.substr(b + 2, e - b - 2)));

@@ -212,7 +212,7 @@ std::string Plot::ToSvg(int W, int H) const {
                         s.color.c_str());
           o << buf;
         }
-    } else {
+    } else if (s.dx.empty()) {  // a vector series is its arrows: no line through their bases
       // A gap (non-finite value) breaks the line; a value alone between gaps is a dot.
       std::string pts;
       size_t count = 0;

@@ -20,6 +20,7 @@ struct PlotSeries {
   std::vector<double> y_low, y_high;
   // Optional vectors drawn as arrows from (x[i], y[i]) to (x[i] + vector_scale * dx[i],
   // y[i] + vector_scale * dy[i]) (e.g. residuals over the image, magnified); empty = none.
+  // A series with vectors draws no line through its points (markers only with `points`).
   std::vector<double> dx, dy;
   double vector_scale = 1.0;
 };

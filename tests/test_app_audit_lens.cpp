@@ -36,6 +36,9 @@ TEST(AuditLensCli, FigueroaOpencv8AgainstSplined) {
   EXPECT_GT(e["bic_gain"].get<double>(), 0.0);
   EXPECT_TRUE(std::filesystem::exists(d / "out" / "report.txt"));
   EXPECT_TRUE(std::filesystem::exists(d / "out" / "report.json"));
+  EXPECT_TRUE(std::filesystem::exists(d / "out" / "plots" / "cam0.svg"));
+  const std::string csv = test::ReadAll(d / "out" / "residuals.csv");
+  EXPECT_EQ(csv.rfind("board,point,u_px,v_px,weight,nominal_ex_px,nominal_ey_px,candidate_ex_px,candidate_ey_px\n", 0), 0u);
   // The named model, readable by mrcal's tools: the splined intrinsics.
   const std::string model = test::ReadAll(d / "out" / "cam0.cameramodel");
   EXPECT_NE(model.find("LENSMODEL_SPLINED_STEREOGRAPHIC"), std::string::npos);
