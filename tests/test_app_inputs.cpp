@@ -157,7 +157,7 @@ TEST(Inputs, OpenCvCameraMatrixWithEightNumbersIsRefused) {
     return text;
   });
   // A camera with 'model' reads the file; the inline fields are then ignored.
-  ExpectTrackRefused(d, {"cv.yaml", "field camera_matrix is malformed"});
+  ExpectTrackRefused(d, {"cv.yaml", "field camera_matrix (line 5) declares 3x3 but data has 8 numbers"});
 }
 
 TEST(Inputs, NanBallPositionIsRefused) {

@@ -118,6 +118,41 @@ TEST(CameraModel, ReadsRealMrcalModelAndOpenCvCalibration) {
   EXPECT_EQ(l.Width(), 640);
 }
 
+// OpenCV YAML is read with yaml-cpp, not cv::FileStorage (which asserted, allocated what a
+// file claimed and, on the first input below, looped forever: found by fuzz/fuzz_camera).
+TEST(CameraModel, OpenCvYamlBadInputNamesFieldAndLine) {
+  const auto dir = test::ScratchDir("camera_model_cv_bad");
+  const std::string head = "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n";
+  const std::string k = "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"%YAML:1.0 24'extrinsics'rix\n%  rows:1\n   dt:e+0  \nix:-matrix\n%  rows:1\n   dt:e+0  \n",
+       "cannot parse OpenCV YAML"},
+      {head + k + "   data: [ 500., 0., 320., 0., 500., 240., 0., 0. ]\n",
+       "field camera_matrix (line 5) declares 3x3 but data has 8 numbers"},
+      {head + k + "   data: [ 500., 0., 320., 0., .nan, 240., 0., 0., 1. ]\n",
+       "field camera_matrix (line 5) holds .nan in data; expected finite numbers"},
+      {head + "camera_matrix: !!opencv-matrix\n   rows: 2147483647\n   cols: 3\n   dt: d\n   data: [ 1 ]\n",
+       "declares rows '2147483647'; expected rows from 0 to 16"},
+      {head + "camera_matrix: !!opencv-matrix\n   rows: 1\n   cols: 3\n   dt: 3d\n   data: [ 1, 2, 3 ]\n",
+       "has dt '3d'; expected one channel"},
+      {head + k + "   data: [ 500., 0., 320., 0., x, 240., 0., 0., 1. ]\n", "holds 'x' in data; expected numbers"},
+      {"%YAML:1.0\n---\nimage_width: wide\n", "field image_width (line 3) is 'wide'"},
+      {"%YAML:1.0\n---\n- 1\n- 2\n", "expected a map of fields"},
+      {"%YAML:1.0\ncamera_matrix: [1, 2\n", "cannot parse OpenCV YAML"},
+  };
+  for (const auto& [text, expected] : cases) {
+    std::ofstream(dir / "c.yaml", std::ios::trunc) << text;
+    try {
+      CameraModel::Read(dir / "c.yaml");
+      ADD_FAILURE() << "accepted:\n" << text;
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find((dir / "c.yaml").string()), std::string::npos) << what;
+      EXPECT_NE(what.find(expected), std::string::npos) << what;
+    }
+  }
+}
+
 // Debian's mrcal tools (Python) must read what we write.
 TEST(CameraModel, DebianMrcalReadsWhatWeWrite) {
   if (std::system("/usr/bin/python3 -c 'import mrcal' >/dev/null 2>&1") != 0)

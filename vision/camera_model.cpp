@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <memory>
+#include <regex>
 #include <opencv2/core.hpp>
 #include <sstream>
 
@@ -197,102 +198,126 @@ std::string LensFromDistortionCount(int n, const fs::path& path) {
   Throw(path.string(), ": distortion_coefficients has ", n, " values; expected 0, 4, 5, 8 or 12");
 }
 
-// An !!opencv-matrix field, its declared size checked first: OpenCV allocates rows x cols
-// before it reads the data, so a file claiming 2^31 rows asked for 17 GB (found by
-// fuzz/fuzz_camera). Every matrix of a camera file is small (3x3, at most 1x14).
+// An !!opencv-matrix field read with yaml-cpp. OpenCV's own FileStorage parser is not used
+// for reading: fuzzing found it asserting on malformed matrices, allocating what a file
+// claims (2^31 rows) and looping forever on 83 bytes of `%`-directive lines inside a
+// document (fuzz/regressions/camera/opencv_filestorage_hang.yaml). yaml-cpp refuses such text
+// with a line number. Every matrix of a camera file is small (3x3, at most 1x14).
 constexpr int kMaxOpenCvMatrixSide = 16;
-cv::Mat ReadSmallMatrix(const cv::FileNode& n, const char* field, const fs::path& path) {
-  cv::Mat m;
-  if (n.empty() || n.isNone()) return m;
-  if (n.isMap()) {
-    const auto side = [](const cv::FileNode& d) { return d.isInt() ? static_cast<int>(d) : -1; };
-    const int rows = side(n["rows"]), cols = side(n["cols"]);
-    if (rows < 0 || cols < 0 || rows > kMaxOpenCvMatrixSide || cols > kMaxOpenCvMatrixSide)
-      Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " declares ", rows < 0 ? "no whole number of " : "",
-            "rows", rows < 0 ? std::string() : std::string(" ").append(std::to_string(rows)), " and ", cols < 0 ? "no whole number of " : "", "cols",
-            cols < 0 ? std::string() : std::string(" ").append(std::to_string(cols)), "; expected rows and cols from 0 to ", kMaxOpenCvMatrixSide,
-            " (a camera matrix is 3x3)");
+struct OpenCvMatrix {
+  int rows = 0, cols = 0;
+  std::vector<double> data;  // row-major
+  bool empty() const { return data.empty(); }
+};
+OpenCvMatrix ReadSmallMatrix(const YAML::Node& root, const char* field, const fs::path& path) {
+  OpenCvMatrix m;
+  const YAML::Node n = root[field];
+  if (!n || n.IsNull()) return m;
+  const auto fail = [&](const auto&... what) {
+    Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " (line ", n.Mark().line + 1, ") ", what...,
+          " (an !!opencv-matrix has rows, cols, dt and rows x cols numbers in data)");
+  };
+  if (!n.IsMap()) fail("is not an !!opencv-matrix (a map with rows, cols, dt, data)");
+  const auto side = [&](const char* key) {
+    const YAML::Node d = n[key];
+    int v = -1;
+    if (d && d.IsScalar()) {
+      try {
+        v = d.as<int>();
+      } catch (const YAML::Exception&) {
+        v = -1;
+      }
+    }
+    if (v < 0 || v > kMaxOpenCvMatrixSide)
+      fail("declares ", key, " '", d && d.IsScalar() ? d.Scalar() : std::string("(none)"), "'; expected ", key,
+           " from 0 to ", kMaxOpenCvMatrixSide);
+    return v;
+  };
+  m.rows = side("rows");
+  m.cols = side("cols");
+  const YAML::Node dt = n["dt"];
+  if (!dt || !dt.IsScalar()) fail("has no dt (element type)");
+  // dt is OpenCV's element type: one of u c w s i f d, optionally preceded by a channel
+  // count; a camera matrix has one channel.
+  const std::string t = dt.Scalar();
+  if (t.size() != 1 || std::string("ucwsifd").find(t[0]) == std::string::npos)
+    fail("has dt '", t, "'; expected one channel of u, c, w, s, i, f or d");
+  const YAML::Node data = n["data"];
+  if (!data || !data.IsSequence()) fail("has no data list");
+  for (const auto& e : data) {
+    double v = 0;
+    bool number = e.IsScalar();
+    if (number) {
+      try {
+        v = e.as<double>();
+      } catch (const YAML::Exception&) {
+        number = false;
+      }
+    }
+    if (!number) fail("holds '", e.IsScalar() ? e.Scalar() : std::string("a list"), "' in data; expected numbers");
+    if (!std::isfinite(v)) fail("holds ", e.Scalar(), " in data; expected finite numbers");
+    m.data.push_back(v);
   }
-  n >> m;
+  if (static_cast<int>(m.data.size()) != m.rows * m.cols)
+    fail("declares ", m.rows, "x", m.cols, " but data has ", m.data.size(), " numbers");
   return m;
+}
+
+int ReadImageSide(const YAML::Node& root, const char* field, const fs::path& path) {
+  const YAML::Node n = root[field];
+  if (!n) return 0;
+  try {
+    if (n.IsScalar()) return n.as<int>();
+  } catch (const YAML::Exception&) {
+  }
+  Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " (line ", n.Mark().line + 1, ") is '",
+        n.IsScalar() ? n.Scalar() : std::string("not a number"), "'; expected the image size in pixels");
 }
 }  // namespace
 
 CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   if (!fs::exists(path)) Throw("camera file ", path.string(), " does not exist");
-  // OpenCV's FileStorage reports malformed content (a camera_matrix with 8 numbers, a
-  // text where a number belongs) by cv::Exception assertions: each becomes an
-  // InputError naming the file.
-  const std::string text = ReadTextFile(path);
-  cv::Mat K, D, rvec, tvec;
-  int w = 0, h = 0;
-  const char* field = "camera_matrix";
-  cv::FileStorage fs_in;
-  try {
-    fs_in.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
-  } catch (const cv::Exception& e) {
-    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.err,
-          " (expected an OpenCV FileStorage file starting with %YAML:1.0)");
-  } catch (const std::exception& e) {
-    // OpenCV's parser also lets standard exceptions through (std::length_error from a
-    // malformed key, found by fuzz/fuzz_camera).
-    Throw("cannot parse OpenCV YAML ", path.string(), ": ", e.what(),
-          " (expected an OpenCV FileStorage file starting with %YAML:1.0)");
+  std::string text = ReadTextFile(path);
+  // OpenCV writes "%YAML:1.0" (and older files "%YAML 1.0") as the first line; the colon
+  // form is not YAML, so that one line is blanked (line numbers stay right).
+  const auto first = text.find_first_not_of(" \t\r\n");
+  if (first != std::string::npos && text.compare(first, 5, "%YAML") == 0) {
+    const auto eol = std::min(text.find('\n', first), text.size());
+    static const std::regex kHeader(R"(%YAML[: ]1\.[0-9]+[ \t\r]*)");
+    if (std::regex_match(text.begin() + static_cast<std::ptrdiff_t>(first), text.begin() + static_cast<std::ptrdiff_t>(eol), kHeader))
+      text.replace(first, eol - first, "");
   }
-  if (!fs_in.isOpened()) Throw("cannot open OpenCV YAML ", path.string());
+  YAML::Node root;
   try {
-    K = ReadSmallMatrix(fs_in["camera_matrix"], field, path);
-    if (K.empty()) {
-      field = "M1";
-      K = ReadSmallMatrix(fs_in["M1"], field, path);
-    }
-    field = "distortion_coefficients";
-    D = ReadSmallMatrix(fs_in["distortion_coefficients"], field, path);
-    if (D.empty()) {
-      field = "D1";
-      D = ReadSmallMatrix(fs_in["D1"], field, path);
-    }
-    field = "image_width";
-    fs_in["image_width"] >> w;
-    field = "image_height";
-    fs_in["image_height"] >> h;
-    field = "rvec";
-    rvec = ReadSmallMatrix(fs_in["rvec"], field, path);
-    field = "tvec";
-    tvec = ReadSmallMatrix(fs_in["tvec"], field, path);
-  } catch (const InputError&) {
-    throw;
-  } catch (const cv::Exception& e) {
-    Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " is malformed (", e.err,
-          "); expected e.g. camera_matrix as a 3x3 !!opencv-matrix with 9 numbers");
-  } catch (const std::exception& e) {
-    Throw("cannot parse OpenCV YAML ", path.string(), ": field ", field, " is malformed (", e.what(),
-          "); expected e.g. camera_matrix as a 3x3 !!opencv-matrix with 9 numbers");
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    Throw("cannot parse OpenCV YAML ", path.string(), ": line ", e.mark.line + 1, ": ", e.msg,
+          " (expected an OpenCV FileStorage file: %YAML:1.0, then camera_matrix, distortion_coefficients, "
+          "image_width, image_height)");
   }
+  if (!root.IsMap())
+    Throw("cannot parse OpenCV YAML ", path.string(),
+          ": expected a map of fields (camera_matrix, distortion_coefficients, image_width, image_height)");
+  OpenCvMatrix K = ReadSmallMatrix(root, "camera_matrix", path);
+  if (K.empty()) K = ReadSmallMatrix(root, "M1", path);
+  OpenCvMatrix D = ReadSmallMatrix(root, "distortion_coefficients", path);
+  if (D.empty()) D = ReadSmallMatrix(root, "D1", path);
+  const int w = ReadImageSide(root, "image_width", path);
+  const int h = ReadImageSide(root, "image_height", path);
+  const OpenCvMatrix rvec = ReadSmallMatrix(root, "rvec", path);
+  const OpenCvMatrix tvec = ReadSmallMatrix(root, "tvec", path);
   if (K.rows != 3 || K.cols != 3) Throw(path.string(), ": field camera_matrix missing or not 3x3");
   if (w <= 0 || h <= 0) Throw(path.string(), ": fields image_width and image_height missing or not positive");
-  K.convertTo(K, CV_64F);
-  std::vector<double> intr = {K.at<double>(0, 0), K.at<double>(1, 1), K.at<double>(0, 2), K.at<double>(1, 2)};
-  if (!D.empty()) {
-    if (D.channels() != 1) Throw(path.string(), ": field distortion_coefficients must be a one-channel matrix");
-    D.convertTo(D, CV_64F);
-    D = D.reshape(1, 1);
-    for (int i = 0; i < D.cols; ++i) intr.push_back(D.at<double>(0, i));
-  }
-  const int ndist = D.empty() ? 0 : D.cols;
-  const std::string lens = LensFromDistortionCount(ndist, path);
+  std::vector<double> intr = {K.data[0], K.data[4], K.data[2], K.data[5]};
+  intr.insert(intr.end(), D.data.begin(), D.data.end());
+  const std::string lens = LensFromDistortionCount(static_cast<int>(D.data.size()), path);
   Pose T;
   if (!rvec.empty() && !tvec.empty()) {
-    if (rvec.total() != 3 || tvec.total() != 3 || rvec.channels() != 1 || tvec.channels() != 1)
-      Throw(path.string(), ": rvec and tvec must have 3 values each");
-    rvec.convertTo(rvec, CV_64F);
-    tvec.convertTo(tvec, CV_64F);
+    if (rvec.data.size() != 3 || tvec.data.size() != 3) Throw(path.string(), ": rvec and tvec must have 3 values each");
     double rt[6];
     for (int i = 0; i < 3; ++i) {
-      rt[i] = rvec.at<double>(i);
-      rt[3 + i] = tvec.at<double>(i);
-      if (!std::isfinite(rt[i]) || !std::isfinite(rt[3 + i]))
-        Throw(path.string(), ": rvec and tvec must hold finite numbers, found ", rt[i], " and ", rt[3 + i]);
+      rt[i] = rvec.data[i];
+      rt[3 + i] = tvec.data[i];
     }
     T = Pose::FromRt(rt);
   }
