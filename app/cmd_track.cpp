@@ -30,6 +30,11 @@ void TrackerCli::Add(CLI::App* cmd) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--threads", threads, "threads for reading images and detecting blobs (0 = all cores)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--predicted-windows", predicted_windows,
+                "detect balls only in windows around the images the track predicts (about 1.4x the frame rate "
+                "of images in memory; the same poses where the windows hold every ball); the whole image every "
+                "25th frame, when a camera's windows miss a ball it saw in the last frame, and when there is no "
+                "prediction. Blobs outside the windows (spurious reflections) are then not reported");
 }
 
 int TrackerCli::Threads() const {
@@ -44,6 +49,7 @@ RecordingTrackerSettings TrackerCli::Settings() const {
   s.threshold_dn = threshold_dn;
   s.noise_frames = noise_frames;
   s.threads = Threads();
+  s.predicted_windows = predicted_windows;
   return s;
 }
 

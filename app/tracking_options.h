@@ -20,6 +20,7 @@ struct TrackerCli {
   double threshold_dn = 0;
   size_t noise_frames = 12;
   int threads = 0;  // 0 = the machine's cores
+  bool predicted_windows = false;
 
   void Add(CLI::App* cmd);
   int Threads() const;

@@ -246,6 +246,31 @@ int Main(int argc, char** argv) {
       std::printf("  measured %-6s %d thread(s)\n", row.source.c_str(), t);
       std::fflush(stdout);
     }
+  // Ours with TrackerOptions::predicted_windows (detection in windows around the predicted
+  // ball images; the whole image every 25th frame and where the windows miss a ball).
+  struct WindowRow {
+    std::string source;
+    int threads;
+    Timing t;
+  };
+  std::vector<WindowRow> window_rows;
+  std::vector<FrameResult> windowed;
+  size_t window_dets = 0, whole_dets = 0;
+  auto ours_windows = [&](const FrameSource& src, int threads) {
+    TrackerOptions o = OurOptions(gain);
+    o.predicted_windows = true;
+    Tracker tracker(rig, target, o);
+    windowed.clear();
+    TrackFramesStreaming(src, tracker, [&](FrameResult&& r) { windowed.push_back(std::move(r)); }, {}, threads);
+    window_dets = tracker.window_detections();
+    whole_dets = tracker.whole_image_detections();
+  };
+  for (const bool from_files : {true, false})
+    for (int t : max_threads > 1 ? std::vector<int>{1, max_threads} : std::vector<int>{1}) {
+      window_rows.push_back({from_files ? "files" : "memory", t, Measure(repeat, [&] { ours_windows(from_files ? files : memory, t); })});
+      std::printf("  measured %-6s %d thread(s), predicted windows\n", window_rows.back().source.c_str(), t);
+      std::fflush(stdout);
+    }
   Timing decode1 = Measure(repeat, [&] {
     for (size_t i = 0; i < n; ++i) {
       std::vector<std::string> problems;
@@ -276,6 +301,28 @@ int Main(int argc, char** argv) {
       std::printf("  %-6s ours %.2fx, baseline %.2fx\n", src.c_str(), one->ours.wall_s / all->ours.wall_s,
                   one->base.wall_s / all->base.wall_s);
   }
+  std::printf("ours with predicted windows (mcms track --predicted-windows):\n");
+  for (const WindowRow& w : window_rows) {
+    const Row* full = nullptr;
+    for (const Row& r : rows)
+      if (r.source == w.source && r.threads == w.threads) full = &r;
+    const double f = dn / w.t.wall_s;
+    std::printf("%-7s %7d | %12.1f fps, %.3f ms CPU/set; %.2fx the whole-image rate, %.1fx the baseline\n",
+                w.source.c_str(), w.threads, f, 1e3 * w.t.cpu_s / dn, full ? full->ours.wall_s / w.t.wall_s : 0.0,
+                full ? full->base.wall_s / w.t.wall_s : 0.0);
+  }
+  double max_dp = 0, max_dr = 0;
+  size_t same_status = 0;
+  for (size_t i = 0; i < std::min(windowed.size(), reference.size()); ++i) {
+    same_status += windowed[i].status == reference[i].status;
+    if (windowed[i].T_rig_target && reference[i].T_rig_target) {
+      max_dp = std::max(max_dp, (windowed[i].T_rig_target->t - reference[i].T_rig_target->t).norm());
+      max_dr = std::max(max_dr, BoxMinus(*windowed[i].T_rig_target, *reference[i].T_rig_target).head<3>().norm());
+    }
+  }
+  std::printf("  detections in windows %zu, whole images %zu (last run); same status as the whole-image "
+              "run on %zu/%zu frame sets, poses differ by at most %.3g m and %.3g rad\n",
+              window_dets, whole_dets, same_status, n, max_dp, max_dr);
   std::printf("PNG decoding alone (LoadFrameImages, 1 thread): %.1f frame sets/s, %.3f ms CPU per set\n",
               dn / decode1.wall_s, 1e3 * decode1.cpu_s / dn);
   size_t posed = 0;

@@ -1,6 +1,7 @@
 #include "synthetic/track_recording.h"
 
 #include <chrono>
+#include <sstream>
 #include <cmath>
 #include <cstdio>
 
@@ -147,6 +148,12 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
           first_reason, "); no output written");
   res.residuals.Finish();
   note(res.residuals.Describe());
+  if (in.tracker.predicted_windows) {
+    std::ostringstream s;
+    s << "predicted windows: " << tracker.window_detections() << " camera images detected in windows, "
+      << tracker.whole_image_detections() << " whole (no prediction, every 25th frame, or a ball the windows missed)";
+    note(s.str());
+  }
   if (with_truth) {
     res.errors = errors.Summary();
     for (const std::string& line : DescribeTruthErrors(*res.errors, res.truth)) note(line);

@@ -64,6 +64,35 @@ TEST(Cli, TracksARenderedRecording) {
   for (size_t i = 0; i < t.rows.size(); ++i) EXPECT_NE(t.rows[i][t.Column("status")], "lost");
 }
 
+// --predicted-windows: the same poses as the whole-image detection (to the digits written);
+// with missing and corrupt images too (those cameras go back to the whole image).
+TEST(Cli, PredictedWindowsGiveTheSamePoses) {
+  const fs::path d = Copy("windows");
+  fs::remove(d / "images" / "cam1" / "000002.png");
+  std::ofstream(d / "images" / "cam2" / "000004.png", std::ios::trunc) << "this is not a PNG";
+  const CliRun whole = Mcms("track --quiet --gain 0 " + d.string() + " -o " + (d / "whole.csv").string(), d);
+  ASSERT_EQ(whole.code, 0) << whole.err;
+  const CliRun win =
+      Mcms("track --quiet --gain 0 --predicted-windows " + d.string() + " -o " + (d / "win.csv").string(), d);
+  ASSERT_EQ(win.code, 0) << win.err;
+  // Frames 0 (no track) and 1 (no velocity yet: windows around a still prediction, which
+  // the moving target leaves) are detected whole; the cameras with an image missing or
+  // corrupt have nothing to detect; the rest in windows.
+  EXPECT_NE(win.out.find("predicted windows: "), std::string::npos) << win.out;
+  const auto at = win.out.find("predicted windows: ");
+  ASSERT_NE(at, std::string::npos);
+  EXPECT_GE(std::stoi(win.out.substr(at + 19)), 10) << win.out.substr(at, 120);
+  const CsvTable a = ReadCsv(d / "whole.csv"), b = ReadCsv(d / "win.csv");
+  ASSERT_EQ(a.rows.size(), 6u);
+  ASSERT_EQ(b.rows.size(), a.rows.size());
+  for (const char* col : {"status", "reason", "x_m", "y_m", "z_m", "qw", "qx", "cov_pz_pz"})
+    for (size_t i = 0; i < a.rows.size(); ++i) {
+      const std::string &x = a.rows[i][a.Column(col)], &y = b.rows[i][b.Column(col)];
+      if (x == y) continue;
+      EXPECT_NEAR(std::stod(x), std::stod(y), 1e-9 * std::max(1.0, std::abs(std::stod(x)))) << col << " row " << i;
+    }
+}
+
 TEST(Cli, MissingAndCorruptImagesDegradeTheirFrameOnly) {
   const fs::path d = Copy("missing");
   fs::remove(d / "images" / "cam1" / "000002.png");

@@ -19,19 +19,28 @@ namespace {
 struct RunResult {
   std::vector<FrameResult> frames;
   std::vector<FrameTruth> truth;
+  std::vector<FrameResult> windowed;  // the same frames, detected in predicted windows
+  size_t window_detections = 0, whole_detections = 0;
 };
 
-RunResult TrackScenario(const Scenario& sc) {
+// Tracks the scenario's frames; with `windows`, a second tracker detects on the same images
+// in windows around the predicted ball images (TrackerOptions::predicted_windows).
+RunResult TrackScenario(const Scenario& sc, bool windows = false) {
   ScenarioRenderer renderer(sc, 2);
   TrackerOptions opts;
   opts.detector.gain_e_per_dn = sc.render.gain_e_per_dn;
   Tracker tracker(sc.rig, sc.target, opts);
+  opts.predicted_windows = true;
+  Tracker windowed(sc.rig, sc.target, opts);
   RunResult r;
   for (size_t f = 0; f < sc.NumFrames(); ++f) {
     RenderedFrame rf = renderer.Render(f);
     r.frames.push_back(tracker.ProcessFrame(f, sc.times[f], rf.images));
+    if (windows) r.windowed.push_back(windowed.ProcessFrame(f, sc.times[f], rf.images));
     r.truth.push_back(rf.truth);
   }
+  r.window_detections = windowed.window_detections();
+  r.whole_detections = windowed.whole_image_detections();
   return r;
 }
 
@@ -39,9 +48,22 @@ TEST(Pipeline, DefaultScenarioPoseIsAccurateAndItsCovarianceHonest) {
   const Scenario sc = Scenario::Default();
   ASSERT_GE(sc.NumFrames(), 100u);
   ASSERT_EQ(sc.rig.size(), 4u);
-  const RunResult r = TrackScenario(sc);
+  const RunResult r = TrackScenario(sc, true);
   std::vector<Pose> truth;
   for (const auto& t : r.truth) truth.push_back(t.T_rig_target);
+  // Detection in predicted windows gives the same frames: statuses, poses (to rounding),
+  // covariances, while most camera images are read only in the windows.
+  std::printf("predicted windows: %zu camera images detected in windows, %zu whole\n", r.window_detections,
+              r.whole_detections);
+  EXPECT_GT(r.window_detections, 4 * r.whole_detections);
+  for (size_t f = 0; f < r.frames.size(); ++f) {
+    const FrameResult &a = r.frames[f], &b = r.windowed[f];
+    EXPECT_EQ(a.status, b.status) << "frame " << f << ": " << a.reason << " | " << b.reason;
+    ASSERT_EQ(a.T_rig_target.has_value(), b.T_rig_target.has_value()) << f;
+    if (!a.T_rig_target) continue;
+    EXPECT_LT((a.T_rig_target->t - b.T_rig_target->t).norm(), 1e-9) << f;
+    EXPECT_LT((a.cov - b.cov).norm(), 1e-6 * a.cov.norm()) << f;
+  }
   const PoseErrorSummary s = EvaluatePoses(r.frames, truth);
   std::printf("%s", FormatSummary(s).c_str());
   // Frames where no two balls' images overlap in any camera must be ok; where they do
@@ -101,7 +123,7 @@ TEST(Pipeline, OcclusionsSpuriousReflectionsAndMissingCamerasDegradeButDoNotBrea
   sc.render.spurious_per_image = 2.0;
   sc.render.dropout_probability = 0.05;
   sc.seed = 99;
-  const RunResult r = TrackScenario(sc);
+  const RunResult r = TrackScenario(sc, true);
   std::vector<Pose> truth;
   int dropped_frames = 0, dropped_and_degraded = 0;
   for (size_t f = 0; f < r.frames.size(); ++f) {
@@ -115,6 +137,17 @@ TEST(Pipeline, OcclusionsSpuriousReflectionsAndMissingCamerasDegradeButDoNotBrea
   }
   const PoseErrorSummary s = EvaluatePoses(r.frames, truth);
   std::printf("%s", FormatSummary(s).c_str());
+  // Detection in predicted windows: where the windows hold every ball the camera saw in the
+  // last frame, the poses are those of the whole-image detection (to rounding); an occluded
+  // ball, a dropped camera or a lost frame sends a camera back to the whole image. Spurious
+  // reflections outside the windows are not seen, so statuses may differ only there.
+  const PoseErrorSummary w = EvaluatePoses(r.windowed, truth);
+  std::printf("predicted windows: %zu camera images detected in windows, %zu whole\n%s", r.window_detections,
+              r.whole_detections, FormatSummary(w).c_str());
+  EXPECT_GT(r.window_detections, 2 * r.whole_detections);
+  EXPECT_LE(w.lost, s.lost);
+  EXPECT_LT(w.position_max_m, 5e-4);
+  EXPECT_LT(w.position_rms_m, 1.05 * s.position_rms_m);
   EXPECT_GT(dropped_frames, 0);
   EXPECT_EQ(dropped_and_degraded, dropped_frames) << "a frame with a missing camera must say so";
   EXPECT_GT(s.degraded, 0);

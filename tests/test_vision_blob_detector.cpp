@@ -362,6 +362,46 @@ TEST(BlobDetector, EvenRowScanFindsTheSameBlobsAsTheFullScan) {
   }
 }
 
+// Windows around blobs measure them as the whole image does; a window that cuts a blob
+// flags it; windows that overlap are merged (each blob found once).
+TEST(BlobDetector, WindowsMeasureAsTheWholeImageAndFlagACutBlob) {
+  const std::vector<EllipseShape> shapes = {{{30.3, 30.8}, 4, 4, 0}, {{90.6, 31.2}, 3, 2.2, 0.3},
+                                            {{100.1, 60.5}, 5, 4, 1}, {{40.2, 66.0}, 3, 3, 0}};
+  const cv::Mat expected = RenderExpected(140, 90, shapes, 10, 200, 0.8);
+  for (int depth : {CV_8U, CV_16U}) {
+    Rng rng(5);
+    const cv::Mat img = AddNoise(expected, 0, 1.5, depth, &rng);
+    BlobImageStats whole_stats, window_stats;
+    const std::vector<Blob> whole = DetectBlobs(img, {}, &whole_stats);
+    ASSERT_EQ(whole.size(), 4u);
+    // Windows of +-22 px around the first three blobs (two of them overlap), none around
+    // the fourth; one far outside the image.
+    std::vector<cv::Rect> windows;
+    for (size_t i = 0; i < 3; ++i)
+      windows.emplace_back(static_cast<int>(shapes[i].centre.x()) - 22, static_cast<int>(shapes[i].centre.y()) - 22, 45, 45);
+    windows.emplace_back(500, 500, 10, 10);
+    EXPECT_EQ(MergeWindows(windows, img.size()).size(), 2u);
+    const std::vector<Blob> in = DetectBlobsInWindows(img, windows, {}, &window_stats);
+    EXPECT_EQ(window_stats.threshold_dn, whole_stats.threshold_dn);
+    EXPECT_EQ(window_stats.background_dn, whole_stats.background_dn);
+    ASSERT_EQ(in.size(), 3u) << "depth " << depth;
+    for (const Blob& b : in) {
+      const auto same = std::find_if(whole.begin(), whole.end(),
+                                     [&](const Blob& w) { return (w.centre - b.centre).norm() < 1e-9; });
+      ASSERT_NE(same, whole.end()) << b.centre.transpose();
+      EXPECT_NEAR(same->cov(0, 0), b.cov(0, 0), 1e-12);
+      EXPECT_NEAR(same->flux, b.flux, 1e-9);
+      EXPECT_EQ(same->area_px, b.area_px);
+      EXPECT_FALSE(b.touches_border);
+    }
+    // A window that holds the blob's region but not its measurement window and ring.
+    const std::vector<Blob> cut = DetectBlobsInWindows(img, {cv::Rect(24, 24, 14, 14)});
+    ASSERT_EQ(cut.size(), 1u);
+    EXPECT_TRUE(cut[0].touches_border);
+  }
+  EXPECT_THROW(DetectBlobsInWindows(cv::Mat(), {cv::Rect(0, 0, 5, 5)}), InputError);
+}
+
 TEST(BlobDetector, FlagsSaturationAndTheBorder) {
   const std::vector<EllipseShape> shapes = {{{20.2, 20.4}, 4, 4, 0}, {{2.5, 30.3}, 4, 4, 0}};
   // 8-bit with a peak of 10 + 400 DN: the first disc clips at 255.

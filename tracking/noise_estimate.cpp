@@ -157,6 +157,7 @@ TrackerOptions RecordingTrackerSettings::Options(const ImageSequence& seq, const
   o.detector.read_noise_dn = read_noise_dn;
   o.detector.polarity = polarity;
   o.detector.threshold_dn = threshold_dn;
+  o.predicted_windows = predicted_windows;
   char buf[160];
   if (gain_e_per_dn) {
     o.detector.gain_e_per_dn = *gain_e_per_dn;

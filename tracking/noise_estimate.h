@@ -64,6 +64,7 @@ struct RecordingTrackerSettings {
   double threshold_dn = 0;              // 0: automatic
   size_t noise_frames = 12;             // frames the gain is measured from
   int threads = 1;                      // reading images and detecting blobs
+  bool predicted_windows = false;       // TrackerOptions::predicted_windows
 
   // InputError naming the setting when one is out of range.
   void Check() const;

@@ -394,14 +394,22 @@ size_t TrackFramesStreaming(const FrameSource& source, Tracker& tracker,
   struct Detected {
     std::vector<std::optional<std::vector<ImagePoint>>> points;
     std::vector<std::string> problems;
+    std::vector<cv::Mat> images;  // with predicted windows: detected in frame order, in deliver
   };
+  // Detection in windows needs the track of the frames before, so then the workers only
+  // read the images, and this thread detects.
+  const bool in_order = tracker.options().predicted_windows;
   auto detect = [&](size_t i, Detected* d) {
     d->problems.assign(tracker.rig().size(), std::string());
-    const std::vector<cv::Mat> images = source.images(i, &d->problems);
-    d->points = tracker.DetectPoints(images, &d->problems);
+    std::vector<cv::Mat> images = source.images(i, &d->problems);
+    if (in_order)
+      d->images = std::move(images);
+    else
+      d->points = tracker.DetectPoints(images, &d->problems);
   };
   auto deliver = [&](size_t i, const Detected& d) {
-    on_frame(tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems));
+    on_frame(in_order ? tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems)
+                      : tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems));
     if (progress) progress(i + 1, n);
   };
   if (threads == 1 || n <= 1) {

@@ -25,6 +25,7 @@ bool TrackerOptions::IsValid(std::string* why) const {
   if (!(association_gate_px > 0)) return (*why = "association_gate_px must be positive", false);
   if (!(max_chi2_per_dof > 0)) return (*why = "max_chi2_per_dof must be positive", false);
   if (!(min_margin >= 0)) return (*why = "min_margin must be >= 0", false);
+  if (full_scan_every < 1) return (*why = "full_scan_every must be >= 1", false);
   return true;
 }
 
@@ -61,26 +62,98 @@ BlobDetectorOptions Tracker::DetectorFor(size_t camera) const {
   return o;
 }
 
+bool Tracker::Usable(size_t c, const std::vector<cv::Mat>& images, std::vector<std::string>* problems) const {
+  if (c >= images.size() || images[c].empty()) return false;
+  const cv::Mat& im = images[c];
+  if (im.cols != rig_.cameras[c].Width() || im.rows != rig_.cameras[c].Height()) {
+    std::ostringstream s;
+    s << "image is " << im.cols << "x" << im.rows << ", the rig says " << rig_.cameras[c].Width() << "x"
+      << rig_.cameras[c].Height();
+    (*problems)[c] = s.str();
+    return false;
+  }
+  return true;
+}
+
+std::vector<ImagePoint> Tracker::Usable(const std::vector<Blob>& blobs) const {
+  std::vector<ImagePoint> v;
+  for (const Blob& b : blobs) {
+    if (b.touches_border || b.crowded) continue;  // a cut or pulled centre would bias the pose
+    v.push_back({b.centre, b.cov});
+  }
+  return v;
+}
+
 std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPoints(const std::vector<cv::Mat>& images,
                                                                           std::vector<std::string>* problems) const {
   std::vector<std::optional<std::vector<ImagePoint>>> pts(rig_.size());
   problems->resize(rig_.size());
+  for (size_t c = 0; c < rig_.size(); ++c)
+    if (Usable(c, images, problems)) pts[c] = Usable(DetectBlobs(images[c], DetectorFor(c)));
+  return pts;
+}
+
+std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredicted(
+    double time_s, const std::vector<cv::Mat>& images, std::vector<std::string>* problems) {
+  const std::optional<Pose> predicted = Predict(time_s);
+  if (!predicted || ++frames_since_full_scan_ >= static_cast<size_t>(options_.full_scan_every)) {
+    frames_since_full_scan_ = 0;
+    whole_detections_ += rig_.size();
+    return DetectPoints(images, problems);
+  }
+  const Pose& last = history_.back().second;
+  std::vector<std::optional<std::vector<ImagePoint>>> pts(rig_.size());
+  problems->resize(rig_.size());
+  const BlobDetectorOptions& d = options_.detector;
   for (size_t c = 0; c < rig_.size(); ++c) {
-    if (c >= images.size() || images[c].empty()) continue;
-    const cv::Mat& im = images[c];
-    if (im.cols != rig_.cameras[c].Width() || im.rows != rig_.cameras[c].Height()) {
-      std::ostringstream s;
-      s << "image is " << im.cols << "x" << im.rows << ", the rig says " << rig_.cameras[c].Width() << "x"
-        << rig_.cameras[c].Height();
-      (*problems)[c] = s.str();
-      continue;
+    if (!Usable(c, images, problems)) continue;
+    const CameraModel& cam = rig_.cameras[c];
+    std::vector<cv::Rect> windows;
+    std::vector<std::pair<Vec2, double>> expected;  // predicted ball image, how far its blob may be
+    for (size_t b = 0; b < target_.balls_target.size(); ++b) {
+      const Vec3& ball = target_.balls_target[b];
+      const Vec3 p = cam.T_cam_rig() * (*predicted * ball);
+      const Vec3 p_last = cam.T_cam_rig() * (last * ball);
+      if (!(p.z() > 0 && p_last.z() > 0)) continue;
+      const Vec2 q = cam.Project(p), q_last = cam.Project(p_last);
+      if (!q.allFinite() || !q_last.allFinite() || q.x() < 0 || q.y() < 0 || q.x() > cam.Width() - 1 ||
+          q.y() > cam.Height() - 1)
+        continue;
+      // The window holds the ball's image (radius fx R / z, with room for an oblique view),
+      // the detector's widest measurement window and ring, the association gate and the
+      // frame's image motion again (the prediction's error at a change of velocity).
+      const double radius_px = 1.5 * cam.Intrinsics()[0] * target_.ball_radius / p.z();
+      const double tolerance = options_.association_gate_px + (q - q_last).norm() + 2;
+      const double half = radius_px + d.max_window_margin_px + d.ring_width_px + tolerance;
+      if (!(half < 0.25 * std::max(cam.Width(), cam.Height()))) {  // too close or too fast: the whole image
+        windows.clear();
+        expected.clear();
+        break;
+      }
+      const int x0 = static_cast<int>(std::floor(q.x() - half)), y0 = static_cast<int>(std::floor(q.y() - half));
+      const int side = static_cast<int>(std::ceil(2 * half)) + 1;
+      windows.emplace_back(x0, y0, side, side);
+      // A usable blob is required of the balls this camera observed in the last posed frame
+      // (not of those it could not: two ball images that touch are unusable in any window).
+      if (c < last_observed_.size() && last_observed_[c][b]) expected.emplace_back(q, tolerance);
     }
-    std::vector<ImagePoint> v;
-    for (const Blob& b : DetectBlobs(im, DetectorFor(c))) {
-      if (b.touches_border || b.crowded) continue;  // a cut or pulled centre would bias the pose
-      v.push_back({b.centre, b.cov});
+    if (!windows.empty() && !expected.empty()) {
+      std::vector<ImagePoint> v = Usable(DetectBlobsInWindows(images[c], windows, DetectorFor(c)));
+      // Every ball predicted in view must have a usable blob in the windows; otherwise
+      // (occlusion, a ball near a window's edge, a wrong prediction) the whole image.
+      bool complete = true;
+      for (const auto& [q, tolerance] : expected)
+        complete = complete && std::any_of(v.begin(), v.end(), [&, &q = q, &tolerance = tolerance](const ImagePoint& ip) {
+                     return (ip.q - q).norm() < tolerance;
+                   });
+      if (complete) {
+        ++window_detections_;
+        pts[c] = std::move(v);
+        continue;
+      }
     }
-    pts[c] = std::move(v);
+    ++whole_detections_;
+    pts[c] = Usable(DetectBlobs(images[c], DetectorFor(c)));
   }
   return pts;
 }
@@ -88,7 +161,7 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPoints(const 
 FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
                                   const std::vector<std::string>& problems) {
   std::vector<std::string> why(problems);
-  const auto pts = DetectPoints(images, &why);
+  const auto pts = options_.predicted_windows ? DetectPointsPredicted(time_s, images, &why) : DetectPoints(images, &why);
   return ProcessPoints(frame, time_s, pts, why);
 }
 
@@ -328,6 +401,8 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
   if (res.chi2_per_dof <= options_.max_chi2_per_dof) {
     history_.emplace_back(time_s, ref.T_rig_target);
     if (history_.size() > 2) history_.erase(history_.begin());
+    last_observed_.assign(rig_.size(), std::vector<char>(target_.balls_target.size(), 0));
+    for (const auto& o : ref.kept) last_observed_[o.camera][o.ball] = 1;
   }
   return res;
 }

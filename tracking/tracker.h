@@ -38,6 +38,14 @@ struct TrackerOptions {
   // detector.gain_e_per_dn (tracking/noise_estimate.h measures it). Empty = the same
   // detector for every camera; otherwise one entry per camera.
   std::vector<double> camera_gain_e_per_dn;
+  // Detect in windows around the ball images predicted by the constant-velocity track
+  // (DetectBlobsInWindows), not in the whole image: a camera whose windows do not yield a
+  // usable blob for every ball predicted in its view, a frame without a prediction, and
+  // every full_scan_every-th frame are detected in the whole image. Blobs the windows hold
+  // are measured as in the whole image; blobs outside them (spurious reflections) are then
+  // neither seen nor reported. Off by default (`mcms track --predicted-windows`).
+  bool predicted_windows = false;
+  int full_scan_every = 25;  // frames; with predicted_windows
   bool IsValid(std::string* why) const;
 };
 
@@ -76,6 +84,16 @@ class Tracker {
   // so that frames can be detected in parallel and processed in order.
   std::vector<std::optional<std::vector<ImagePoint>>> DetectPoints(const std::vector<cv::Mat>& images,
                                                                    std::vector<std::string>* problems) const;
+  // DetectPoints in windows around the ball images predicted for time_s (see
+  // TrackerOptions::predicted_windows); the whole image where that cannot be trusted.
+  // Uses the track, so frames must come in order.
+  std::vector<std::optional<std::vector<ImagePoint>>> DetectPointsPredicted(double time_s,
+                                                                            const std::vector<cv::Mat>& images,
+                                                                            std::vector<std::string>* problems);
+  // Frames detected whole and in windows by DetectPointsPredicted so far, per camera.
+  size_t whole_image_detections() const { return whole_detections_; }
+  size_t window_detections() const { return window_detections_; }
+  const TrackerOptions& options() const { return options_; }
   // The detector options used for camera c.
   BlobDetectorOptions DetectorFor(size_t camera) const;
 
@@ -98,6 +116,11 @@ class Tracker {
   TrackerOptions options_;
   // Last two good poses for the constant-velocity prediction.
   std::vector<std::pair<double, Pose>> history_;
+  size_t whole_detections_ = 0, window_detections_ = 0, frames_since_full_scan_ = 0;
+  std::vector<std::vector<char>> last_observed_;  // [camera][ball]: kept by the last accepted pose
+  // An image of camera c that can be detected; otherwise the reason in problems[c].
+  bool Usable(size_t c, const std::vector<cv::Mat>& images, std::vector<std::string>* problems) const;
+  std::vector<ImagePoint> Usable(const std::vector<Blob>& blobs) const;
 };
 
 }  // namespace mcms

@@ -604,17 +604,12 @@ bool Measure(const Context& ctx, const Region& r, const RegionShape& shape, Scra
   return true;
 }
 
+// Labels the regions of `img` (the whole image or a window of it, whose pixel (0,0) is at
+// `origin` in the image) and measures those that pass the shape tests; appends the blobs, in
+// image coordinates, to *blobs. Returns the number of regions.
 template <typename T, bool kDark>
-std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobImageStats* stats) {
-  double background, noise;
-  SampleStats<T>(img, &background, &noise);
-  if (o.read_noise_dn > 0) noise = o.read_noise_dn;
-  const double thr = o.threshold_dn > 0 ? o.threshold_dn : o.k_sigma * noise;
-  // Integer level for Pass<kDark>: v > floor(bg + thr) <=> v > bg + thr for integer v
-  // (bright); v < ceil(bg - thr) <=> v < bg - thr (dark). Clamped to int range.
-  const double level = kDark ? std::ceil(background - thr) : std::floor(background + thr);
-  const int t = static_cast<int>(std::clamp(level, -1.0, 70000.0));
-
+int DetectIn(const cv::Mat& img, const cv::Point& origin, const BlobDetectorOptions& o, int t, double noise,
+             std::vector<Blob>* blobs) {
   std::vector<Run> runs;
   std::vector<int> parent;
   // A region within one row of length L has circularity 1/L (second moments L^2/12 and
@@ -652,12 +647,6 @@ std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobI
       g.head = static_cast<int>(i);
     g.tail = static_cast<int>(i);
   }
-  if (stats) {
-    stats->background_dn = background;
-    stats->noise_dn = noise;
-    stats->threshold_dn = thr;
-    stats->num_regions = static_cast<int>(regions.size());
-  }
 
   Context ctx;
   ctx.img = &img;
@@ -666,7 +655,6 @@ std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobI
   ctx.opts = &o;
   ctx.global_noise = noise;
   Scratch scratch;
-  std::vector<Blob> blobs;
   for (const Region& g : regions) {
     if (g.n < o.min_area_px || g.n > o.max_area_px) continue;
     // The shape tests need only the region: reject before the (costlier) measurement.
@@ -677,25 +665,57 @@ std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobI
     if (blob.circularity < o.min_circularity) continue;
     blob.ellipse_residual_px = EllipseResidual(g, shape, runs, next_run);
     if (blob.ellipse_residual_px > o.max_ellipse_residual_px) continue;
-    if (Measure<T, kDark>(ctx, g, shape, &scratch, &blob)) blobs.push_back(blob);
+    if (Measure<T, kDark>(ctx, g, shape, &scratch, &blob)) {
+      blob.centre += Vec2(origin.x, origin.y);
+      blobs->push_back(blob);
+    }
+  }
+  return static_cast<int>(regions.size());
+}
+
+// The image-wide statistics, then detection in each window (the whole image when windows
+// is null).
+template <typename T, bool kDark>
+std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobImageStats* stats,
+                         const std::vector<cv::Rect>* windows) {
+  double background, noise;
+  SampleStats<T>(img, &background, &noise);
+  if (o.read_noise_dn > 0) noise = o.read_noise_dn;
+  const double thr = o.threshold_dn > 0 ? o.threshold_dn : o.k_sigma * noise;
+  // Integer level for Pass<kDark>: v > floor(bg + thr) <=> v > bg + thr for integer v
+  // (bright); v < ceil(bg - thr) <=> v < bg - thr (dark). Clamped to int range.
+  const double level = kDark ? std::ceil(background - thr) : std::floor(background + thr);
+  const int t = static_cast<int>(std::clamp(level, -1.0, 70000.0));
+
+  std::vector<Blob> blobs;
+  int num_regions = 0;
+  if (!windows) {
+    num_regions = DetectIn<T, kDark>(img, cv::Point(0, 0), o, t, noise, &blobs);
+  } else {
+    for (const cv::Rect& w : *windows) num_regions += DetectIn<T, kDark>(img(w), w.tl(), o, t, noise, &blobs);
+  }
+  if (stats) {
+    stats->background_dn = background;
+    stats->noise_dn = noise;
+    stats->threshold_dn = thr;
+    stats->num_regions = num_regions;
   }
   std::sort(blobs.begin(), blobs.end(), [](const Blob& x, const Blob& y) { return x.flux > y.flux; });
   return blobs;
 }
 
-}  // namespace
-
-std::vector<Blob> DetectBlobs(const cv::Mat& image, const BlobDetectorOptions& options, BlobImageStats* stats) {
+// The image as one gray channel of 8 or 16 bits; InputError naming what is wrong.
+cv::Mat CheckedGray(const cv::Mat& image, const BlobDetectorOptions& options, const char* caller) {
   std::string why;
-  if (!options.IsValid(&why)) Throw("DetectBlobs: invalid BlobDetectorOptions: ", why);
-  if (image.empty()) Throw("DetectBlobs: image is empty; expected a CV_8U or CV_16U image");
+  if (!options.IsValid(&why)) Throw(caller, ": invalid BlobDetectorOptions: ", why);
+  if (image.empty()) Throw(caller, ": image is empty; expected a CV_8U or CV_16U image");
   const int depth = image.depth();
   if (depth != CV_8U && depth != CV_16U) {
     const bool is_float = depth == CV_32F || depth == CV_64F || depth == CV_16F;
     if (is_float && depth != CV_16F && !cv::checkRange(image, true))
-      Throw("DetectBlobs: image is ", cv::typeToString(image.type()),
+      Throw(caller, ": image is ", cv::typeToString(image.type()),
             " and contains NaN or Inf; expected a CV_8U or CV_16U image");
-    Throw("DetectBlobs: image is ", cv::typeToString(image.type()), "; expected a CV_8U or CV_16U image");
+    Throw(caller, ": image is ", cv::typeToString(image.type()), "; expected a CV_8U or CV_16U image");
   }
   cv::Mat gray;
   switch (image.channels()) {
@@ -703,12 +723,54 @@ std::vector<Blob> DetectBlobs(const cv::Mat& image, const BlobDetectorOptions& o
     case 3: cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY); break;
     case 4: cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY); break;
     default:
-      Throw("DetectBlobs: image has ", image.channels(), " channels; expected 1 (gray), 3 (BGR) or 4 (BGRA)");
+      Throw(caller, ": image has ", image.channels(), " channels; expected 1 (gray), 3 (BGR) or 4 (BGRA)");
   }
+  return gray;
+}
+
+std::vector<Blob> Dispatch(const cv::Mat& gray, const BlobDetectorOptions& options, BlobImageStats* stats,
+                           const std::vector<cv::Rect>* windows) {
   const bool dark = options.polarity == Polarity::kDark;
-  if (depth == CV_8U)
-    return dark ? Detect<uint8_t, true>(gray, options, stats) : Detect<uint8_t, false>(gray, options, stats);
-  return dark ? Detect<uint16_t, true>(gray, options, stats) : Detect<uint16_t, false>(gray, options, stats);
+  if (gray.depth() == CV_8U)
+    return dark ? Detect<uint8_t, true>(gray, options, stats, windows) : Detect<uint8_t, false>(gray, options, stats, windows);
+  return dark ? Detect<uint16_t, true>(gray, options, stats, windows) : Detect<uint16_t, false>(gray, options, stats, windows);
+}
+
+}  // namespace
+
+std::vector<Blob> DetectBlobs(const cv::Mat& image, const BlobDetectorOptions& options, BlobImageStats* stats) {
+  return Dispatch(CheckedGray(image, options, "DetectBlobs"), options, stats, nullptr);
+}
+
+std::vector<cv::Rect> MergeWindows(std::vector<cv::Rect> windows, const cv::Size& image_size) {
+  const cv::Rect all(0, 0, image_size.width, image_size.height);
+  std::vector<cv::Rect> out;
+  for (cv::Rect w : windows) {
+    w &= all;
+    if (w.area() > 0) out.push_back(w);
+  }
+  // Union every two windows that overlap or touch (a region on their common edge would be
+  // cut in both) until none do.
+  for (bool merged = true; merged;) {
+    merged = false;
+    for (size_t i = 0; i < out.size() && !merged; ++i)
+      for (size_t j = i + 1; j < out.size() && !merged; ++j) {
+        const cv::Rect grown(out[i].x - 1, out[i].y - 1, out[i].width + 2, out[i].height + 2);
+        if ((grown & out[j]).area() > 0) {
+          out[i] |= out[j];
+          out.erase(out.begin() + static_cast<std::ptrdiff_t>(j));
+          merged = true;
+        }
+      }
+  }
+  return out;
+}
+
+std::vector<Blob> DetectBlobsInWindows(const cv::Mat& image, const std::vector<cv::Rect>& windows,
+                                       const BlobDetectorOptions& options, BlobImageStats* stats) {
+  const cv::Mat gray = CheckedGray(image, options, "DetectBlobsInWindows");
+  const std::vector<cv::Rect> merged = MergeWindows(windows, gray.size());
+  return Dispatch(gray, options, stats, &merged);
 }
 
 }  // namespace mcms

@@ -129,4 +129,21 @@ std::vector<Blob> DetectBlobs(const cv::Mat& image,
                               const BlobDetectorOptions& options = {},
                               BlobImageStats* stats = nullptr);
 
+// Detection restricted to windows of the image (a tracker's predicted ball images): the
+// image-wide background, noise and threshold come from the same sparse sample of the whole
+// image as in DetectBlobs, so a blob whose region, measurement window and background ring
+// lie inside one window is measured as DetectBlobs measures it (the same pixels; the sums
+// differ only by rounding). Windows are clipped to the image, and windows that overlap or
+// touch are merged (MergeWindows). A blob cut by a window's edge is returned with
+// touches_border set, as at the image's border. stats->num_regions counts the regions
+// inside the windows. Reads the windows and about 1/17 of the image's rows (the sample).
+std::vector<Blob> DetectBlobsInWindows(const cv::Mat& image,
+                                       const std::vector<cv::Rect>& windows,
+                                       const BlobDetectorOptions& options = {},
+                                       BlobImageStats* stats = nullptr);
+
+// The windows clipped to an image of `image_size`, empty ones dropped, those that overlap
+// or touch united (their bounding rectangle) until none do.
+std::vector<cv::Rect> MergeWindows(std::vector<cv::Rect> windows, const cv::Size& image_size);
+
 }  // namespace mcms
