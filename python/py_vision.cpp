@@ -209,10 +209,19 @@ TrackerOptions GetTrackerOptions(const py::kwargs& kw) {
       o.max_prediction_age_s = num();
     } else if (key == "gate_px") {
       o.matching.gate_px = num();
+    } else if (key == "predicted_windows") {
+      if (!py::isinstance<py::bool_>(item.second)) Throw("argument 'predicted_windows': expected True or False");
+      o.predicted_windows = item.second.cast<bool>();
+    } else if (key == "full_scan_every") {
+      const double n = num();
+      if (!(n >= 1 && n <= 1e9 && n == std::floor(n)))
+        Throw("argument 'full_scan_every': expected a whole number of frames >= 1, got ", n);
+      o.full_scan_every = static_cast<int>(n);
     } else {
       Throw("unknown tracker option '", key,
             "'; expected polarity, threshold_dn, read_noise_dn, gain_e_per_dn, camera_gain_e_per_dn, min_margin, "
-            "max_fit_rms_m, association_gate_px, max_chi2_per_dof, max_prediction_age_s, gate_px");
+            "max_fit_rms_m, association_gate_px, max_chi2_per_dof, max_prediction_age_s, gate_px, predicted_windows, "
+            "full_scan_every");
     }
   }
   std::string why;
@@ -541,11 +550,16 @@ void BindVision(py::module_& m) {
   py::class_<Tracker>(m, "Tracker",
                       "Sequence tracker of the five-ball target. Options as keywords: polarity, threshold_dn, "
                       "read_noise_dn, gain_e_per_dn, camera_gain_e_per_dn, min_margin, max_fit_rms_m, "
-                      "association_gate_px, max_chi2_per_dof, max_prediction_age_s, gate_px.")
+                      "association_gate_px, max_chi2_per_dof, max_prediction_age_s, gate_px, predicted_windows (detect in "
+                      "windows around the predicted ball images; see mcms track --predicted-windows), full_scan_every.")
       .def(py::init([](const CameraRig& rig, std::optional<Target> target, py::kwargs kw) {
              return Tracker(rig, target ? *target : Target::Default(), GetTrackerOptions(kw));
            }),
            py::arg("rig"), py::arg("target") = py::none())
+      .def_property_readonly("window_detections", &Tracker::window_detections,
+                             "camera images detected in predicted windows so far (predicted_windows=True)")
+      .def_property_readonly("whole_image_detections", &Tracker::whole_image_detections,
+                             "camera images detected whole so far with predicted_windows=True")
       .def(
           "process_frame",
           [](Tracker& t, py::handle images, size_t frame, double time_s) {

@@ -137,6 +137,25 @@ class Tracker(unittest.TestCase):
         self.assertEqual(r.cameras_used, 3)
         self.assertLess(np.linalg.norm(r.T_rig_target[:3, 3] - T[:3, 3]), 1e-3)
 
+    def test_predicted_windows_give_the_same_poses(self):
+        if cv2 is None:
+            self.skipTest("skipped: python3-opencv not installed")
+        whole = mcms.Tracker(self.rig, self.target, read_noise_dn=2.0)
+        windows = mcms.Tracker(self.rig, self.target, read_noise_dn=2.0, predicted_windows=True)
+        for k in range(6):
+            images = self.draw(target_pose(0.3 + 0.01 * k, (0.004 * k, 0.002 * k, 0.05)))
+            a = whole.process_frame(images, frame=k, time_s=0.1 * k)
+            b = windows.process_frame(images, frame=k, time_s=0.1 * k)
+            self.assertEqual(a.status, b.status, (a.reason, b.reason))
+            np.testing.assert_allclose(b.T_rig_target, a.T_rig_target, atol=1e-9)
+        # Frames 0 and 1 whole (no velocity yet), then windows; the whole-image tracker never.
+        self.assertGreaterEqual(windows.window_detections, 12)
+        self.assertEqual(whole.window_detections, 0)
+        with self.assertRaisesRegex(mcms.InputError, "'predicted_windows': expected True or False"):
+            mcms.Tracker(self.rig, self.target, predicted_windows="yes")
+        with self.assertRaisesRegex(mcms.InputError, "'full_scan_every': expected a whole number"):
+            mcms.Tracker(self.rig, self.target, full_scan_every=0.5)
+
     def test_sequence_on_disk_to_csv_and_arrays(self):
         if cv2 is None:
             self.skipTest("skipped: python3-opencv not installed")
