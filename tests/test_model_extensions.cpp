@@ -3,8 +3,6 @@
 // the templated forward kinematics against RobotModel, and inverse kinematics.
 #include <gtest/gtest.h>
 
-#include <ceres/dynamic_autodiff_cost_function.h>
-#include <ceres/gradient_checker.h>
 
 #include <functional>
 #include <set>
@@ -17,6 +15,7 @@
 #include "model/inverse_kinematics.h"
 #include "model/kinematics.h"
 #include "model/robot_model.h"
+#include "tests/gradient_check.h"
 
 namespace mcms {
 namespace {
@@ -26,28 +25,7 @@ const Eigen::VectorXd& TestJoints() {
   return q;
 }
 
-// Checks the autodiff Jacobian of `functor` (one parameter block of size n, m residuals)
-// against central differences at x.
-template <typename F>
-void ExpectGradientsMatch(const F& functor, int n, int m, std::vector<double> x, double precision = 1e-6) {
-  SCOPED_TRACE(testing::Message() << n << " parameters, " << m << " residuals");
-  auto* fn = new F(functor);
-  ceres::DynamicAutoDiffCostFunction<F, 8> cost(fn);
-  cost.AddParameterBlock(n);
-  cost.SetNumResiduals(m);
-  // GradientChecker differentiates by Ridders' method; its default first step (1e-2, not
-  // relative to small parameters) spans a strongly curved range of the compliance and
-  // error-motion units (tens of mrad of joint motion), where the extrapolation fails.
-  ceres::NumericDiffOptions numeric;
-  numeric.ridders_relative_initial_step_size = 1e-3;
-  const std::vector<const ceres::Manifold*>* no_manifolds = nullptr;
-  ceres::GradientChecker checker(&cost, no_manifolds, numeric);
-  ceres::GradientChecker::ProbeResults results;
-  const double* blocks[1] = {x.data()};
-  EXPECT_TRUE(checker.Probe(blocks, precision, &results)) << results.error_log;
-  // A unit whose Jacobian is zero everywhere would pass trivially: it must depend on x.
-  EXPECT_GT(results.jacobians[0].norm(), 0.0);
-}
+using test::ExpectGradientsMatch;
 
 // Residuals: the flange position (m) and the 9 entries of its rotation matrix (smooth
 // everywhere, unlike a rotation vector at the identity).

@@ -118,15 +118,8 @@ SequenceAudit AuditCameras(const CameraRig& rig, const Target& target, const std
         if (!rig.cameras[c].Sees(p_cam, 10)) continue;
         const Vec2 q = PredictBall(rig.cameras[c], rig.cameras[c].T_cam_rig(), target, r.T_rig_target, b, nullptr,
                                    nullptr);
-        int best = -1;
-        double best_d = kAuditGatePx;
-        for (size_t k = 0; k < blobs.size(); ++k)
-          if (!used[k] && (blobs[k].q - q).norm() < best_d) {
-            best_d = (blobs[k].q - q).norm();
-            best = static_cast<int>(k);
-          }
+        const int best = ClaimNearest(blobs, q, kAuditGatePx, &used);
         if (best < 0) continue;
-        used[best] = true;
         // The prediction carries the leave-one-out pose's error: the residual's covariance
         // is the blob's plus J C_pose J^T, with J = dq/dp_cam R_cam_rig [-(R p_target)x, I]
         // for the pose perturbation of docs/conventions.md.

@@ -242,15 +242,8 @@ class Auditor {
           const Vec3 p_cam_c = cam.T_cam_rig() * (T_c * target_x.balls_target[b]);
           const Vec2 q0 = cam.Project(p_cam);
           const Vec2 q = cam.Project(p_cam_c) + SphereProjectionBias(cam, p_cam_c, target_x.ball_radius, 32);
-          int best = -1;
-          double best_d = o_.gate_px;
-          for (size_t k = 0; k < blobs.size(); ++k)
-            if (!used[k] && (blobs[k].q - q).norm() < best_d) {
-              best_d = (blobs[k].q - q).norm();
-              best = static_cast<int>(k);
-            }
+          const int best = ClaimNearest(blobs, q, o_.gate_px, &used);
           if (best < 0) continue;
-          used[best] = true;
           obs.push_back({c, b, blobs[best].q - (cam.Project(p_cam_c) - q0), blobs[best].cov});
         }
       }

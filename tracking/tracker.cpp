@@ -328,20 +328,8 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
         if (!cam.Sees(p_cam)) continue;
         const Vec2 q = SphereImageCentroid(cam, p_cam, target_.ball_radius,
                                                 options_.refinement.bias_outline_points);
-        int best = -1;
-        double best_d = gate;
-        for (size_t k = 0; k < pts[c].size(); ++k) {
-          if (used[c][k]) continue;
-          const double d = (pts[c][k].q - q).norm();
-          if (d < best_d) {
-            best_d = d;
-            best = static_cast<int>(k);
-          }
-        }
-        if (best >= 0) {
-          out->push_back({c, b, pts[c][best].q, pts[c][best].cov});
-          used[c][best] = true;
-        }
+        const int best = ClaimNearest(pts[c], q, gate, &used[c]);
+        if (best >= 0) out->push_back({c, b, pts[c][best].q, pts[c][best].cov});
       }
   };
   associate(*initial, from_prediction ? 3 * options_.association_gate_px : options_.association_gate_px, &obs);

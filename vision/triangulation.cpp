@@ -298,4 +298,19 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
   return out;
 }
 
+int ClaimNearest(const std::vector<ImagePoint>& points, const Vec2& q, double gate, std::vector<bool>* used) {
+  int best = -1;
+  double best_d = gate;
+  for (size_t k = 0; k < points.size(); ++k) {
+    if ((*used)[k]) continue;
+    const double d = (points[k].q - q).norm();
+    if (d < best_d) {
+      best_d = d;
+      best = static_cast<int>(k);
+    }
+  }
+  if (best >= 0) (*used)[best] = true;
+  return best;
+}
+
 }  // namespace mcms

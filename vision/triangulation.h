@@ -73,4 +73,8 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
 // Whitening factor L with L^T L = cov^-1 (so residual L*e has unit covariance).
 Mat2 WhiteningOf(const Mat2& cov);
 
+// Association of a predicted image point with detected ones: the index of the point not yet
+// used that is nearest to q, closer than `gate` px, marked used; -1 when there is none.
+int ClaimNearest(const std::vector<ImagePoint>& points, const Vec2& q, double gate, std::vector<bool>* used);
+
 }  // namespace mcms
