@@ -3,6 +3,7 @@
 // externally measured tool positions, tests its residuals, names the catalog effects that
 // explain them with their sizes, and measures each one's held-out gain.
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 
 #include "app/audit_modes.h"
@@ -17,7 +18,7 @@ struct AuditRobotArgs {
   std::vector<std::string> only;
   std::vector<double> base_guess;
   double false_alarm = 0.01;
-  int folds = 5, max_effects = 4;
+  int folds = 5, max_effects = 6;
   bool quiet = false;
 };
 
@@ -45,7 +46,9 @@ int RunAuditRobot(const AuditRobotArgs& a) {
   if (!a.quiet) job.options.progress = [](const std::string& s) { std::fprintf(stderr, "audit robot: %s\n", s.c_str()); };
   const std::string report = RunRobotAuditJob(job);
   std::printf("%s", report.c_str());
-  if (!a.output.empty()) std::printf("wrote %s (report.txt, report.json, robot.yaml, residuals.csv, plots/)\n", a.output.c_str());
+  if (!a.output.empty())
+    std::printf("wrote %s (report.txt, report.json, robot.yaml, residuals.csv, plots/%s)\n", a.output.c_str(),
+                std::filesystem::exists(std::filesystem::path(a.output) / "next_poses.csv") ? ", next_poses.csv" : "");
   if (!a.json.empty()) std::printf("wrote %s\n", a.json.c_str());
   return 0;
 }
@@ -58,19 +61,27 @@ std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit) {
       "robot",
       "Audit a robot model against a measurement log: CSV time_s,q1_rad..qN_rad,x_m,y_m,z_m [,qw,qx,qy,qz] "
       "[,temperature_c] [,payload_kg] (or a calib-robot YAML file). The registration to the robot base and the tool "
-      "are fitted; the noise (anisotropic, unknown) is estimated, from repeated poses where there are any. Names the "
-      "effects of the catalog (joint_offset, link_length, joint_scale, gravity_compliance, thermal_drift, backlash, "
-      "error_motion) that earn their parameters on held-out data, with size +- sigma.");
+      "are fitted; the noise (anisotropic, unknown) is estimated, from repeated poses where there are any. Geometry "
+      "first: the DH parameters the poses identify, one by one (joint_offset, link_length, link_twist) or all at once "
+      "(geometry); then the effects of the catalog on top of the whole geometry (gravity_compliance: the arm's own "
+      "weight and the payload, from the robot file's link masses or lumped masses when it has none; joint_scale, "
+      "thermal_drift, backlash, error_motion) that earn their parameters on held-out data, with size +- sigma. "
+      "Candidates the data cannot tell apart are reported undecided with both sizes, and -o writes the poses that "
+      "would separate them (next_poses.csv).");
   cmd->add_option("LOG", args->log, "measurement log (CSV or calib-robot YAML)")->required();
-  cmd->add_option("--robot", args->robot, "robot description (YAML, model/robots format); default: the built-in KUKA KR 5 arc");
-  cmd->add_option("-o,--output", args->output, "output folder: report.txt, report.json, robot.yaml, residuals.csv, plots/");
+  cmd->add_option("--robot", args->robot,
+                  "robot description (YAML, model/robots format, optionally with link masses: "
+                  "examples/robots/ur10_like.yaml); default: the built-in KUKA KR 5 arc");
+  cmd->add_option("-o,--output", args->output,
+                  "output folder: report.txt, report.json, robot.yaml, residuals.csv, plots/, next_poses.csv (when a "
+                  "pair is undecided)");
   cmd->add_option("--json", args->json, "write the machine-readable report here");
   cmd->add_option("--only", args->only, "test only these catalog effects (names)");
   cmd->add_option("--base-guess", args->base_guess, "starting T_meas_base: x y z qw qx qy qz (m)")->expected(7);
   cmd->add_option("--false-alarm", args->false_alarm,
                   "designed probability that a clean log is called not clean (default 0.01)");
   cmd->add_option("--folds", args->folds, "time-blocked cross-validation folds (default 5)");
-  cmd->add_option("--max-effects", args->max_effects, "at most this many effects (default 4)");
+  cmd->add_option("--max-effects", args->max_effects, "at most this many non-geometric effects (default 6)");
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args] { return RunAuditRobot(*args); }));
 }

@@ -122,30 +122,6 @@ int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOpti
   return NumParameters(robot, options);
 }
 
-namespace {
-
-// Whitened residuals and the dense Jacobian (rows: residuals, columns: all parameters).
-void Evaluate(const std::vector<std::unique_ptr<CostFunction>>& costs, const Eigen::VectorXd& x,
-              Eigen::VectorXd* r, Eigen::MatrixXd* J) {
-  int rows = 0;
-  for (const auto& c : costs) rows += c->num_residuals();
-  r->resize(rows);
-  if (J) J->resize(rows, x.size());
-  const double* params[] = {x.data()};
-  int at = 0;
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Ji;
-  for (const auto& c : costs) {
-    const int m = c->num_residuals();
-    Ji.resize(m, x.size());
-    double* jac[] = {Ji.data()};
-    c->Evaluate(params, r->data() + at, J ? jac : nullptr);
-    if (J) J->middleRows(at, m) = Ji;
-    at += m;
-  }
-}
-
-// Greedy identifiability analysis (header comment). `requested` marks parameters fixed
-// by request (they are skipped, their reason already set).
 void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
                             std::vector<CalibrationParameter>* params) {
   const int n = static_cast<int>(J.cols());
@@ -183,6 +159,28 @@ void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::str
     Q.conservativeResize(Eigen::NoChange, Q.cols() + 1);
     Q.col(Q.cols() - 1) = res / dist;
     kept.push_back(j);
+  }
+}
+
+namespace {
+
+// Whitened residuals and the dense Jacobian (rows: residuals, columns: all parameters).
+void Evaluate(const std::vector<std::unique_ptr<CostFunction>>& costs, const Eigen::VectorXd& x,
+              Eigen::VectorXd* r, Eigen::MatrixXd* J) {
+  int rows = 0;
+  for (const auto& c : costs) rows += c->num_residuals();
+  r->resize(rows);
+  if (J) J->resize(rows, x.size());
+  const double* params[] = {x.data()};
+  int at = 0;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Ji;
+  for (const auto& c : costs) {
+    const int m = c->num_residuals();
+    Ji.resize(m, x.size());
+    double* jac[] = {Ji.data()};
+    c->Evaluate(params, r->data() + at, J ? jac : nullptr);
+    if (J) J->middleRows(at, m) = Ji;
+    at += m;
   }
 }
 
@@ -372,7 +370,7 @@ RobotModel WithErrorMotionErrors(const RobotModel& robot, const std::vector<int>
       j.error_motion_cos[h] += delta.segment<6>(at + 6);
     }
   }
-  return RobotModel(robot.Name(), robot.Convention(), joints, robot.T_flange_tool());
+  return robot.WithJoints(joints);
 }
 
 RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta) {
@@ -386,7 +384,7 @@ RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta) {
     joints[i].a += delta[4 * i + 2];
     joints[i].alpha += delta[4 * i + 3];
   }
-  return RobotModel(robot.Name(), robot.Convention(), joints, robot.T_flange_tool());
+  return robot.WithJoints(joints);
 }
 
 std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_meas_base,

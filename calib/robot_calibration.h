@@ -203,6 +203,15 @@ CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_b
                                    const std::vector<RobotMeasurement>& measurements,
                                    const RobotCalibrationOptions& options, int folds);
 
+// The greedy identifiability analysis of the header comment on a Jacobian whose columns
+// are in priority order (the calibration puts base and tool first, then the joints from
+// the base out; the robot audit does the same): a column whose relative distance from the
+// span of the columns kept before it is below `tol`, or that is zero, is marked fixed in
+// `params` (index-aligned with the columns) with the reason, naming the kept parameters it
+// is a combination of. Parameters already fixed (by request) are skipped.
+void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
+                            std::vector<CalibrationParameter>* params);
+
 // Greedy pose selection: picks k of the candidate joint vectors, each step the one that
 // most improves the column-normalized information matrix of the identifiable parameters
 // (the identifiability analysis runs on all candidates first): log det (D-optimal) while

@@ -5,7 +5,8 @@
 //   {"mode": .., "nominal": {"chi2_per_dof": .., "n": ..}, "clean": true|false,
 //    "effects": [{"name", "where", "parameters": {..}, "sigma": {..}, "heldout_rms_before",
 //                 "heldout_rms_after", "heldout_loglik_gain", "bic_gain"}],
-//    "undecided": [[name, name], ..], "tests": [..], "notes": [..]}
+//    "undecided": [[name, name], ..], "undecided_effects": [[{effect}, ..], ..],
+//    "tests": [..], "notes": [..]}   (an effect may also carry "held": {name: reason})
 // Units: parameters and sigmas in SI (rad, m, s, dimensionless factors); held-out RMS in
 // the unit the mode states in `rms_unit` (m for robot positions, px for cameras).
 #pragma once
@@ -33,6 +34,9 @@ struct AuditEffect {
   // Parameters that are names, not numbers (the lens audit: the chosen lens model);
   // written into "parameters" beside the numbers.
   std::vector<std::pair<std::string, std::string>> labels;
+  // Parameters of the effect that the data cannot identify, held at their nominal value,
+  // with the reason (the robot audit's `geometry`: "not identifiable: a combination of ...").
+  std::vector<std::pair<std::string, std::string>> held;
   double heldout_rms_before = 0.0, heldout_rms_after = 0.0;
   double heldout_loglik_gain = 0.0;  // summed over held-out measurements (nats)
   double bic_gain = 0.0;             // BIC(before) - BIC(after) on all data (> 0 = earns its place)
@@ -48,6 +52,9 @@ struct AuditReport {
   std::vector<AuditTest> tests;
   std::vector<AuditEffect> effects;
   std::vector<std::vector<std::string>> undecided;  // groups of "name at where" labels
+  // The same groups with each member's fitted size (parameters, sigma, gains), when the
+  // mode gives them (the robot audit); index-aligned with `undecided`, or empty.
+  std::vector<std::vector<AuditEffect>> undecided_effects;
   std::vector<std::string> notes;                   // what the audit could not test, and why
 
   // Appends another audit of the same data set (fusion: the inclinometer beside the

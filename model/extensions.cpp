@@ -12,11 +12,15 @@ const std::vector<EffectInfo>& EffectCatalog() {
       {Effect::kLinkLength, "link_length", SensorKind::kRobot, "one DH length a or d off (m)"},
       {Effect::kJointScale, "joint_scale", SensorKind::kRobot, "a gear-ratio error: the joint moves (1 + s) q"},
       {Effect::kGravityCompliance, "gravity_compliance", SensorKind::kRobot,
-       "joint deflection proportional to its gravity torque (rad per N m)"},
+       "joint deflection proportional to the gravity torque of the links beyond it and the payload (compliance >= 0)"},
       {Effect::kThermalDrift, "thermal_drift", SensorKind::kRobot,
        "every link length grows by a relative amount: exponential warm-up in time, or linear in temperature"},
-      {Effect::kBacklash, "backlash", SensorKind::kRobot, "a joint lags by half its backlash against the last move"},
+      {Effect::kBacklash, "backlash", SensorKind::kRobot,
+       "a joint lags its motor-side encoder by half its backlash against the last move (backlash >= 0)"},
       {Effect::kErrorMotion, "error_motion", SensorKind::kRobot, "harmonic error motion of a rotary joint (ISO 230-7)"},
+      {Effect::kLinkTwist, "link_twist", SensorKind::kRobot, "one DH twist alpha off (rad)"},
+      {Effect::kGeometry, "geometry", SensorKind::kRobot,
+       "every DH parameter the data identify (theta offset, d, a, alpha of each joint) at once"},
       {Effect::kCameraMoved, "camera_moved", SensorKind::kCamera, "the camera's pose in the rig moved (6 dof)"},
       {Effect::kFocalLength, "focal_length", SensorKind::kCamera, "both focal lengths scaled by 1 + s"},
       {Effect::kPrincipalPoint, "principal_point", SensorKind::kCamera, "the principal point shifted (px)"},
@@ -53,6 +57,8 @@ int Extension::NumParameters() const {
   switch (effect) {
     case Effect::kThermalDrift: return variant == 0 ? 2 : 1;
     case Effect::kErrorMotion: return kErrorMotionParamsPerHarmonic * variant;
+    case Effect::kGeometry: return kDhParamsPerJoint * variant;
+    case Effect::kGravityCompliance: return variant == 0 ? 1 : variant;
     case Effect::kCameraMoved: return 6;
     case Effect::kPrincipalPoint:
     case Effect::kInclinometerBias:
@@ -68,7 +74,27 @@ std::vector<std::string> Extension::ParameterNames() const {
     case Effect::kJointOffset: return {"offset_rad"};
     case Effect::kLinkLength: return {"delta_m"};
     case Effect::kJointScale: return {"scale"};
-    case Effect::kGravityCompliance: return {"compliance_rad_per_Nm"};
+    case Effect::kGravityCompliance: {
+      if (variant == 0) return {"compliance_rad_per_Nm"};
+      std::vector<std::string> names;
+      const int n = (variant - 1) / 2;
+      for (int k = 1; k <= n; ++k) names.push_back(std::string("c_m_o").append(std::to_string(k)));
+      for (int k = 1; k <= n; ++k) names.push_back(std::string("c_m_c").append(std::to_string(k)));
+      names.push_back("c_m_tool");
+      return names;
+    }
+    case Effect::kLinkTwist: return {"delta_rad"};
+    case Effect::kGeometry: {
+      std::vector<std::string> names;
+      for (int j = 1; j <= variant; ++j)
+        for (const char* f : {"theta_offset", "d", "a", "alpha"}) {
+          std::string name = std::to_string(j);  // (GCC 12 -Wrestrict misfires on "J" + ...)
+          name.insert(name.begin(), 'J');
+          name.append(".").append(f);
+          names.push_back(name);
+        }
+      return names;
+    }
     case Effect::kThermalDrift:
       return variant == 0 ? std::vector<std::string>{"growth", "time_constant_s"}
                           : std::vector<std::string>{"growth_per_K"};
@@ -107,7 +133,9 @@ std::string Extension::Where(const std::vector<std::string>& camera_names) const
   switch (Info(effect).sensor) {
     case SensorKind::kRobot:
       if (effect == Effect::kThermalDrift) return "robot";
+      if (effect == Effect::kGeometry) return "DH table";
       if (effect == Effect::kLinkLength) return std::string(variant == 0 ? "a" : "d") + std::to_string(index + 1);
+      if (effect == Effect::kLinkTwist) return "alpha" + std::to_string(index + 1);
       return "joint " + std::to_string(index + 1);
     case SensorKind::kCamera:
       if (effect == Effect::kTargetGeometry) return "ball " + std::to_string(index + 1);
@@ -133,6 +161,7 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
     case Effect::kBacklash:
     case Effect::kErrorMotion:
     case Effect::kLinkLength:
+    case Effect::kLinkTwist:
       if (!robot) bad("needs a robot");
       if (index < 0 || index >= robot->NumJoints())
         bad("joint index " + std::to_string(index) + " is outside the robot's " +
@@ -141,6 +170,12 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
       if (effect == Effect::kErrorMotion && variant < 1) bad("needs at least one harmonic");
       if (effect == Effect::kErrorMotion && robot->Joints()[index].type != JointType::kRevolute)
         bad("error motion is for revolute joints");
+      if (effect == Effect::kGravityCompliance && variant != 0 && variant != 2 * robot->NumJoints() + 1)
+        bad("variant must be 0 (the robot's masses) or 2 n + 1 (lumped masses)");
+      break;
+    case Effect::kGeometry:
+      if (!robot) bad("needs a robot");
+      if (variant != robot->NumJoints()) bad("variant must be the robot's number of joints");
       break;
     case Effect::kThermalDrift:
       if (variant != 0 && variant != 1) bad("variant must be 0 (warm-up in time) or 1 (linear in temperature)");
@@ -155,6 +190,63 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
             " cameras");
       break;
   }
+}
+
+namespace {
+
+constexpr double kStandardGravity = 9.80665;
+
+// Torque on joint i (of a robot whose link frames are `frames`) of a force f at point p of
+// link k (1-based; moved by joints 1..k).
+void AddPointTorque(const RobotModel& robot, const std::vector<Pose>& frames, int k, const Vec3& p, const Vec3& f,
+                    double scale, Eigen::Ref<Eigen::VectorXd> tau) {
+  const bool standard = robot.Convention() == DhConvention::kStandard;
+  for (int i = 0; i < k && i < robot.NumJoints(); ++i) {
+    const Pose& F = standard ? frames[i] : frames[i + 1];
+    const Vec3 z = F.R.col(2);
+    tau[i] += scale * (robot.Joints()[i].type == JointType::kRevolute ? z.cross(p - F.t).dot(f) : z.dot(f));
+  }
+}
+
+}  // namespace
+
+Eigen::VectorXd GravityTorque(const RobotModel& robot, const Eigen::VectorXd& q, double payload_kg) {
+  if (!robot.HasMasses())
+    Throw("robot '", robot.Name(), "' gives no link masses (mass_kg per joint); its gravity torque is not known");
+  const std::vector<Pose> frames = robot.LinkFrames(q);
+  const Vec3 g(0.0, 0.0, -kStandardGravity);
+  const int n = robot.NumJoints();
+  Eigen::VectorXd tau = Eigen::VectorXd::Zero(n);
+  for (int k = 1; k <= n; ++k) {
+    const Joint& j = robot.Joints()[k - 1];
+    if (j.mass_kg > 0) AddPointTorque(robot, frames, k, frames[k] * j.com_m, g, j.mass_kg, tau);
+  }
+  const ToolMass& tm = robot.Tool();
+  if (tm.mass_kg > 0) AddPointTorque(robot, frames, n, frames[n] * tm.com_m, g, tm.mass_kg, tau);
+  if (payload_kg > 0) AddPointTorque(robot, frames, n, (frames[n] * robot.T_flange_tool()).t, g, payload_kg, tau);
+  return tau;
+}
+
+Eigen::MatrixXd GravityLever(const RobotModel& robot, const Eigen::VectorXd& q) {
+  const std::vector<Pose> frames = robot.LinkFrames(q);
+  const Vec3 g(0.0, 0.0, -kStandardGravity);
+  const int n = robot.NumJoints();
+  const bool standard = robot.Convention() == DhConvention::kStandard;
+  Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n, 2 * n + 1);
+  for (int k = 1; k <= n; ++k) {
+    AddPointTorque(robot, frames, k, frames[k].t, g, 1.0, L.col(k - 1));
+    // The corner of link k's DH path: standard o_{k-1} + d_k z_{k-1} (on link k); modified
+    // o_{k-1} + a_k x_{k-1} (fixed to link k-1).
+    const Joint& j = robot.Joints()[k - 1];
+    if (standard) {
+      const double d = j.type == JointType::kRevolute ? j.d : j.d + q[k - 1];
+      AddPointTorque(robot, frames, k, frames[k - 1] * Vec3(0.0, 0.0, d), g, 1.0, L.col(n + k - 1));
+    } else {
+      AddPointTorque(robot, frames, k - 1, frames[k - 1] * Vec3(j.a, 0.0, 0.0), g, 1.0, L.col(n + k - 1));
+    }
+  }
+  AddPointTorque(robot, frames, n, (frames[n] * robot.T_flange_tool()).t, g, 1.0, L.col(2 * n));
+  return L;
 }
 
 Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorXd& q) {

@@ -7,8 +7,9 @@
 // its parameter block and what the measurement knows (MeasurementContext) and changes one
 // quantity of the nominal model:
 //   robot          joint values (dq) and DH table (dh): joint_offset, joint_scale,
-//                  gravity_compliance, backlash, link_length, thermal_drift; error_motion
-//                  is the joint's harmonic error motion (model/kinematics.h, 12 / harmonic);
+//                  gravity_compliance, backlash, link_length, link_twist, thermal_drift,
+//                  geometry (every DH parameter at once); error_motion is the joint's
+//                  harmonic error motion (model/kinematics.h, 12 / harmonic);
 //   cameras        camera_moved (T_rig_cam), focal_length, principal_point,
 //                  radial_distortion (intrinsics), camera_time_offset (the target's pose at
 //                  a shifted time), pixel_noise_scale (the noise model), target_geometry
@@ -36,6 +37,7 @@ namespace mcms {
 enum class Effect {
   // robot
   kJointOffset, kLinkLength, kJointScale, kGravityCompliance, kThermalDrift, kBacklash, kErrorMotion,
+  kLinkTwist, kGeometry,
   // cameras
   kCameraMoved, kFocalLength, kPrincipalPoint, kRadialDistortion, kCameraTimeOffset, kPixelNoiseScale,
   kTargetGeometry,
@@ -61,10 +63,18 @@ std::optional<Effect> EffectFromName(std::string_view name);
 
 // One extension: an effect at one place.
 //  index:   the joint (0-based) for joint_offset, joint_scale, gravity_compliance, backlash,
-//           error_motion; the link (0-based) for link_length; the camera for camera effects;
-//           the ball for target_geometry; unused (-1) otherwise.
+//           error_motion, link_twist; the link (0-based) for link_length; the camera for
+//           camera effects; the ball for target_geometry; unused (-1) otherwise.
 //  variant: link_length 0 = a, 1 = d; thermal_drift 0 = exponential warm-up in time,
-//           1 = linear in temperature; error_motion = the number of harmonics (>= 1).
+//           1 = linear in temperature; error_motion = the number of harmonics (>= 1);
+//           geometry = the robot's number of joints n (4 n parameters: [dtheta, dd, da,
+//           dalpha] per joint, added to the DH table); gravity_compliance 0 = the joint's
+//           compliance (rad per N m) times the gravity torque of the robot's own masses
+//           and the payload (MeasurementContext::gravity_torque), 2 n + 1 = lumped masses:
+//           compliance x mass (rad kg / (N m)) at each link frame's origin o_1..o_n, at
+//           each link's DH corner c_1..c_n and at the tool point, times the torque per kg
+//           there (MeasurementContext::gravity_lever), for robots whose masses are not
+//           given (a centre of mass on a link's DH path is a positive sum of them).
 struct Extension {
   Effect effect = Effect::kJointOffset;
   int index = -1;
@@ -92,9 +102,16 @@ struct MeasurementContext {
   double temperature_c = std::nan("");   // NaN when the log has no temperature
   double reference_temperature_c = 20.0; // temperature at which the DH table holds
   // Per joint: the sign (+1, -1, 0) of the last move's direction (backlash), and the
-  // gravity torque of the flange load (GravityTorquePerKg times the load, N m).
+  // gravity torque on it (N m): of the robot's own masses and the payload when the robot
+  // gives its masses (GravityTorque), else of the flange load alone.
   Eigen::VectorXd move_direction;
   Eigen::VectorXd gravity_torque;
+  // n x (2 n + 1): torque on joint i (N m) per kg at link frame origin o_k (column k - 1,
+  // k = 1..n), at link k's DH corner (column n + k - 1: standard DH o_{k-1} + d_k z_{k-1},
+  // modified o_{k-1} + a_k x_{k-1}) and at the tool point (column 2 n, times the payload
+  // when it is known): the covariates of lumped-mass gravity compliance (GravityLever).
+  // Empty = none.
+  Eigen::MatrixXd gravity_lever;
   // Per joint: the joint velocity at the measurement (rad/s or m/s; empty = at rest), for
   // a clock offset between the robot's log and the measuring instrument.
   Eigen::VectorXd joint_velocity;
@@ -103,8 +120,15 @@ struct MeasurementContext {
 // Torque (N m) that 1 kg at the flange origin puts on each joint by gravity (base z up,
 // g = 9.80665): tau_i = (z_i x (p_flange - o_i)) . (0, 0, -g) for a revolute joint i with
 // axis z_i through o_i; (z_i . (0, 0, -g)) for a prismatic one. Compliance deflects each
-// joint in proportion to it (the parameter carries the sign and the stiffness).
+// joint in proportion to it (a stiffness is positive: the audit bounds it at 0).
 Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorXd& q);
+// Gravity torque (N m) on each joint of the robot's own links (Joint::mass_kg at com_m),
+// the tool's mass (RobotModel::Tool) and a payload at the tool point; only joints that
+// move a mass feel it. InputError when the robot gives no masses (HasMasses).
+Eigen::VectorXd GravityTorque(const RobotModel& robot, const Eigen::VectorXd& q, double payload_kg);
+// The lumped-mass covariates of MeasurementContext::gravity_lever: n x (2 n + 1), torque
+// on each joint per kg at each link frame's origin, each link's DH corner and the tool point.
+Eigen::MatrixXd GravityLever(const RobotModel& robot, const Eigen::VectorXd& q);
 
 // ---- robot units ------------------------------------------------------------------
 // Adds the effect of `e` with parameters p to the joint corrections dq (n) and the DH
@@ -118,12 +142,22 @@ void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p
     case Effect::kJointOffset: dq[i] += p[0]; break;
     case Effect::kJointScale: dq[i] += p[0] * q[i]; break;
     case Effect::kGravityCompliance:
-      if (c.gravity_torque.size() > i) dq[i] += p[0] * c.gravity_torque[i];
+      if (e.variant == 0) {
+        if (c.gravity_torque.size() > i) dq[i] += p[0] * c.gravity_torque[i];
+      } else if (c.gravity_lever.rows() > i) {
+        for (int k = 0; k < e.variant && k < c.gravity_lever.cols(); ++k) dq[i] += p[k] * c.gravity_lever(i, k);
+      }
       break;
     case Effect::kBacklash:
-      if (c.move_direction.size() > i) dq[i] += 0.5 * p[0] * c.move_direction[i];
+      // The link lags the motor-side encoder by half the backlash against the last move:
+      // q_link = q_encoder - b/2 sign(last move), b >= 0.
+      if (c.move_direction.size() > i) dq[i] -= 0.5 * p[0] * c.move_direction[i];
       break;
     case Effect::kLinkLength: dh[kDhParamsPerJoint * i + (e.variant == 0 ? 2 : 1)] += p[0]; break;
+    case Effect::kLinkTwist: dh[kDhParamsPerJoint * i + 3] += p[0]; break;
+    case Effect::kGeometry:
+      for (int k = 0; k < kDhParamsPerJoint * robot.NumJoints(); ++k) dh[k] += p[k];
+      break;
     case Effect::kThermalDrift: {
       // Every link length grows by the same relative amount s.
       T s;

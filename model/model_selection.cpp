@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include <boost/math/distributions/chi_squared.hpp>
@@ -68,7 +69,24 @@ bool SelectionRule::IsValid(std::string* why) const {
   if (!(ln_n >= 0)) return fail("ln_n must be >= 0");
   if (!(close_bic >= 0) || !(undecided_heldout >= 0) || !(undecided_bic >= 0) || !(undecided_bic_relative >= 0))
     return fail("margins must be >= 0");
+  if (!(tie_z >= 0)) return fail("tie_z must be >= 0");
   return true;
+}
+
+double PairedZ(const std::vector<double>& a, const std::vector<double>& b, double offset) {
+  const size_t n = a.size();
+  if (n == 0 || b.size() != n) return 0.0;
+  double sum = 0, sq = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const double d = a[i] - b[i];
+    sum += d;
+    sq += d * d;
+  }
+  const double var = std::max(0.0, sq / n - (sum / n) * (sum / n));
+  const double se = std::sqrt(n * var);
+  const double x = sum - offset;
+  if (!(se > 0)) return x > 0 ? std::numeric_limits<double>::infinity() : (x < 0 ? -std::numeric_limits<double>::infinity() : 0.0);
+  return x / se;
 }
 
 StepDecision DecideStep(std::vector<SelectionCandidate>& cands, int m, const SelectionRule& rule,
@@ -113,17 +131,51 @@ StepDecision DecideStep(std::vector<SelectionCandidate>& cands, int m, const Sel
   int best = contenders.front();
   for (int i : contenders)
     if (cands[i].heldout_gain > cands[best].heldout_gain) best = i;
-  d.best = best;
-  d.group = {best};
-  const SelectionCandidate& b = cands[best];
-  for (int i : passing) {
-    if (i == best || cands[i].group != b.group) continue;
-    if (!(cands[i].bic_gain >= bar - rule.close_bic)) continue;
+  // Whether candidate i explains the same residual as `b` equally well (rule 4).
+  const auto Ties = [&](int b, int i) {
+    const SelectionCandidate &cb = cands[b], &ci = cands[i];
+    const bool rows = !cb.row_loglik.empty() && cb.row_loglik.size() == ci.row_loglik.size();
+    if (rows) {
+      // Only a candidate that also gains held out can stand beside the best.
+      if (!(Gain(i) > 0)) return false;
+      if (PairedZ(cb.row_loglik, ci.row_loglik, 0.5 * (cb.k - ci.k) * rule.ln_n) < rule.tie_z) return true;
+      const double h = ci.heldout_gain;
+      if (!cb.heldout_row_loglik.empty() && cb.heldout_row_loglik.size() == ci.heldout_row_loglik.size())
+        return PairedZ(cb.heldout_row_loglik, ci.heldout_row_loglik) < 1.0;
+      return std::abs(h - cb.heldout_gain) <= rule.undecided_heldout;
+    }
+    if (!(ci.bic_gain >= bar - rule.close_bic)) return false;
     const double h = Gain(i);
-    if (std::abs(h - b.heldout_gain) <= rule.undecided_heldout &&
-        std::abs(cands[i].bic_gain - b.bic_gain) <= rule.undecided_bic + rule.undecided_bic_relative * b.lr)
-      d.group.push_back(i);
+    return std::abs(h - cb.heldout_gain) <= rule.undecided_heldout &&
+           std::abs(ci.bic_gain - cb.bic_gain) <= rule.undecided_bic + rule.undecided_bic_relative * cb.lr;
+  };
+  const auto GroupOf = [&](int b) {
+    std::vector<int> g{b};
+    for (int i : passing) {
+      if (i == b || cands[i].group != cands[b].group) continue;
+      if (cands[i].tier > cands[b].tier) continue;  // rule 5
+      if (Ties(b, i)) g.push_back(i);
+    }
+    return g;
+  };
+  std::vector<int> group = GroupOf(best);
+  // Rule 5: a tied candidate of a lower tier is named in the best's place.
+  for (int guard = 0; guard < 8; ++guard) {
+    int lower = -1;
+    for (int i : group)
+      if (cands[i].tier < cands[best].tier &&
+          (lower < 0 || cands[i].tier < cands[lower].tier ||
+           (cands[i].tier == cands[lower].tier && cands[i].heldout_gain > cands[lower].heldout_gain)))
+        lower = i;
+    if (lower < 0) break;
+    best = lower;
+    group = GroupOf(best);
   }
+  // The group holds only the best's tier.
+  group.erase(std::remove_if(group.begin() + 1, group.end(), [&](int i) { return cands[i].tier != cands[best].tier; }),
+              group.end());
+  d.best = best;
+  d.group = group;
   d.outcome = d.group.size() > 1 ? StepOutcome::kUndecided : StepOutcome::kNamed;
   return d;
 }

@@ -20,11 +20,24 @@
 //  3. among the contenders with a positive held-out gain, the one with the largest
 //     held-out gain is the step's effect (a drift and a geometric error fit all data
 //     alike; blocks of time tell them apart);
-//  4. a contender of the same group whose held-out gain is within `undecided_heldout`
-//     nats of the best's and whose BIC gain is within undecided_bic +
-//     undecided_bic_relative * lr of the best's explains the same residual equally
-//     well: the step names neither and reports the group as undecided;
-//  5. no passing candidate, or none with a held-out gain > 0: the selection stops.
+//  4. a contender of the same group that explains the same residual equally well is a
+//     tie: the step names neither and reports the group as undecided. With per-
+//     measurement log-likelihoods (row_loglik, heldout_row_loglik, as the robot audit
+//     gives) a tie is judged statistically: the two candidates' fits differ by less than
+//     chance produces on all data (Vuong's paired test of the per-measurement log-
+//     likelihood differences with the BIC correction for their sizes, z below `tie_z`),
+//     or their held-out gains differ by less
+//     than one standard error of the paired per-measurement differences; any passing
+//     candidate of the group is tested. Without them: held-out gains within
+//     `undecided_heldout` nats and BIC gains within undecided_bic + undecided_bic_relative
+//     * lr of the best's;
+//  5. candidates carry a preference tier for ties (lower is preferred): a flexible family
+//     (a harmonic series that can follow many shapes, e.g. error motion of an articulated
+//     arm's joint) or a broad one (every DH parameter at once) is named only where no
+//     candidate of a lower tier ties with it: when the best ties with a lower-tier
+//     candidate, that one is taken in its place (its own ties decide undecided), and a
+//     higher-tier candidate never joins a lower-tier best's undecided group;
+//  6. no passing candidate, or none with a held-out gain > 0: the selection stops.
 // Designed false-alarm rate: a mode gives the selection a share alpha of its rate; with
 // at most one false step per data set the probability of naming anything on a clean data
 // set is <= alpha (held-out gain and BIC only lower it).
@@ -72,6 +85,9 @@ struct SelectionRule {
   double undecided_heldout = 1.0;  // nats
   double undecided_bic = 2.0;
   double undecided_bic_relative = 0.0;
+  // With per-measurement log-likelihoods: Vuong's z below this is a tie (one-sided 5 %:
+  // the chance of preferring the wrong one of two candidates that differ by this much).
+  double tie_z = 1.645;
   bool IsValid(std::string* why) const;
 };
 
@@ -83,6 +99,12 @@ struct SelectionCandidate {
   // Held-out log-likelihood gain (nats, summed over the folds); NaN until known. The
   // engine fills it through the callback for the candidates it needs.
   double heldout_gain = std::numeric_limits<double>::quiet_NaN();
+  // Optional, for statistical ties: the log-likelihood of each measurement under the
+  // candidate's fit on all data, and of each held-out measurement under its fold's fit
+  // (same measurements, same order, for every candidate of the step). The held-out one
+  // may be filled by the held-out callback.
+  std::vector<double> row_loglik, heldout_row_loglik;
+  int tier = 0;  // preference in ties (rule 5): 0 = a single physical cause; higher = broader or flexible
   // Filled by the engine.
   double bic_gain = 0.0, p_value = 1.0;
   bool passes = false;  // likelihood-ratio test and BIC
@@ -100,6 +122,12 @@ struct StepDecision {
   int best = -1;                // the best contender (for kNoHeldoutGain: the best by BIC)
   std::vector<int> group;       // kUndecided: indices, best first
 };
+
+// Vuong's statistic for a paired comparison of per-measurement log-likelihoods a - b:
+// (sum - offset) / sqrt(n var), where offset corrects for the models' sizes (Vuong 1989:
+// (k_a - k_b) ln(n) / 2, the BIC correction; 0 for held-out log-likelihoods); +-inf when
+// every difference is equal, 0 when a or b is empty or the sizes differ.
+double PairedZ(const std::vector<double>& a, const std::vector<double>& b, double offset = 0.0);
 
 // One step of greedy forward selection over `cands` (m candidates tested in the step,
 // m >= cands.size(): candidates screened out before a full fit count). `heldout_gain(i)`

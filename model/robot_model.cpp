@@ -151,8 +151,9 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
   }
 
   Pose tool;
+  ToolMass tool_mass;
   if (const YAML::Node t = root["tool"]) {
-    in.CheckKeys(t, {"translation_m", "quaternion_wxyz"}, "tool");
+    in.CheckKeys(t, {"translation_m", "quaternion_wxyz", "mass_kg", "com_m"}, "tool");
     if (t["translation_m"]) {
       const auto v = in.Numbers(t["translation_m"], 3, "tool translation_m");
       tool.t = Vec3(v[0], v[1], v[2]);
@@ -163,6 +164,15 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
       if (std::abs(q.norm() - 1.0) > 1e-6)
         in.Fail(t["quaternion_wxyz"], "tool quaternion_wxyz must have unit norm, has ", q.norm());
       tool.R = q.normalized().toRotationMatrix();
+    }
+    if (t["com_m"] && !t["mass_kg"]) in.Fail(t["com_m"], "tool: com_m needs mass_kg");
+    if (t["mass_kg"]) {
+      tool_mass.mass_kg = in.Number(t["mass_kg"], "tool mass_kg");
+      if (tool_mass.mass_kg < 0) in.Fail(t["mass_kg"], "tool mass_kg must be >= 0, got ", tool_mass.mass_kg);
+      if (t["com_m"]) {
+        const auto v = in.Numbers(t["com_m"], 3, "tool com_m");
+        tool_mass.com_m = Vec3(v[0], v[1], v[2]);
+      }
     }
   }
 
@@ -175,7 +185,7 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
     in.CheckKeys(jn,
                  {"name", "type", "a_m", "d_m", "alpha_rad", "alpha_deg", "theta_offset_rad", "theta_offset_deg",
                   "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m",
-                  "error_motion"},
+                  "error_motion", "mass_kg", "com_m"},
                  where);
     Joint j;
     if (jn["name"]) j.name = jn["name"].as<std::string>();
@@ -234,9 +244,27 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
         j.error_motion_cos.push_back(Eigen::Map<const Vec6>(vc.data()));
       }
     }
+    if (jn["com_m"] && !jn["mass_kg"]) in.Fail(jn["com_m"], label, ": com_m needs mass_kg");
+    if (jn["mass_kg"]) {
+      // The link's mass and centre of mass (in this joint's DH frame i): the arm's own
+      // weight, which deflects compliant joints.
+      j.mass_kg = in.Number(jn["mass_kg"], label + " mass_kg");
+      if (j.mass_kg < 0) in.Fail(jn["mass_kg"], label, ": mass_kg must be >= 0 (a mass), got ", j.mass_kg);
+      if (jn["com_m"]) {
+        const auto v = in.Numbers(jn["com_m"], 3, label + " com_m");
+        j.com_m = Vec3(v[0], v[1], v[2]);
+      }
+    }
     joints.push_back(j);
   }
-  return RobotModel(name, convention, joints, tool);
+  int with_mass = 0;
+  for (const Joint& j : joints) with_mass += !std::isnan(j.mass_kg);
+  if (with_mass > 0 && with_mass < static_cast<int>(joints.size()))
+    in.Fail(list, "mass_kg is given for ", with_mass, " of ", joints.size(),
+            " joints; give every link's mass (0 for a massless one) or none");
+  RobotModel model(name, convention, joints, tool);
+  model.SetToolMass(tool_mass);
+  return model;
 }
 
 }  // namespace
@@ -262,11 +290,37 @@ RobotModel::RobotModel(std::string name, DhConvention convention, std::vector<Jo
     for (int h = 0; h < j.Harmonics(); ++h)
       if (!j.error_motion_sin[h].allFinite() || !j.error_motion_cos[h].allFinite())
         Throw(who, ": ", JointLabel(joints_, i), " error motion harmonic ", h + 1, " is not finite");
+    if (!std::isnan(j.mass_kg) && !(std::isfinite(j.mass_kg) && j.mass_kg >= 0))
+      Throw(who, ": ", JointLabel(joints_, i), " mass_kg is ", j.mass_kg, "; expected a finite mass >= 0");
+    if (!j.com_m.allFinite()) Throw(who, ": ", JointLabel(joints_, i), " com_m is not finite");
   }
+  int with_mass = 0;
+  for (const Joint& j : joints_) with_mass += !std::isnan(j.mass_kg);
+  if (with_mass > 0 && with_mass < NumJoints())
+    Throw(who, ": mass_kg is given for ", with_mass, " of ", NumJoints(),
+          " joints; give every link's mass (0 for a massless one) or none");
   if (!T_flange_tool_.R.allFinite() || !T_flange_tool_.t.allFinite() ||
       (T_flange_tool_.R.transpose() * T_flange_tool_.R - Mat3::Identity()).norm() > 1e-9 ||
       T_flange_tool_.R.determinant() < 0)
     Throw(who, ": T_flange_tool must be a finite rigid transform");
+}
+
+bool RobotModel::HasMasses() const {
+  for (const Joint& j : joints_)
+    if (std::isnan(j.mass_kg)) return false;
+  return true;
+}
+
+RobotModel RobotModel::WithJoints(std::vector<Joint> joints) const {
+  RobotModel m(name_, convention_, std::move(joints), T_flange_tool_);
+  m.tool_mass_ = tool_mass_;
+  return m;
+}
+
+void RobotModel::SetToolMass(const ToolMass& m) {
+  if (!(std::isfinite(m.mass_kg) && m.mass_kg >= 0) || !m.com_m.allFinite())
+    Throw("robot '", name_, "': tool mass_kg ", m.mass_kg, " and com_m must be finite, with a mass >= 0");
+  tool_mass_ = m;
 }
 
 RobotModel RobotModel::Default() {
@@ -305,7 +359,7 @@ std::string RobotModel::ToYaml() const {
   out << YAML::Key << "name" << YAML::Value << name_;
   out << YAML::Key << "convention" << YAML::Value
       << (convention_ == DhConvention::kStandard ? "standard_dh" : "modified_dh");
-  if (T_flange_tool_.R != Mat3::Identity() || T_flange_tool_.t != Vec3::Zero()) {
+  if (T_flange_tool_.R != Mat3::Identity() || T_flange_tool_.t != Vec3::Zero() || tool_mass_.mass_kg > 0) {
     // The quaternion is written from the rotation matrix; reading it back reproduces
     // the matrix to rounding (1e-16), not bit for bit.
     const Eigen::Quaterniond q = T_flange_tool_.Quaternion();
@@ -314,6 +368,11 @@ std::string RobotModel::ToYaml() const {
         << std::vector<double>{T_flange_tool_.t.x(), T_flange_tool_.t.y(), T_flange_tool_.t.z()};
     out << YAML::Key << "quaternion_wxyz" << YAML::Value << YAML::Flow
         << std::vector<double>{q.w(), q.x(), q.y(), q.z()};
+    if (tool_mass_.mass_kg > 0) {
+      out << YAML::Key << "mass_kg" << YAML::Value << tool_mass_.mass_kg;
+      out << YAML::Key << "com_m" << YAML::Value << YAML::Flow
+          << std::vector<double>{tool_mass_.com_m.x(), tool_mass_.com_m.y(), tool_mass_.com_m.z()};
+    }
     out << YAML::EndMap;
   }
   out << YAML::Key << "joints" << YAML::Value << YAML::BeginSeq;
@@ -332,6 +391,11 @@ std::string RobotModel::ToYaml() const {
           << std::vector<double>{j.lower, j.upper};
     }
     out << YAML::Key << (rev ? "encoder_sigma_rad" : "encoder_sigma_m") << YAML::Value << j.encoder_sigma;
+    if (!std::isnan(j.mass_kg)) {
+      out << YAML::Key << "mass_kg" << YAML::Value << j.mass_kg;
+      out << YAML::Key << "com_m" << YAML::Value << YAML::Flow
+          << std::vector<double>{j.com_m.x(), j.com_m.y(), j.com_m.z()};
+    }
     if (j.Harmonics() > 0) {
       out << YAML::Key << "error_motion" << YAML::Value << YAML::Flow << YAML::BeginSeq;
       for (int h = 0; h < j.Harmonics(); ++h) {

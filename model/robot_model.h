@@ -62,6 +62,19 @@ struct Joint {
   // length (the number of harmonics); empty = a perfect rotation. Not for prismatic joints.
   std::vector<Vec6> error_motion_sin, error_motion_cos;
   int Harmonics() const { return static_cast<int>(error_motion_sin.size()); }
+  // Mass of the link this joint moves (link i, whose DH frame is frame i) and its centre
+  // of mass in frame i (m), from CAD or a data sheet. NaN = not given: a robot gives a
+  // mass for every joint or for none (RobotModel::HasMasses). Used for the gravity torque
+  // that deflects compliant joints (model/extensions.h GravityTorque).
+  double mass_kg = std::numeric_limits<double>::quiet_NaN();
+  Vec3 com_m = Vec3::Zero();
+};
+
+// A mass carried at the flange (a tool, the target, a gripper): kg and its centre of mass
+// in the flange frame (m).
+struct ToolMass {
+  double mass_kg = 0.0;
+  Vec3 com_m = Vec3::Zero();
 };
 
 class RobotModel {
@@ -71,7 +84,8 @@ class RobotModel {
 
   RobotModel() = default;
   // InputError when there are no joints, a parameter is not finite, a limit range is
-  // empty, or an encoder sigma is negative.
+  // empty, an encoder sigma is negative, or the link masses are not all given (finite,
+  // >= 0, with finite centres of mass) or all left out.
   RobotModel(std::string name, DhConvention convention, std::vector<Joint> joints,
              const Pose& T_flange_tool = Pose::Identity());
 
@@ -92,6 +106,15 @@ class RobotModel {
   int NumJoints() const { return static_cast<int>(joints_.size()); }
   const Pose& T_flange_tool() const { return T_flange_tool_; }
   void SetT_flange_tool(const Pose& T) { T_flange_tool_ = T; }
+  // Whether the description gives the links' masses (every joint's mass_kg); then the
+  // gravity torque of the arm on each joint is known up to the joints' compliances.
+  bool HasMasses() const;
+  // The same robot (name, convention, tool and its mass) with another joint table.
+  RobotModel WithJoints(std::vector<Joint> joints) const;
+  // The tool's mass (YAML `tool: {mass_kg, com_m}`; zero when not given). InputError when
+  // not finite or negative.
+  const ToolMass& Tool() const { return tool_mass_; }
+  void SetToolMass(const ToolMass& m);
 
   // InputError when q has the wrong size, a value is not finite, or a joint is outside
   // its limits; the message names the joint and the limit (in degrees for revolute joints).
@@ -130,6 +153,7 @@ class RobotModel {
   DhConvention convention_ = DhConvention::kStandard;
   std::vector<Joint> joints_;
   Pose T_flange_tool_;
+  ToolMass tool_mass_;
 };
 
 }  // namespace mcms

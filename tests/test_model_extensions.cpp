@@ -54,6 +54,7 @@ MeasurementContext TestContext(const RobotModel& robot) {
   c.temperature_c = 31.0;
   c.move_direction = (Eigen::VectorXd(6) << 1, -1, 1, 1, -1, 1).finished();
   c.gravity_torque = 3.0 * GravityTorquePerKg(robot, TestJoints());
+  c.gravity_lever = GravityLever(robot, TestJoints());
   return c;
 }
 
@@ -65,7 +66,12 @@ std::vector<Extension> RobotExtensions() {
 
 TEST(ModelExtensions, EveryRobotUnitMatchesNumericDerivatives) {
   const RobotModel robot = RobotModel::Default();
-  for (const Extension& e : RobotExtensions()) {
+  std::vector<Extension> units = RobotExtensions();
+  // The geometric units of the audit and lumped-mass compliance.
+  units.push_back({Effect::kLinkTwist, 2, 0});
+  units.push_back({Effect::kGeometry, -1, 6});
+  units.push_back({Effect::kGravityCompliance, 1, 13});
+  for (const Extension& e : units) {
     SCOPED_TRACE(e.Label());
     e.Check(&robot);
     std::vector<double> x = e.InitialParameters();
@@ -111,9 +117,10 @@ TEST(ModelExtensions, RobotUnitsMeanWhatTheirNamesSay) {
   q2 = q;
   q2[0] *= 1.01;
   EXPECT_LT(BoxMinus(flange({Effect::kJointScale, 0, 0}, {0.01}), robot.T_base_flange(q2)).norm(), 1e-12);
-  // Backlash b: half of it against the last move (joint 5 moved downwards here).
+  // Backlash b: the link lags the encoder by half of it (joint 5 moved downwards here, so
+  // the link stands half the backlash above the encoder's reading).
   q2 = q;
-  q2[4] -= 0.5 * 2e-3;
+  q2[4] += 0.5 * 2e-3;
   EXPECT_LT(BoxMinus(flange({Effect::kBacklash, 4, 0}, {2e-3}), robot.T_base_flange(q2)).norm(), 1e-12);
   // A link length change equals the DH table changed.
   std::vector<Joint> joints = robot.Joints();
@@ -121,6 +128,23 @@ TEST(ModelExtensions, RobotUnitsMeanWhatTheirNamesSay) {
   const RobotModel longer("longer", robot.Convention(), joints, robot.T_flange_tool());
   EXPECT_LT(BoxMinus(flange({Effect::kLinkLength, 3, 1}, {1e-3}), longer.T_base_flange(q)).norm(), 1e-12);
   EXPECT_EQ(Extension({Effect::kLinkLength, 3, 1}).Where(), "d4");
+  // A link twist is alpha changed; the geometry block is every DH parameter.
+  joints = robot.Joints();
+  joints[2].alpha += 1e-3;
+  const RobotModel twisted("twisted", robot.Convention(), joints, robot.T_flange_tool());
+  EXPECT_LT(BoxMinus(flange({Effect::kLinkTwist, 2, 0}, {1e-3}), twisted.T_base_flange(q)).norm(), 1e-12);
+  EXPECT_EQ(Extension({Effect::kLinkTwist, 2, 0}).Where(), "alpha3");
+  Eigen::VectorXd dh(24);
+  for (int k = 0; k < 24; ++k) dh[k] = 1e-4 * std::sin(1.0 + k);
+  const std::vector<double> dhv(dh.data(), dh.data() + 24);
+  joints = robot.Joints();
+  for (int k = 0; k < 6; ++k) {
+    joints[k].theta_offset += dh[4 * k];
+    joints[k].d += dh[4 * k + 1];
+    joints[k].a += dh[4 * k + 2];
+    joints[k].alpha += dh[4 * k + 3];
+  }
+  EXPECT_LT(BoxMinus(flange({Effect::kGeometry, -1, 6}, dhv), robot.WithJoints(joints).T_base_flange(q)).norm(), 1e-12);
   // Thermal growth scales every length: the flange moves outwards, rotation unchanged.
   const Pose warm = flange({Effect::kThermalDrift, -1, 1}, {1e-4});  // 11 K above 20 C
   const Pose nominal = robot.T_base_flange(q);
@@ -129,6 +153,51 @@ TEST(ModelExtensions, RobotUnitsMeanWhatTheirNamesSay) {
   // Compliance: a joint whose gravity torque is zero does not deflect.
   EXPECT_NEAR(GravityTorquePerKg(robot, q)[0], 0.0, 1e-12);  // joint 1's axis is vertical
   EXPECT_GT(std::abs(GravityTorquePerKg(robot, q)[1]), 1.0);
+}
+
+// The arm's own weight: the torque of the links' masses (at their centres of mass), the
+// tool's and a payload equals the derivative of their potential energy; lumped masses at
+// the frames' origins and the DH corners are the lever columns times the masses.
+TEST(ModelExtensions, ArmGravityTorqueMatchesVirtualWork) {
+  std::vector<Joint> j = RobotModel::Default().Joints();
+  const double m[6] = {25.0, 18.0, 12.0, 4.0, 2.0, 0.5};
+  const Vec3 c[6] = {{-0.09, 0.1, 0.0}, {-0.3, 0.0, 0.05}, {-0.05, 0.0, 0.2}, {0.0, -0.1, 0.0}, {0.0, 0.0, 0.02}, {0.0, 0.0, -0.02}};
+  for (int k = 0; k < 6; ++k) {
+    j[k].mass_kg = m[k];
+    j[k].com_m = c[k];
+  }
+  RobotModel robot = RobotModel::Default().WithJoints(j);
+  robot.SetT_flange_tool(Pose{Mat3::Identity(), Vec3(0.01, 0.02, 0.15)});
+  robot.SetToolMass({1.5, Vec3(0.0, 0.03, 0.05)});
+  ASSERT_TRUE(robot.HasMasses());
+  const double payload = 4.0;
+  const auto Energy = [&](const Eigen::VectorXd& q) {
+    const std::vector<Pose> F = robot.LinkFrames(q);
+    double z = 0;
+    for (int k = 0; k < 6; ++k) z += m[k] * (F[k + 1] * c[k]).z();
+    z += 1.5 * (F[6] * Vec3(0.0, 0.03, 0.05)).z() + payload * (F[6] * robot.T_flange_tool()).t.z();
+    return 9.80665 * z;
+  };
+  const Eigen::VectorXd tau = GravityTorque(robot, TestJoints(), payload);
+  for (int i = 0; i < 6; ++i) {
+    Eigen::VectorXd a = TestJoints(), b = TestJoints();
+    a[i] += 1e-6;
+    b[i] -= 1e-6;
+    EXPECT_NEAR(tau[i], -(Energy(a) - Energy(b)) / 2e-6, 1e-4) << "joint " << i + 1;
+  }
+  // Lumped: masses at the origins (centres of mass zero) are the lever columns times them.
+  for (int k = 0; k < 6; ++k) j[k].com_m = Vec3::Zero();
+  const RobotModel lumped = RobotModel::Default().WithJoints(j);
+  const Eigen::MatrixXd L = GravityLever(lumped, TestJoints());
+  ASSERT_EQ(L.cols(), 13);
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(13);
+  for (int k = 0; k < 6; ++k) w[k] = m[k];
+  w[12] = payload;
+  EXPECT_LT((L * w - GravityTorque(lumped, TestJoints(), payload)).norm(), 1e-9);
+  // Link 4's DH corner (o3 + d4 z3 = o4 for the KR 5 arc, whose a4 = 0) is its origin.
+  EXPECT_LT((L.col(6 + 3) - L.col(3)).norm(), 1e-9);
+  // A robot without masses has no arm torque to give.
+  EXPECT_THROW(GravityTorque(RobotModel::Default(), TestJoints(), 1.0), InputError);
 }
 
 TEST(ModelExtensions, GravityTorqueMatchesVirtualWork) {
