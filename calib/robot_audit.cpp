@@ -1647,10 +1647,44 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
 
 }  // namespace
 
+// Measured positions in another unit than metres (millimetres under x_m headers, say) or a
+// robot description of another size: the scale of the best similarity between the tool
+// positions the robot's model gives for the logged joints and the measured ones is far
+// from 1 (no DH error scales a robot by a fifth). Refused with the likely unit named,
+// before any fit (the audit of such a log would only measure the wrong unit).
+void CheckScale(const RobotModel& robot, const RobotLog& log) {
+  const int N = log.rows.size();
+  Eigen::Matrix3Xd src(3, N), dst(3, N);
+  for (int i = 0; i < N; ++i) {
+    src.col(i) = robot.T_base_tool(log.rows[i].q).t;
+    dst.col(i) = log.rows[i].p_meas;
+  }
+  const Eigen::Matrix3Xd a = src.colwise() - src.rowwise().mean(), b = dst.colwise() - dst.rowwise().mean();
+  const double var_src = a.squaredNorm() / N;
+  if (!(var_src > 1e-8)) return;  // the tool barely moves: nothing to compare
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(b * a.transpose() / N, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Vector3d d(1, 1, 1);
+  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) d[2] = -1;
+  const double scale = svd.singularValues().dot(d) / var_src;
+  if (scale > 0.8 && scale < 1.25) return;
+  const std::string src_name = log.source.empty() ? std::string("robot log") : log.source.string();
+  std::string unit;
+  if (std::abs(std::log10(scale) - 3.0) < 0.05) unit = " (millimetres under x_m, y_m, z_m headers?)";
+  else if (std::abs(std::log10(scale) - 2.0) < 0.05) unit = " (centimetres?)";
+  else if (std::abs(scale / 39.37 - 1.0) < 0.05) unit = " (inches?)";
+  else if (std::abs(std::log10(scale) + 3.0) < 0.05) unit = " (kilometres?)";
+  char b2[96];
+  std::snprintf(b2, sizeof b2, "%.4g", scale);
+  Throw(src_name, ": the measured positions are ", b2, " times as far apart as robot '", robot.Name(),
+        "' puts its tool at the logged joints", unit,
+        "; give the positions in metres, and the robot description the log was measured with (--robot)");
+}
+
 RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& o) {
   std::string why;
   if (!o.IsValid(&why)) Throw("robot audit options: ", why);
   CheckRobotLog(log, robot);
+  CheckScale(robot, log);
   const auto say = [&](const std::string& s) {
     if (o.progress) o.progress(s);
   };

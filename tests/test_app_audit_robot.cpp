@@ -117,6 +117,26 @@ std::string Edit(const std::string& csv, int row, int col, std::string value) {
   return out.str();
 }
 
+// A log in millimetres under x_m headers (issue 29: it ran past 120 s fitting effects of
+// likelihood ratios near 4,000): refused at once, the unit named.
+TEST(AppAuditRobot, MillimetresUnderMetreHeadersAreNamed) {
+  std::istringstream in(LogCsv(0.0, 4));
+  std::ostringstream mm;
+  std::string line;
+  std::getline(in, line);
+  mm << line << "\n";
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::stringstream ls(line);
+    std::string cell;
+    while (std::getline(ls, cell, ',')) c.push_back(cell);
+    for (int k = 7; k <= 9; ++k) c[k] = std::to_string(std::stod(c[k]) * 1000.0);
+    for (size_t i = 0; i < c.size(); ++i) mm << (i ? "," : "") << c[i];
+    mm << "\n";
+  }
+  ExpectRefused("millimetres", mm.str(), {"log.csv", "1000 times", "millimetres", "metres"});
+}
+
 TEST(AppAuditRobot, RefusesBadLogs) {
   const std::string good = LogCsv(0.0, 9);
   const std::string header = good.substr(0, good.find('\n') + 1);
