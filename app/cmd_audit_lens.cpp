@@ -1,4 +1,4 @@
-// mcms audit lens MODEL.cameramodel: the lens mode of the model audit (calib/lens_audit.h):
+// mcms audit lens MODEL.cameramodel: the lens mode of the model audit (audit/lens_audit.h):
 // refits the chessboard observations stored in a mrcal .cameramodel with its own lens
 // model and with richer ones (OpenCV8/12, mrcal's splined model), scores each on held-out
 // boards, and names the richer model only when it earns its parameters.
@@ -6,7 +6,7 @@
 #include <memory>
 
 #include "app/audit_modes.h"
-#include "calib/lens_audit.h"
+#include "audit/lens_audit.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/output_folder.h"

@@ -1,4 +1,4 @@
-// mcms audit robot LOG: the robot mode of the model audit (calib/robot_audit.h): fits the
+// mcms audit robot LOG: the robot mode of the model audit (audit/robot_audit.h): fits the
 // nominal robot model (with the registration and the tool) to a log of joint values and
 // externally measured tool positions, tests its residuals, names the catalog effects that
 // explain them with their sizes, and measures each one's held-out gain.
@@ -7,7 +7,7 @@
 #include <memory>
 
 #include "app/audit_modes.h"
-#include "calib/robot_audit.h"
+#include "audit/robot_audit.h"
 #include "core/error.h"
 
 namespace mcms::app {

@@ -1,5 +1,5 @@
 // mcms batch: many recordings on Dask distributed. The work is python/mcms_batch.py (each
-// recording a task calling mcms.track_recording, synthetic/track_recording.h); this command
+// recording a task calling mcms.track_recording, jobs/track_recording.h); this command
 // finds it beside the executable and runs it with the arguments as given.
 #include <unistd.h>
 

@@ -20,6 +20,7 @@
 //                    parameters with the reason, correlated pairs, k-fold held-out errors
 //   --plot FILE.svg  position error per measurement before and after calibration, and
 //                    FILE-joints.svg the same errors against each joint angle
+#include <numbers>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -37,7 +38,7 @@
 namespace mcms::app {
 namespace {
 
-constexpr double kDeg = 3.14159265358979323846 / 180.0;
+constexpr double kDeg = std::numbers::pi / 180.0;
 
 struct CalibRobotArgs {
   std::string measurements, robot, output, report, plot;

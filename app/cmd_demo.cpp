@@ -1,12 +1,12 @@
 // mcms demo: the main job, on the embedded default (the paper's lab experiment, section
-// 3.4): synthetic/demo.h RunDemo renders, tracks, writes the sensor logs, fuses them by the
+// 3.4): jobs/demo.h RunDemo renders, tracks, writes the sensor logs, fuses them by the
 // path `mcms fuse` runs, and reports against the truth. This file parses and prints.
 #include <cstdio>
 #include <memory>
 
 #include "app/commands.h"
-#include "core/html_report.h"
-#include "synthetic/demo.h"
+#include "jobs/html_report.h"
+#include "jobs/demo.h"
 
 namespace mcms::app {
 namespace {

@@ -2,8 +2,9 @@
 // (Cramer-Rao of the tracker's estimators for the rig, target and pixel-noise model),
 // simulated (Monte Carlo through the renderer and the tracker at a sample of grid points)
 // and, with --measured, confronted with repeated measurements (the paper's Table 1 or a
-// raw CSV) and line lengths (Table 2). The algorithms live in synthetic/fov_map.h and
-// synthetic/fov_map_measured.h.
+// raw CSV) and line lengths (Table 2). The algorithms live in jobs/fov_map.h and
+// audit/repeatability.h.
+#include <numbers>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -14,9 +15,9 @@
 
 #include "app/commands.h"
 #include "core/error.h"
-#include "core/html_report.h"
+#include "jobs/html_report.h"
 #include "core/io.h"
-#include "synthetic/fov_map_job.h"
+#include "jobs/fov_map_job.h"
 
 namespace mcms::app {
 namespace {
@@ -65,7 +66,7 @@ int RunFovMap(const FovArgs& a) {
   job.rig = a.rig;
   job.target = a.target;
   job.grid = a.grid;
-  job.orientation_rad = ParseTriple(a.orientation_deg, "--orientation-deg") * (M_PI / 180.0);
+  job.orientation_rad = ParseTriple(a.orientation_deg, "--orientation-deg") * (std::numbers::pi / 180.0);
   job.gain = a.gain;
   job.read_noise = a.read_noise;
   job.ball_dn = a.ball_dn;

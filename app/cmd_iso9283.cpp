@@ -1,6 +1,6 @@
 // mcms iso9283: ISO 9283 pose, distance and path characteristics from measured poses
 // (formats and evaluation in calib/iso9283_report.h), or --simulate: the forward-model
-// experiment (synthetic/iso9283_experiment.h). This file parses and prints.
+// experiment (jobs/iso9283_experiment.h). This file parses and prints.
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -10,14 +10,14 @@
 #include "calib/iso9283_report.h"
 #include "core/error.h"
 #include "core/io.h"
-#include "synthetic/iso9283_experiment.h"
+#include "jobs/iso9283_experiment.h"
 
 namespace mcms::app {
 namespace {
 
 struct IsoArgs {
   std::string poses, path, output;
-  // --simulate: the experiment on the forward model (synthetic/iso9283_experiment.h)
+  // --simulate: the experiment on the forward model (jobs/iso9283_experiment.h)
   // instead of measured input.
   bool simulate = false;
   int cycles = 30;

@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 
 namespace mcms::app {

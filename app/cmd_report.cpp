@@ -1,12 +1,12 @@
 // mcms report: one self-contained HTML page (no network) for the output folder of another
 // mcms command (demo, fov-map, calib-rig, track, iso9283, calib-robot, audit). The page is
-// built by core/html_report.h; this file parses the options and prints what it wrote.
+// built by jobs/html_report.h; this file parses the options and prints what it wrote.
 #include <cstdio>
 #include <memory>
 #include <string>
 
 #include "app/commands.h"
-#include "core/html_report.h"
+#include "jobs/html_report.h"
 
 namespace mcms::app {
 namespace {

@@ -9,7 +9,7 @@
 #include "app/tracking_options.h"
 #include "core/error.h"
 #include "core/io.h"
-#include "synthetic/track_recording.h"
+#include "jobs/track_recording.h"
 
 namespace mcms::app {
 

@@ -3,7 +3,7 @@
 // Not a test: numbers depend on the machine.
 #include <benchmark/benchmark.h>
 
-#include "synthetic/fov_map.h"
+#include "jobs/fov_map.h"
 #include "synthetic/scenario.h"
 
 namespace mcms {

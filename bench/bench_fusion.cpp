@@ -1,5 +1,6 @@
 // Fusion throughput, one thread: 3-sensor 6-DOF MOIFA (camera, robot, inclinometer) and the
 // multi-sensor pose Kalman filter's updates. Not a test: numbers depend on the machine.
+#include <numbers>
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -23,7 +24,7 @@ struct Scene {
     Mat3 R;
     R << 0, 0, 1, 0, -1, 0, 1, 0, 0;  // KR 5 arc flange at q = 0
     truth = {R, Vec3(0.9, 0.0, 1.1)};
-    incl.R_flange_incl = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitY()).toRotationMatrix();
+    incl.R_flange_incl = Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitY()).toRotationMatrix();
     Cc = (Vec6() << 5e-4, 5e-4, 5e-4, 1.5e-4, 1.5e-4, 1.5e-4).finished().cwiseAbs2().asDiagonal();
     Cr = (Vec6() << 3e-4, 3e-4, 3e-4, 1.57e-4, 0.87e-4, 0.43e-4).finished().cwiseAbs2().asDiagonal();
     Rng rng(1);

@@ -20,6 +20,7 @@
 // that does not depend on what else the machine runs; wall time is printed beside it.
 // OpenCV is held to one thread (cv::setNumThreads(1)) so that both pipelines run on a
 // single core and the two times agree on an idle machine.
+#include <numbers>
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -41,6 +42,7 @@
 #include "bench/opencv_baseline.h"
 #include "core/pose_math.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tracking/identify.h"
 #include "tracking/pose_refinement.h"
@@ -168,7 +170,7 @@ Accuracy MeasureBaseline(const BenchData& d) {
 
 void SetAccuracyCounters(benchmark::State& state, const Accuracy& a) {
   state.counters["pos_rms_um"] = a.pos_rms_m * 1e6;
-  state.counters["rot_rms_mdeg"] = a.rot_rms_rad * 180 / M_PI * 1e3;
+  state.counters["rot_rms_mdeg"] = a.rot_rms_rad * 180 / std::numbers::pi * 1e3;
   state.counters["ball_rms_um"] = a.ball_rms_m * 1e6;
   state.counters["posed_frames"] = a.posed;
 }
@@ -441,8 +443,8 @@ void PrintSummary(const RecordingReporter& rep) {
   auto acc = [](const char* name, const Accuracy& a) {
     std::printf("%-9s posed %2d/%2d frames  pose position RMS %7.2f um (max %7.2f)  rotation RMS %7.3f mdeg "
                 "(max %7.3f)  ball centres RMS %7.2f um (%d)\n",
-                name, a.posed, a.frames, a.pos_rms_m * 1e6, a.pos_max_m * 1e6, a.rot_rms_rad * 180 / M_PI * 1e3,
-                a.rot_max_rad * 180 / M_PI * 1e3, a.ball_rms_m * 1e6, a.balls);
+                name, a.posed, a.frames, a.pos_rms_m * 1e6, a.pos_max_m * 1e6, a.rot_rms_rad * 180 / std::numbers::pi * 1e3,
+                a.rot_max_rad * 180 / std::numbers::pi * 1e3, a.ball_rms_m * 1e6, a.balls);
   };
   acc("ours", g_ours_accuracy);
   acc("baseline", g_baseline_accuracy);

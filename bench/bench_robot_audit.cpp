@@ -1,4 +1,4 @@
-// The robot audit (calib/robot_audit.h) over the whole catalog, one thread: a KUKA KR 5 arc
+// The robot audit (audit/robot_audit.h) over the whole catalog, one thread: a KUKA KR 5 arc
 // log of N measurements (N/5 poses x 5 passes over 2 h, anisotropic noise) as a real robot
 // gives it: every DH parameter a little off (0.05 mm, 5e-5 rad), the arm's own weight on
 // compliant joints 2 and 3 and a hidden joint 3 offset; the whole AuditRobot call
@@ -13,7 +13,7 @@
 #include <cmath>
 #include <vector>
 
-#include "calib/robot_audit.h"
+#include "audit/robot_audit.h"
 #include "calib/robot_calibration.h"
 #include "core/random.h"
 #include "tests/robot_logs.h"

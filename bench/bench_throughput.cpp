@@ -50,6 +50,7 @@
 
 #include "bench/opencv_baseline.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tracking/sequence.h"
 #include "tracking/tracker.h"

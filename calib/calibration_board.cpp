@@ -1,5 +1,6 @@
 #include "calib/calibration_board.h"
 
+#include <numbers>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -81,7 +82,7 @@ std::vector<Pose> CalibrationBoard::NumberingSymmetries() const {
   const Vec3 centre((cols - 1) * square_m / 2, (rows - 1) * square_m / 2, 0.0);
   for (int quarter = 1; quarter < 4; ++quarter) {
     if (cols != rows && quarter != 2) continue;
-    const Mat3 R = ExpSO3(Vec3(0, 0, quarter * M_PI / 2));
+    const Mat3 R = ExpSO3(Vec3(0, 0, quarter * std::numbers::pi / 2));
     // Exact entries (0, +-1): the mapped points land exactly on grid points.
     Mat3 Rr = R.array().round().matrix();
     out.push_back(Pose{Rr, centre - Rr * centre});
@@ -90,7 +91,7 @@ std::vector<Pose> CalibrationBoard::NumberingSymmetries() const {
 }
 
 double CalibrationBoard::SymmetryAngleDeg(const Pose& S) {
-  double a = std::atan2(S.R(1, 0), S.R(0, 0)) * 180.0 / M_PI;
+  double a = std::atan2(S.R(1, 0), S.R(0, 0)) * 180.0 / std::numbers::pi;
   if (a < 0) a += 360.0;
   return a;
 }

@@ -1,5 +1,6 @@
 #include "calib/camera_calibration.h"
 
+#include <numbers>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -419,7 +420,7 @@ std::vector<Pose> PlaceCameras(const CameraCalibrationInput& input, Observations
         if (s == 0) as_numbered = r;
       for (Vec3& P : ob.obs[oc].points_board) P = S * P;
       T_cam_board[oc] = *T_cam_board[oc] * S.Inverse();
-      const double angle = std::atan2(S.R(1, 0), S.R(0, 0)) * 180.0 / M_PI;
+      const double angle = std::atan2(S.R(1, 0), S.R(0, 0)) * 180.0 / std::numbers::pi;
       res.renumbered.push_back({c, f, angle < 0 ? angle + 360.0 : angle, rms[0].first, rms[1].first});
       std::ostringstream m;
       m.precision(3);

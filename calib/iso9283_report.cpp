@@ -1,5 +1,6 @@
 #include "calib/iso9283_report.h"
 
+#include <numbers>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -14,7 +15,7 @@ namespace mcms {
 
 namespace {
 
-constexpr double kDeg = 3.14159265358979323846 / 180.0;
+constexpr double kDeg = std::numbers::pi / 180.0;
 
 struct PoseRows {
   Pose commanded;

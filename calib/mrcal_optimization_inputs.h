@@ -62,7 +62,7 @@ namespace mcms {
 
 // The chessboard problem stored in a .cameramodel's 'optimization_inputs' (mrcal 2.x:
 // the inverse of WriteCameramodelWithOptimizationInputs): the arguments of
-// mrcal.optimize() that the lens audit (calib/lens_audit.h) refits. Arrays are
+// mrcal.optimize() that the lens audit (audit/lens_audit.h) refits. Arrays are
 // row-major as numpy stores them.
 struct MrcalOptimizationInputsData {
   std::string lensmodel;

@@ -1,5 +1,6 @@
 #include "calib/robot_calibration.h"
 
+#include <numbers>
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 #include <yaml-cpp/yaml.h>
@@ -25,7 +26,7 @@ namespace mcms {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 constexpr int kParamsPerJoint = kDhParamsPerJoint;
 constexpr int kBaseAndTool = 12;
 constexpr int kPerHarmonic = kErrorMotionParamsPerHarmonic;  // sin [rx ry rz x y z], cos [..]

@@ -1,5 +1,6 @@
 #include "calib/robot_calibration_job.h"
 
+#include <numbers>
 #include <chrono>
 #include <cstdio>
 #include <sstream>
@@ -11,7 +12,7 @@
 namespace mcms {
 
 namespace {
-constexpr double kDeg = 3.14159265358979323846 / 180.0;
+constexpr double kDeg = std::numbers::pi / 180.0;
 
 // A parameter in report units: deg for angles, mm for lengths.
 std::string ValueText(const CalibrationParameter& p, double v) {

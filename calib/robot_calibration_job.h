@@ -4,6 +4,7 @@
 // when the calibration fails). The command only parses options and prints.
 #pragma once
 
+#include <numbers>
 #include <filesystem>
 #include <functional>
 #include <optional>
@@ -26,7 +27,7 @@ struct RobotCalibrationJob {
   std::vector<std::string> fixed;
   std::vector<int> error_motion_harmonics;
   double position_sigma_m = 0.05e-3;
-  double rotation_sigma_rad = 0.05 * 3.14159265358979323846 / 180.0;
+  double rotation_sigma_rad = 0.05 * std::numbers::pi / 180.0;
   int folds = 5;                        // 0 = no held-out validation
   int max_iterations = 200;
   bool registration_only = false;

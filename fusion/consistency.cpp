@@ -5,7 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 #include "fusion/gaussian_internal.h"
 #include "fusion/moifa_internal.h"
 

@@ -8,7 +8,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "core/error.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 #include "fusion/gaussian_internal.h"
 #include "fusion/moifa_internal.h"
 

@@ -1,5 +1,6 @@
 #include "fusion/log_fusion.h"
 
+#include <numbers>
 #include <cmath>
 #include <cstdio>
 
@@ -130,7 +131,7 @@ namespace {
 // range by more than 5 sigma on either axis), naming each in `dropped`. InputError when
 // nothing is left.
 void DropOutOfRangeTilts(const Inclinometer& inc, InclinometerLog* log, std::vector<std::string>* dropped) {
-  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  constexpr double kDeg = std::numbers::pi / 180.0;
   const double limit = inc.range + 5.0 * inc.sigma;
   std::vector<InclinometerSample> kept;
   for (const InclinometerSample& s : log->samples) {

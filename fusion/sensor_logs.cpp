@@ -1,5 +1,6 @@
 #include "fusion/sensor_logs.h"
 
+#include <numbers>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -20,7 +21,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double kDeg = 3.14159265358979323846 / 180.0;
+constexpr double kDeg = std::numbers::pi / 180.0;
 const char* const kAxes[6] = {"rx", "ry", "rz", "px", "py", "pz"};
 
 // ReadCsv plus the checks every log shares: a file with no header names line 1, one with
@@ -407,7 +408,7 @@ InclinometerLog ReadInclinometerLog(const fs::path& path) {
     CheckIncreasing(t, i, s.time_s, previous);
     previous = s.time_s;
     s.reading = Vec2(t.Number(i, cx.first) * cx.second, t.Number(i, cy.first) * cy.second);
-    if (std::abs(s.reading.x()) >= 0.5 * 3.14159265358979323846 || std::abs(s.reading.y()) >= 0.5 * 3.14159265358979323846)
+    if (std::abs(s.reading.x()) >= 0.5 * std::numbers::pi || std::abs(s.reading.y()) >= 0.5 * std::numbers::pi)
       Throw(path.string(), " line ", s.line, ": a tilt reading must lie within +-90 deg");
     log.samples.push_back(std::move(s));
   }

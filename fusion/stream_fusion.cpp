@@ -1,5 +1,6 @@
 #include "fusion/stream_fusion.h"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -10,7 +11,7 @@
 #include <Eigen/LU>
 
 #include "core/error.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 
 namespace mcms {
 
@@ -45,7 +46,7 @@ struct RangeRejects {
                   count == 1 ? "" : "s", worst_rad * 180.0 / kPi, model.range * 180.0 / kPi);
     return b;
   }
-  static constexpr double kPi = 3.14159265358979323846;
+  static constexpr double kPi = std::numbers::pi;
 };
 
 // The mean of the inclinometer readings in [lo, hi] (or [lo, hi)) that are not beyond the

@@ -1,7 +1,7 @@
 // The one fusion path: time-stamped sensor samples with covariance in, fused flange poses
 // T_base_flange with consistency flags out, by MOIFA and by the multi-sensor Kalman filter.
-// `mcms fuse` (fusion/log_fusion.h), the demo's lab experiment (synthetic/lab_experiment.h)
-// and the ISO 9283 experiment (synthetic/iso9283_experiment.h, FuseEpoch) all run it.
+// `mcms fuse` (fusion/log_fusion.h), the demo's lab experiment (jobs/lab_experiment.h)
+// and the ISO 9283 experiment (jobs/iso9283_experiment.h, FuseEpoch) all run it.
 //
 // Each sensor in the base frame:
 //  camera        T_base_flange = T_base_rig * T_rig_target * T_flange_target^-1. Its

@@ -8,8 +8,8 @@
 #include "fusion/log_fusion.h"
 #include "fuzz/fuzz_support.h"
 #include "fuzz/fuzz_targets.h"
-#include "synthetic/evaluation.h"
-#include "synthetic/fov_map_measured.h"
+#include "jobs/evaluation.h"
+#include "audit/repeatability.h"
 
 namespace mcms::fuzz {
 

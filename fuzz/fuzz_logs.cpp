@@ -1,6 +1,6 @@
 // The sensor logs of `mcms fuse` (tracker poses CSV, joint log, inclinometer log) and the
 // measurement log of `mcms audit robot` (CSV; its YAML form is the robot target's).
-#include "calib/robot_audit.h"
+#include "audit/robot_audit.h"
 #include "fusion/sensor_logs.h"
 #include "fuzz/fuzz_support.h"
 #include "fuzz/fuzz_targets.h"

@@ -6,7 +6,7 @@
 #include "fusion/sensor_logs.h"
 #include "fuzz/fuzz_support.h"
 #include "fuzz/fuzz_targets.h"
-#include "synthetic/fov_map.h"
+#include "jobs/fov_map.h"
 #include "synthetic/scenario.h"
 
 namespace mcms::fuzz {

@@ -1,5 +1,6 @@
 #include "model/inclinometer.h"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -19,7 +20,7 @@ bool Inclinometer::IsValid(std::string* why) const {
     s << "sigma must be positive and finite, is " << sigma;
   else if (!(period > 0) || !std::isfinite(period))
     s << "period must be positive and finite, is " << period;
-  else if (!(range > 0) || !(range < 0.5 * 3.14159265358979323846))
+  else if (!(range > 0) || !(range < 0.5 * std::numbers::pi))
     s << "range must be in (0, pi/2) rad, is " << range;
   if (s.tellp() == 0) return true;
   if (why) *why = "inclinometer: " + s.str();
@@ -58,8 +59,8 @@ OrientationInformation Inclinometer::Constraint(const Vec2& reading, const Mat3&
   Eigen::Matrix<double, 2, 3> H;
   const Vec2 tilt = Tilt(R_base_flange_lin, &H);
   if (tilt.cwiseAbs().maxCoeff() > range)
-    Throw("inclinometer: linearization orientation tilts the sensor by ", tilt.cwiseAbs().maxCoeff() * 180.0 / 3.14159265358979323846,
-          " deg, beyond its range ", range * 180.0 / 3.14159265358979323846, " deg");
+    Throw("inclinometer: linearization orientation tilts the sensor by ", tilt.cwiseAbs().maxCoeff() * 180.0 / std::numbers::pi,
+          " deg, beyond its range ", range * 180.0 / std::numbers::pi, " deg");
   const double w = 1.0 / (sigma * sigma);
   OrientationInformation c;
   c.R_base_flange_lin = R_base_flange_lin;

@@ -22,6 +22,7 @@
 // with dtheta in the BASE frame.
 #pragma once
 
+#include <numbers>
 #include <optional>
 #include <string>
 
@@ -46,11 +47,11 @@ struct OrientationInformation {
 struct Inclinometer {
   Mat3 R_flange_incl = Mat3::Identity();  // mounting rotation, sensor frame to flange frame
   Vec2 bias = Vec2::Zero();               // rad, per axis, added to the true tilt
-  double sigma = 0.01 * 3.14159265358979323846 / 180.0;  // rad, per-axis noise (LE-30: 0.01 deg)
+  double sigma = 0.01 * std::numbers::pi / 180.0;  // rad, per-axis noise (LE-30: 0.01 deg)
   double period = 0.02;                   // s between readings (LE-30: 20 ms)
   // Largest |tilt| on either axis at which a reading exists. The paper gives no range for
   // the LE-30; 30 deg is taken from its name. The Jacobian grows as 1/cos(tilt).
-  double range = 30.0 * 3.14159265358979323846 / 180.0;  // rad
+  double range = 30.0 * std::numbers::pi / 180.0;  // rad
 
   // Finite rotation, sigma > 0, period > 0, 0 < range < pi/2.
   bool IsValid(std::string* why = nullptr) const;

@@ -1,5 +1,6 @@
 #include "model/inverse_kinematics.h"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -7,7 +8,7 @@
 namespace mcms {
 
 namespace {
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 
 Eigen::VectorXd Clamped(const RobotModel& robot, Eigen::VectorXd q) {
   for (int i = 0; i < robot.NumJoints(); ++i) {

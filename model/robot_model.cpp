@@ -1,5 +1,6 @@
 #include "model/robot_model.h"
 
+#include <numbers>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
@@ -25,7 +26,7 @@ extern const char* const kDefaultRobotSource;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
 
 const char* TypeName(JointType t) { return t == JointType::kRevolute ? "revolute" : "prismatic"; }

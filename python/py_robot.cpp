@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "calib/iso9283.h"
-#include "calib/robot_audit.h"
+#include "audit/robot_audit.h"
 #include "calib/robot_calibration.h"
 #include "fusion/sensor_logs.h"
 #include "fusion/stream_fusion.h"

@@ -6,9 +6,9 @@
 
 #include "python/py_common.h"
 #include "fusion/sensor_logs.h"
-#include "synthetic/fov_map.h"
-#include "synthetic/track_recording.h"
-#include "tracking/audit.h"
+#include "jobs/fov_map.h"
+#include "jobs/track_recording.h"
+#include "audit/camera_audit.h"
 #include "tracking/fov_prediction.h"
 #include "tracking/noise_estimate.h"
 #include "tracking/sequence.h"
@@ -715,36 +715,43 @@ void BindVision(py::module_& m) {
 
   m.def(
       "audit_cameras",
-      [](const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results) {
-        const SequenceAudit a = AuditCameras(rig, target, results);
+      [](const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results, double false_alarm) {
+        CameraAuditOptions o;
+        o.false_alarm = false_alarm;
+        std::string why;
+        if (!o.IsValid(&why)) Throw("argument 'false_alarm': ", why);
+        const CameraAuditResult a = AuditCameraModel(rig, target, results, o);
         py::dict d;
-        d["report"] = a.Report();
-        d["worst"] = a.worst;
-        py::list cams;
-        for (const auto& c : a.cameras) {
-          py::dict e;
-          e["name"] = c.name;
-          e["observations"] = c.observations;
-          e["outliers"] = c.outliers;
-          e["chi2_per_dof"] = c.chi2_per_dof;
-          e["chi2_threshold"] = c.chi2_threshold;
-          e["consistent"] = c.consistent;
-          e["mean_residual_px"] = Array({2}, c.mean_residual_px.data());
-          e["cause"] = c.cause;
-          e["after_moved"] = c.after_moved;
-          e["after_radial"] = c.after_radial;
-          e["corrected_T_cam_rig"] = PoseToArray(c.corrected_T_cam_rig);
-          e["camera_move"] = Array({6}, c.camera_move.data());
-          e["radial_k"] = c.radial_k;
-          cams.append(e);
-        }
-        d["cameras"] = cams;
-        d["repaired_rig"] = RepairRig(rig, a);
+        d["report"] = a.report.Text();
+        d["clean"] = a.report.clean;
+        const auto Effect = [](const AuditEffect& e) {
+          py::dict x;
+          x["name"] = e.name;
+          x["where"] = e.where;
+          py::dict p, s;
+          for (const auto& [k, v] : e.parameters) p[py::str(k)] = v;
+          for (const auto& [k, v] : e.sigma) s[py::str(k)] = v;
+          x["parameters"] = p;
+          x["sigma"] = s;
+          x["heldout_loglik_gain"] = e.heldout_loglik_gain;
+          x["bic_gain"] = e.bic_gain;
+          return x;
+        };
+        py::list effects, undecided;
+        for (const auto& e : a.report.effects) effects.append(Effect(e));
+        for (const auto& g : a.report.undecided) undecided.append(py::cast(g));
+        d["effects"] = effects;
+        d["undecided"] = undecided;
+        d["noise_scale"] = py::cast(a.noise_scale);
+        d["repaired_rig"] = a.ExtendedRig(rig);
         return d;
       },
-      py::arg("rig"), py::arg("target"), py::arg("results"),
-      "Leave-one-camera-out audit of tracked frames (tracking/audit.h): per camera chi2, the cause and a "
-      "repaired rig.");
+      py::arg("rig"), py::arg("target"), py::arg("results"), py::arg("false_alarm") = 0.01,
+      "The camera audit of tracked frames (audit/camera_audit.h, as `mcms audit cameras`): the catalog effects "
+      "(camera_moved, focal_length, principal_point, radial_distortion, camera_time_offset, pixel_noise_scale, "
+      "target_geometry) that earn their place, each with its size and sigma ('effects'), the undecided groups, the "
+      "estimated noise scale per camera, the text report and the rig with the named effects applied "
+      "('repaired_rig').");
 
   m.def(
       "predict_fov_point",

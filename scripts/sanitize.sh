@@ -13,7 +13,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-modules="${MCMS_SANITIZE_MODULES:-core vision model tracking fusion calib synthetic app}"
+modules="${MCMS_SANITIZE_MODULES:-core vision model tracking fusion calib synthetic audit jobs app}"
 app_tests="${MCMS_SANITIZE_APP_TESTS:-inputs cli fuse}"
 jobs=$(nproc 2>/dev/null || echo 2)
 launcher=()
@@ -27,7 +27,7 @@ san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-poin
 # 16-byte aligned under ASan too, so tell Eigen, as the uninstrumented libraries assume.
 san="$san -DEIGEN_MALLOC_ALREADY_ALIGNED=1"
 # GCC 12 with -fsanitize reports -Wmaybe-uninitialized inside libstdc++'s own std::regex
-# (std::function moved in regex_automaton.h; test_core_html_report uses std::regex): a known
+# (std::function moved in regex_automaton.h; test_jobs_html_report uses std::regex): a known
 # false positive of the instrumented build, not of our code, which the normal -Werror build
 # still checks for this warning.
 san="$san -Wno-maybe-uninitialized"

@@ -9,7 +9,6 @@
 #include <yaml-cpp/yaml.h>
 
 #include "core/error.h"
-#include "synthetic/fov_map_measured.h"
 
 namespace mcms {
 
@@ -64,21 +63,11 @@ bool CameraErrorModel::IsValid(std::string* why) const {
   return true;
 }
 
-CameraErrorModel CameraErrorModelFromFit(const NoiseModelFit& fit, const std::string& name, const std::string& source) {
-  CameraErrorModel m;
-  m.name = name;
-  m.source = source;
-  m.pixel_noise_scale = fit.scale;
-  m.floor_m = std::abs(fit.floor);
-  m.anisotropy_m = fit.anisotropy.cwiseAbs();
-  return m;
-}
-
 CameraErrorModel PaperCameraErrorModel() {
   // mcms fov-map --measured ../shared/data/paper/table1_point_repeatability.csv
   //   --lines ../shared/data/paper/table2_line_lengths.csv --json fit.json -o DIR
   // selects misidentification + anisotropy_y + anisotropy_z + pixel_noise_scale (no floor);
-  // test_synthetic_camera_error_model refits and compares.
+  // test_jobs_camera_error_model refits and compares.
   CameraErrorModel m;
   m.name = "paper";
   m.source = "fitted by `mcms fov-map --measured` to the paper's Table 1 (assumed layout)";

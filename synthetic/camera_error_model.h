@@ -1,8 +1,8 @@
 // The forward model's camera made as bad as a measured one (issue 12, item 3): the
 // extension of the camera noise model that `mcms fov-map --measured` fits
-// (synthetic/fov_map_measured.h NoiseModelFit), named once and used by the demo
-// (synthetic/demo.h, `mcms demo --camera-model`), the lab prediction without rendering
-// (synthetic/fov_map_lab.h) and the fit's own JSON.
+// (audit/repeatability.h NoiseModelFit, CameraErrorModelFromFit), named once and used by the demo
+// (jobs/demo.h, `mcms demo --camera-model`), the lab prediction without rendering
+// (jobs/fov_map_lab.h) and the fit's own JSON.
 //
 // What each effect is in the simulation:
 //   pixel_noise_scale k   the blob centres' noise k times the nominal one, per frame. To
@@ -43,8 +43,6 @@
 
 namespace mcms {
 
-struct NoiseModelFit;
-
 // A draw from N(0, C), C symmetric positive semi-definite ([dtheta; dp]).
 Vec6 DrawNormal(const Mat6& C, Rng* rng);
 
@@ -80,9 +78,6 @@ struct PaperLabResult {
   static constexpr double camera_3sigma_m = 3.940e-3, robot_3sigma_m = 3.379e-3, kf_3sigma_m = 1.297e-3;
   static constexpr double moifa_reduction = 0.382, kf_reduction = 0.673;
 };
-
-// From a fit (the misidentification effect is left out, see above).
-CameraErrorModel CameraErrorModelFromFit(const NoiseModelFit& fit, const std::string& name, const std::string& source);
 
 // The model `mcms fov-map --measured ../shared/data/paper/table1_point_repeatability.csv`
 // fits to the paper's Table 1 (values copied from its --json output; a test refits them).

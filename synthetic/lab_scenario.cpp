@@ -1,5 +1,6 @@
 #include "synthetic/lab_scenario.h"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 
@@ -63,8 +64,8 @@ LabScenario MakeLabScenario(const LabOptions& o) {
 
   Eigen::VectorXd seed(6);
   seed << 0.0, -0.35, 0.6, 0.0, 1.3, 0.0;
-  const double golden = M_PI * (3.0 - std::sqrt(5.0));
-  const double spread = o.orientation_spread_deg * M_PI / 180.0;
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  const double spread = o.orientation_spread_deg * std::numbers::pi / 180.0;
   for (int i = 0; i < o.points; ++i) {
     // Fibonacci lattice: evenly spread points on the sphere.
     const double z = o.points == 1 ? 0.0 : 1.0 - 2.0 * (i + 0.5) / o.points;

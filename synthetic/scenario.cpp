@@ -1,5 +1,6 @@
 #include "synthetic/scenario.h"
 
+#include <numbers>
 #include <yaml-cpp/yaml.h>
 
 #include <charconv>
@@ -294,7 +295,7 @@ CameraRig ParseGeneratedRig(const Reader& r, const YAML::Node& n) {
     const double start = n["start_deg"] ? r.Number(n["start_deg"], "rig.start_deg") : 0.0;
     if (count > 1000) r.Bad(n["count"], "rig.count", "expected at most 1000 cameras");
     for (long long i = 0; i < count; ++i) {
-      const double az = (start + 360.0 * static_cast<double>(i) / static_cast<double>(count)) * M_PI / 180.0;
+      const double az = (start + 360.0 * static_cast<double>(i) / static_cast<double>(count)) * std::numbers::pi / 180.0;
       positions.emplace_back(radius * std::cos(az), radius * std::sin(az), height);
     }
   } else {
@@ -406,7 +407,7 @@ void ParseLissajous(const Reader& r, const YAML::Node& n, Scenario* s) {
     rot_amp = r.Number(n["rotation_amplitude_deg"], "motion.rotation_amplitude_deg");
     if (rot_amp < 0 || rot_amp >= 180)
       r.Bad(n["rotation_amplitude_deg"], "motion.rotation_amplitude_deg", "expected an angle in [0, 180) degrees");
-    rot_amp *= M_PI / 180.0;
+    rot_amp *= std::numbers::pi / 180.0;
   }
   if (rot_amp > 0) {
     const YAML::Node rp = r.Require(n, "rotation_period_s", "motion", "periods of the orientation wobble");
@@ -421,9 +422,9 @@ void ParseLissajous(const Reader& r, const YAML::Node& n, Scenario* s) {
     const double t = start + static_cast<double>(i) / rate;
     Vec3 p, w;
     for (int k = 0; k < 3; ++k) {
-      p[k] = centre[k] + amp[k] * std::sin(2 * M_PI * t / period[k] + phase[k]);
+      p[k] = centre[k] + amp[k] * std::sin(2 * std::numbers::pi * t / period[k] + phase[k]);
       // Each component within a / sqrt(3), so the rotation angle |w| stays within a.
-      w[k] = rot_amp / std::sqrt(3.0) * std::sin(2 * M_PI * t / rot_period[k] + rot_phase[k]);
+      w[k] = rot_amp / std::sqrt(3.0) * std::sin(2 * std::numbers::pi * t / rot_period[k] + rot_phase[k]);
     }
     s->times.push_back(t);
     s->T_rig_target.push_back(Pose{ExpSO3(w) * R_base, p});

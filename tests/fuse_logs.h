@@ -7,6 +7,7 @@
 //    hidden effects (a late joint log, an inclinometer bias, misalignment or clock offset).
 #pragma once
 
+#include <numbers>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -110,7 +111,7 @@ inline Logs MovingLogs(const LogOptions& o) {
   for (int k = 0; k <= nj; ++k) {
     const Eigen::VectorXd q = q_at(k / 100.0 - o.joint_late_s);  // stamped late: an earlier moment's value
     std::string row = N(k / 100.0);
-    for (int i = 0; i < 6; ++i) (row += ",") += N(o.joints_deg ? q[i] * 180.0 / 3.14159265358979323846 : q[i]);
+    for (int i = 0; i < 6; ++i) (row += ",") += N(o.joints_deg ? q[i] * 180.0 / std::numbers::pi : q[i]);
     j.push_back(row);
   }
   if (o.with_incl) {

@@ -12,7 +12,7 @@
 
 #include <Eigen/Core>
 
-#include "calib/robot_audit.h"
+#include "audit/robot_audit.h"
 #include "calib/robot_calibration.h"
 #include "core/random.h"
 #include "model/extensions.h"

@@ -7,12 +7,13 @@
 
 #include <nlohmann/json.hpp>
 
-#include "synthetic/evaluation.h"
+#include "jobs/evaluation.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"
-#include "tracking/audit.h"
+#include "audit/camera_audit.h"
 
 namespace mcms {
 namespace {
@@ -51,17 +52,23 @@ TEST(Audit, FindsABumpedCameraNamesTheCauseAndRepairsIt) {
 
   const auto before = Track(model.rig, model, images);
   const PoseErrorSummary s0 = EvaluatePoses(before, model.T_rig_target);
-  const SequenceAudit audit = AuditCameras(model.rig, model.target, before);
-  std::printf("%s", audit.Report().c_str());
-  ASSERT_EQ(audit.worst, 2);
-  EXPECT_EQ(audit.cameras[2].cause, "camera moved");
-  for (int c : {0, 1, 3}) EXPECT_TRUE(audit.cameras[c].consistent) << audit.cameras[c].name;
+  const CameraAuditResult audit = AuditCameraModel(model.rig, model.target, before);
+  std::printf("%s", audit.report.Text().c_str());
+  // cam2 moved, over the whole recording, and nothing named at the other cameras.
+  bool moved = false;
+  for (const CameraModelTerm& t : audit.terms) {
+    if (t.undecided) continue;
+    EXPECT_EQ(t.extension.index, 2) << t.extension.Label({"cam0", "cam1", "cam2", "cam3"});
+    moved |= t.extension.effect == Effect::kCameraMoved && t.extension.index == 2;
+  }
+  ASSERT_TRUE(moved) << audit.report.Text();
   // The re-estimated pose of cam2 is the bumped one.
-  const Vec6 left = BoxMinus(audit.cameras[2].corrected_T_cam_rig, world.rig.cameras[2].T_cam_rig());
+  const CameraRig repaired = audit.ExtendedRig(model.rig);
+  const Vec6 left = BoxMinus(repaired.cameras[2].T_cam_rig(), world.rig.cameras[2].T_cam_rig());
   EXPECT_LT(left.head<3>().norm(), 1e-4) << "rad";
   EXPECT_LT(left.tail<3>().norm(), 2e-4) << "m";
 
-  const auto after = Track(RepairRig(model.rig, audit), model, images);
+  const auto after = Track(repaired, model, images);
   const PoseErrorSummary s1 = EvaluatePoses(after, model.T_rig_target);
   std::printf("before repair:\n%safter repair:\n%s", FormatSummary(s0).c_str(), FormatSummary(s1).c_str());
   // Before: the tracker protected the pose by dropping cam2's observations as outliers in
@@ -75,10 +82,10 @@ TEST(Audit, FindsABumpedCameraNamesTheCauseAndRepairsIt) {
 TEST(Audit, FindsNothingOnCleanData) {
   const Scenario sc = Short();
   const auto results = Track(sc.rig, sc, Render(sc));
-  const SequenceAudit audit = AuditCameras(sc.rig, sc.target, results);
-  std::printf("%s", audit.Report().c_str());
-  EXPECT_EQ(audit.worst, -1);
-  for (const auto& c : audit.cameras) EXPECT_TRUE(c.consistent) << c.name;
+  const CameraAuditResult audit = AuditCameraModel(sc.rig, sc.target, results);
+  std::printf("%s", audit.report.Text().c_str());
+  EXPECT_TRUE(audit.report.effects.empty()) << audit.report.Text();
+  EXPECT_TRUE(audit.report.undecided.empty()) << audit.report.Text();
 }
 
 // `mcms audit cameras --repaired-target`: images rendered with ball 3 of the target 0.4 mm

@@ -19,7 +19,7 @@
 #include <random>
 
 #include "synthetic/scenario.h"
-#include "tracking/camera_audit.h"
+#include "audit/camera_audit.h"
 #include "vision/sphere_projection.h"
 
 namespace mcms {

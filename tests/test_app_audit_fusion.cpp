@@ -8,6 +8,7 @@
 //    parameter within 3 of its sigmas, positive held-out gain;
 //  - clean controls: the inclinometer audit on many clean seeds (library calls), the
 //    observed false-alarm rate against the designed one.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -16,9 +17,9 @@
 #include <fstream>
 #include <sstream>
 
-#include "calib/inclinometer_audit.h"
+#include "audit/inclinometer_audit.h"
 #include "core/random.h"
-#include "fusion/log_audit.h"
+#include "audit/fusion_log_audit.h"
 #include "fusion/sensor_logs.h"
 #include "tests/cli_runner.h"
 #include "tests/fuse_logs.h"
@@ -147,7 +148,7 @@ Hidden PickEffect(uint64_t seed) {
   h.o.frames = 290;
   const int kind = static_cast<int>(seed % 3);
   if (kind == 0) {
-    const double a = pick.Uniform(0, 2 * 3.14159265358979323846), m = pick.Uniform(4e-5, 8e-5);
+    const double a = pick.Uniform(0, 2 * std::numbers::pi), m = pick.Uniform(4e-5, 8e-5);
     h.name = "inclinometer_bias";
     h.o.incl_bias = Vec2(m * std::cos(a), m * std::sin(a));
     h.truth = {{"bias_x_rad", h.o.incl_bias.x()}, {"bias_y_rad", h.o.incl_bias.y()}};

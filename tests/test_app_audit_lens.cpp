@@ -1,4 +1,4 @@
-// `mcms audit lens` (calib/lens_audit.h) through the command: mrcal's real Figueroa
+// `mcms audit lens` (audit/lens_audit.h) through the command: mrcal's real Figueroa
 // calibration (6016x4016, 186 chessboard views, 10x10 corners): the stored OPENCV8
 // solution has RMS 0.551 px per coordinate, mrcal's own splined fit of the same
 // observations 0.430 px. The audit refits both with libmrcal and must find that the

@@ -2,6 +2,7 @@
 // the JSON names the effect; bad logs (one row, time going backwards, joints beyond the
 // limits, a NaN temperature, a different joint count) get an error naming the file and
 // the problem, a non-zero exit and no output.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -40,7 +41,7 @@ std::string LogCsv(double offset_deg, uint64_t seed) {
   }
   const Pose T_meas_base{ExpSO3(Vec3(0.0, 0.0, 2.5)), Vec3(2.0, 0.5, -0.2)};
   const Extension ext{Effect::kJointOffset, 2, 0};
-  const double p = offset_deg * M_PI / 180;
+  const double p = offset_deg * std::numbers::pi / 180;
   const double* params[1] = {&p};
   std::ostringstream o;
   o.precision(12);
@@ -73,7 +74,7 @@ TEST(AppAuditRobot, NamesAHiddenJointOffsetInACsvLog) {
   EXPECT_EQ(j["effects"][0]["where"], "joint 3");
   const double est = j["effects"][0]["parameters"]["offset_rad"].get<double>();
   const double sig = j["effects"][0]["sigma"]["offset_rad"].get<double>();
-  EXPECT_LT(std::abs(est - 0.006 * M_PI / 180), 3 * sig);
+  EXPECT_LT(std::abs(est - 0.006 * std::numbers::pi / 180), 3 * sig);
   EXPECT_GT(j["effects"][0]["heldout_loglik_gain"].get<double>(), 0.0);
   for (const char* f : {"report.txt", "report.json", "robot.yaml", "residuals.csv", "plots/effect1.svg"})
     EXPECT_TRUE(fs::exists(d / "out" / f)) << f;

@@ -5,6 +5,7 @@
 // reported uncertainty (or 0.3 %), and the solved model must project like the true
 // one across the central image. The detector's error against the true corner
 // projections (its bias on rendered squares) is measured and reported.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -52,8 +53,8 @@ std::vector<Pose> BoardPoses(const CameraModel& cam, const CalibrationBoard& boa
       for (int attempt = 0;; ++attempt) {
         if (attempt % 20 == 19) aim = image_centre + 0.9 * (aim - image_centre);
         const double range = rng.Uniform(0.6, 1.2);
-        const double tilt = rng.Uniform(10.0, 35.0) * M_PI / 180.0, axis = rng.Uniform(0.0, 2 * M_PI);
-        const double roll = rng.Uniform(-20.0, 20.0) * M_PI / 180.0;
+        const double tilt = rng.Uniform(10.0, 35.0) * std::numbers::pi / 180.0, axis = rng.Uniform(0.0, 2 * std::numbers::pi);
+        const double roll = rng.Uniform(-20.0, 20.0) * std::numbers::pi / 180.0;
         const Mat3 R = ExpSO3(Vec3(tilt * std::cos(axis), tilt * std::sin(axis), 0.0)) * ExpSO3(Vec3(0, 0, roll));
         const Vec3 ray = *cam.Unproject(aim);
         const Pose T{R, range * ray - R * centre_board};
@@ -219,7 +220,7 @@ TEST(BoardCalibration, RenderedImagesCalibrateTheLens) {
   const double n = static_cast<double>(qs.size());
   std::printf("solved vs true projection at 1 m, central 80 %% (%zu points): raw RMS %.4f px, max %.4f px "
               "(max / allowed %.2f); after the implied rotation (%.4f deg): RMS %.4f px, max %.4f px\n",
-              qs.size(), std::sqrt(raw2 / n), raw_max, worst_ratio, LogSO3(R).norm() * 180 / M_PI,
+              qs.size(), std::sqrt(raw2 / n), raw_max, worst_ratio, LogSO3(R).norm() * 180 / std::numbers::pi,
               std::sqrt(fit2 / n), fit_max);
   EXPECT_LT(worst_ratio, 1.0);
   EXPECT_LT(fit_max, kMaxProjectionDiffPx);

@@ -11,6 +11,7 @@
 //   - an upside-down camera, whose OpenCV numbering differs in every frame;
 //   - `mcms calib-rig` on such images (renumbering reported, models right), and on
 //     images whose frames do not match between the cameras (refused, nothing written).
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -63,7 +64,7 @@ CameraRig TrueRig(bool upside_down) {
   CameraRig rig;
   rig.names = {"cam0", "cam1"};
   rig.cameras.emplace_back("LENSMODEL_OPENCV4", TrueIntrinsics(0), kWidth, kHeight, Pose::Identity());
-  const Mat3 R = ExpSO3(Vec3(0, 0, upside_down ? M_PI : 0.0)) * ExpSO3(Vec3(0.01, -8.0 * M_PI / 180, 0.0));
+  const Mat3 R = ExpSO3(Vec3(0, 0, upside_down ? std::numbers::pi : 0.0)) * ExpSO3(Vec3(0.01, -8.0 * std::numbers::pi / 180, 0.0));
   // Camera 1's centre 0.3 m to the right of camera 0: t = -R c.
   const Pose T{R, -(R * Vec3(0.3, 0.0, 0.0))};
   rig.cameras.emplace_back("LENSMODEL_OPENCV4", TrueIntrinsics(1), kWidth, kHeight, T);
@@ -78,8 +79,8 @@ std::vector<Pose> BoardPlacements(const CameraRig& rig, const CalibrationBoard& 
   std::vector<Pose> out;
   for (int attempt = 0; static_cast<int>(out.size()) < n && attempt < 20000; ++attempt) {
     const Vec3 centre(rng.Uniform(-0.25, 0.55), rng.Uniform(-0.3, 0.3), rng.Uniform(0.9, 1.5));
-    const double tilt = rng.Uniform(15.0, 40.0) * M_PI / 180.0, axis = rng.Uniform(0.0, 2 * M_PI);
-    const double roll = rng.Uniform(0.0, 2 * M_PI);
+    const double tilt = rng.Uniform(15.0, 40.0) * std::numbers::pi / 180.0, axis = rng.Uniform(0.0, 2 * std::numbers::pi);
+    const double roll = rng.Uniform(0.0, 2 * std::numbers::pi);
     const Mat3 R = ExpSO3(Vec3(tilt * std::cos(axis), tilt * std::sin(axis), 0.0)) * ExpSO3(Vec3(0, 0, roll));
     const Pose T_rig_board{R, centre - R * centre_board};
     bool inside = true;
@@ -103,7 +104,7 @@ std::vector<Pose> GridMotions(const CalibrationBoard& board) {
   for (int mirror = 0; mirror < 2; ++mirror)
     for (int q = 0; q < 4; ++q) {
       if (board.cols != board.rows && q % 2 == 1) continue;
-      Mat3 R = ExpSO3(Vec3(0, 0, q * M_PI / 2)).array().round().matrix();
+      Mat3 R = ExpSO3(Vec3(0, 0, q * std::numbers::pi / 2)).array().round().matrix();
       if (mirror) R = R * Vec3(-1, 1, -1).asDiagonal();  // a mirror in the plane = a flip about the board's y axis
       out.push_back(Pose{R, centre - R * centre});
     }
@@ -200,7 +201,7 @@ void ExpectRigRight(const CameraCalibrationResult& r, const CameraRig& truth) {
     }
   const Pose d = r.rig.cameras[1].T_cam_rig() * truth.cameras[1].T_cam_rig().Inverse();
   const double dt = (r.rig.cameras[1].T_cam_rig().Inverse().t - truth.cameras[1].T_cam_rig().Inverse().t).norm();
-  const double dr = LogSO3(d.R).norm() * 180 / M_PI;
+  const double dr = LogSO3(d.R).norm() * 180 / std::numbers::pi;
   std::printf("  cam1 pose error: %.3f mm, %.4f deg\n", dt * 1e3, dr);
   EXPECT_LT(dt, kMaxBaselineErrM);
   EXPECT_LT(dr, kMaxRotationErrDeg);
@@ -223,7 +224,7 @@ TEST(BoardSymmetry, OpenCvNumberingsAreThePredictedSymmetries) {
     int views = 0;
     for (int tilt = 0; tilt < 2; ++tilt)
       for (int roll = 0; roll < 360; roll += 30) {
-        const Mat3 R = ExpSO3(Vec3(0.35 * tilt, -0.25, 0.0)) * ExpSO3(Vec3(0, 0, roll * M_PI / 180));
+        const Mat3 R = ExpSO3(Vec3(0.35 * tilt, -0.25, 0.0)) * ExpSO3(Vec3(0, 0, roll * std::numbers::pi / 180));
         const Pose T{R, Vec3(0, 0, 0.8) - R * centre};
         Rng noise(kSeed + roll + 1000 * tilt);
         const BoardDetection det = DetectBoard(board, RenderBoard(table, board, T, options, &noise));
@@ -541,7 +542,7 @@ TEST(AppCalibRigSymmetry, ViewOfAnotherMomentIsRefusedWithoutOutput) {
   {
     const BoardRenderOptions options;
     const RayTable table(v.rig.cameras[1], BoardRenderPadPx(options) + 2.0);
-    const Pose moved = Pose{ExpSO3(Vec3(0.2 * M_PI / 180, 0, 0)), Vec3(0.002, 0, 0)} * v.T_rig_board[late];
+    const Pose moved = Pose{ExpSO3(Vec3(0.2 * std::numbers::pi / 180, 0, 0)), Vec3(0.002, 0, 0)} * v.T_rig_board[late];
     Rng noise(kSeed + 99);
     v.images[1][late] = RenderBoard(table, board, v.rig.cameras[1].T_cam_rig() * moved, options, &noise);
   }

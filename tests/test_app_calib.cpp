@@ -6,6 +6,7 @@
 // Real data (skipped with the reason when absent):
 //   industrial-calibration-positioner  205 joint/pose measurements of a two-axis positioner
 //   opencv-stereo-chessboard           OpenCV's 13 stereo chessboard pairs (640x480, 9x6, 25 mm)
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -56,7 +57,7 @@ constexpr double kMaxRigRmsPx = 0.5;
 // the cameras' x axis, a plausible length and a small relative rotation.
 constexpr double kMinBaselineAlongX = 0.99;  // |t_x| / |t|
 constexpr double kBaselineRangeM[2] = {0.05, 0.15};
-constexpr double kMaxRelativeRotationRad = 2.0 * M_PI / 180.0;
+constexpr double kMaxRelativeRotationRad = 2.0 * std::numbers::pi / 180.0;
 
 using test::CliRun;
 using test::Mcms;
@@ -100,7 +101,7 @@ double Figure(const std::string& text, const std::string& line_key, const std::s
 constexpr const char* kPositionerYaml = R"(name: two-axis positioner
 convention: standard_dh
 joints:
-  - {name: j1, a_m: 0.0, d_m: 0.0, alpha_rad: -1.5707963267948966, theta_offset_rad: 0.0, limits_rad: [-3.141592653589793, 3.141592653589793]}
+  - {name: j1, a_m: 0.0, d_m: 0.0, alpha_rad: -1.5707963267948966, theta_offset_rad: 0.0, limits_rad: [-std::numbers::pi, std::numbers::pi]}
   - {name: j2, a_m: 0.0, d_m: -0.475, alpha_rad: 0.0, theta_offset_rad: -1.5707963267948966, limits_rad: [-6.283185307179586, 6.283185307179586]}
 tool:
   translation_m: [0.17, -0.65, 0.5]
@@ -374,7 +375,7 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
   const double baseline = T_right_rig.t.norm();
   std::printf("baseline %.2f mm, t_right_rig [%.2f, %.2f, %.2f] mm, relative rotation %.3f deg\n", baseline * 1e3,
               T_right_rig.t.x() * 1e3, T_right_rig.t.y() * 1e3, T_right_rig.t.z() * 1e3,
-              RotationAngle(T_right_rig.R, Mat3::Identity()) * 180 / M_PI);
+              RotationAngle(T_right_rig.R, Mat3::Identity()) * 180 / std::numbers::pi);
   EXPECT_GT(-T_right_rig.t.x(), kMinBaselineAlongX * baseline);
   EXPECT_GT(baseline, kBaselineRangeM[0]);
   EXPECT_LT(baseline, kBaselineRangeM[1]);

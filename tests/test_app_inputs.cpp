@@ -1,6 +1,7 @@
 // Bad inputs through the real `mcms` binary (issue 14): each is refused with one line
 // naming the input and the bad value, a non-zero exit and nothing written, or (a frame's
 // image, an inclinometer row) left out with the reason while the rest is processed.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <array>
@@ -395,7 +396,7 @@ TEST(Inputs, InclinometerReadingBeyondItsRangeIsLeftOut) {
   const size_t rows = ReadCsv(d / "fused.csv").rows.size();
   fs::remove(d / "fused.csv");
   Lines& in = l.files["incl.csv"];
-  in[12] = in[12].substr(0, in[12].find(',')) + "," + Num(80.0 * 3.14159265358979323846 / 180.0) + ",0";
+  in[12] = in[12].substr(0, in[12].find(',')) + "," + Num(80.0 * std::numbers::pi / 180.0) + ",0";
   Write(d, l);
   const CliRun r = Mcms(kFuse, d);
   ASSERT_EQ(r.code, 0) << r.err;

@@ -5,10 +5,11 @@
 
 #include <cmath>
 
-#include "synthetic/evaluation.h"
-#include "synthetic/lab_experiment.h"
+#include "jobs/evaluation.h"
+#include "jobs/lab_experiment.h"
 #include "synthetic/lab_scenario.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "core/error.h"
 #include "tests/test_util.h"
 

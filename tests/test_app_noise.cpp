@@ -13,8 +13,9 @@
 #include <unistd.h>
 
 #include "core/io.h"
-#include "synthetic/evaluation.h"
+#include "jobs/evaluation.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"

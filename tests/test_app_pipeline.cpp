@@ -1,12 +1,14 @@
 // End to end on rendered images: render -> detect -> match -> triangulate -> identify
 // -> bundle-adjust, over sequences of at least 100 frames from 4 cameras, measured
 // against the ground truth and against the bound the pipeline reports.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "synthetic/evaluation.h"
+#include "jobs/evaluation.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tests/test_util.h"
 #include "tracking/tracker.h"
@@ -88,7 +90,7 @@ TEST(Pipeline, DefaultScenarioPoseIsAccurateAndItsCovarianceHonest) {
   EXPECT_GE(clean_ok, clean - 1);
   // Accuracy: the paper's rig class reaches ~0.1 mm; rendered noise allows far better.
   EXPECT_LT(s.position_rms_m, 5e-5);
-  EXPECT_LT(s.rotation_rms_rad, 0.05 * M_PI / 180);
+  EXPECT_LT(s.rotation_rms_rad, 0.05 * std::numbers::pi / 180);
   // Honesty: the mean NEES of the 6-DOF pose error inside its 95 % chi-square band.
   EXPECT_TRUE(s.NeesInBand()) << "mean NEES " << s.mean_nees << " not in [" << s.nees_band_lo << ", "
                               << s.nees_band_hi << "]";

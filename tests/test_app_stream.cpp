@@ -1,6 +1,7 @@
 // Long recordings: tracking streams each frame's result in frame order with a bounded
 // reorder window, `mcms track` keeps its peak memory flat as the recording grows, and an
 // error mid-run leaves no poses.csv (issue 14, "Long sequences").
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -18,7 +19,7 @@
 #include <stdexcept>
 
 #include "core/io.h"
-#include "synthetic/evaluation.h"
+#include "jobs/evaluation.h"
 #include "synthetic/scenario.h"
 #include "tests/test_util.h"
 #include "tracking/sequence.h"
@@ -405,7 +406,7 @@ TEST(Truth, TrackReportsErrorAndNeesAgainstTheRenderedTruth) {
     const Vec6 e = BoxMinus(est, truth.at(i).T_rig_target);
     const double nees = e.dot(cov.ldlt().solve(e));
     EXPECT_NEAR(p.Number(i, p.Column("err_pos_mm")), 1e3 * e.tail<3>().norm(), 1e-6) << "row " << i;
-    EXPECT_NEAR(p.Number(i, p.Column("err_rot_deg")), e.head<3>().norm() * 180 / M_PI, 1e-7) << "row " << i;
+    EXPECT_NEAR(p.Number(i, p.Column("err_rot_deg")), e.head<3>().norm() * 180 / std::numbers::pi, 1e-7) << "row " << i;
     EXPECT_NEAR(p.Number(i, p.Column("nees")), nees, 1e-3 * (1 + nees)) << "row " << i;
     EXPECT_LT(p.Number(i, p.Column("err_pos_mm")), 1.0) << "a rendered frame tracks to well under a millimetre";
     nees_sum += nees;

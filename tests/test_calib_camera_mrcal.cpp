@@ -4,6 +4,7 @@
 // (skipped with the reason when it or the data is absent). The projection
 // uncertainty (mean-frames, camera-pose term included) is compared with mrcal's own
 // mrcal.projection_uncertainty of the same model.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -191,7 +192,7 @@ TEST(CalibCameraMrcal, FigueroaOpenCv8MatchesMrcal) {
   std::printf("figueroa vs mrcal over the board region (%.0f..%.0f x %.0f..%.0f px), after a best-fit rotation of "
               "%.4f deg: mean projection difference %.3f px, worst %.3f px; our mean 1-sigma uncertainty %.3f px; "
               "worst difference / sigma %.2f\n",
-              umin, umax, vmin, vmax, LogSO3(R).norm() * 180 / M_PI, sum_diff / grid.size(), worst_diff,
+              umin, umax, vmin, vmax, LogSO3(R).norm() * 180 / std::numbers::pi, sum_diff / grid.size(), worst_diff,
               sum_sigma / grid.size(), worst_ratio);
   // Same data, same model (board warp included): the solutions agree far inside our
   // projection uncertainty (measured: worst 0.008 px against a 0.19 px sigma; mrcal's

@@ -1,4 +1,5 @@
 // Camera calibration on real data sets (skipped with the reason when absent).
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cctype>
@@ -95,7 +96,7 @@ TEST(CalibCameraReal, OpenCvStereoBaseline) {
   std::printf("opencv stereo: baseline %.2f mm, t_right_left = (%.2f, %.2f, %.2f) mm +- (%.2f, %.2f, %.2f), "
               "rotation %.3f deg; right fx %.2f (intrinsics.yml M2 534.80); RMS %.4f / %.4f px per coordinate\n",
               T.t.norm() * 1e3, T.t.x() * 1e3, T.t.y() * 1e3, T.t.z() * 1e3, r.extrinsics_std[1][3] * 1e3,
-              r.extrinsics_std[1][4] * 1e3, r.extrinsics_std[1][5] * 1e3, LogSO3(T.R).norm() * 180 / M_PI, i1[0],
+              r.extrinsics_std[1][4] * 1e3, r.extrinsics_std[1][5] * 1e3, LogSO3(T.R).norm() * 180 / std::numbers::pi, i1[0],
               r.residuals[0].rms_px, r.residuals[1].rms_px);
   std::printf("%s", SummarizeCalibration(r).c_str());
   // A side-by-side pair: baseline mostly along x (the right camera sees the left
@@ -103,7 +104,7 @@ TEST(CalibCameraReal, OpenCvStereoBaseline) {
   // consistent with intrinsics.yml (534.80 for both, with fixed aspect ratio).
   EXPECT_LT(T.t.x(), 0.0);
   EXPECT_GT(std::abs(T.t.x()), 0.9 * T.t.norm());
-  EXPECT_LT(LogSO3(T.R).norm(), 5.0 * M_PI / 180);
+  EXPECT_LT(LogSO3(T.R).norm(), 5.0 * std::numbers::pi / 180);
   EXPECT_NEAR(i1[0], 534.80, 0.02 * 534.80);
   EXPECT_NEAR(r.rig.cameras[0].Intrinsics()[0], 534.80, 0.02 * 534.80);
 }
@@ -317,10 +318,10 @@ TEST(CalibCameraReal, VispAprilTagCornersAndPoses) {
     const Vec3 t_gt(g[0], g[1], g[2]);
     const Mat3 R_gt = ExpSO3(Vec3(g[3], g[4], g[5]));
     const double dpos = (T.t - t_gt).norm();
-    const double dang = RotationAngle(T.R, R_gt) * 180 / M_PI;
+    const double dang = RotationAngle(T.R, R_gt) * 180 / std::numbers::pi;
     std::printf("visp tag %2d: corners max %.3f px; pose diff %.3f mm, %.3f deg (range %.0f mm); ours %.3f mm, %.3f deg\n",
                 d.id, e, dpos * 1e3, dang, T.t.norm() * 1e3, (T_ours.t - t_gt).norm() * 1e3,
-                RotationAngle(T_ours.R, R_gt) * 180 / M_PI);
+                RotationAngle(T_ours.R, R_gt) * 180 / std::numbers::pi);
     worst_pos = std::max(worst_pos, dpos);
     worst_ang = std::max(worst_ang, dang);
   }
@@ -478,7 +479,7 @@ TEST(CalibCameraReal, AprilTagRenderedCornerAccuracy) {
   Stats stats[3];
   for (int t = 0; t < kTags; ++t) {
     const int id = 3 * t;
-    const double s = rng.Uniform(8.0, 14.0), angle = rng.Uniform(-M_PI, M_PI);
+    const double s = rng.Uniform(8.0, 14.0), angle = rng.Uniform(-std::numbers::pi, std::numbers::pi);
     const double cx = kSizePx / 2.0 + rng.Uniform(-10.0, 10.0), cy = kSizePx / 2.0 + rng.Uniform(-10.0, 10.0);
     const std::vector<cv::Point2f> cells = {{0, 0}, {8, 0}, {8, 8}, {0, 8}};
     std::vector<cv::Point2f> px;
@@ -619,7 +620,7 @@ TEST(CalibCameraReal, Caliscope4CamMatchesCaliscope) {
       const Pose T_c_0 = T_ref(c) * T_ref(0).Inverse();  // caliscope's camera c relative to camera 0
       const Pose& T = r.rig.cameras[c].T_cam_rig();
       const double dpos = (T.Inverse().t - T_c_0.Inverse().t).norm();
-      const double dang = RotationAngle(T.R, T_c_0.R) * 180 / M_PI;
+      const double dang = RotationAngle(T.R, T_c_0.R) * 180 / std::numbers::pi;
       std::printf("  cam%d: fx %.1f/%.1f fy %.1f/%.1f cx %.1f/%.1f cy %.1f/%.1f (ours/caliscope); position in cam0 "
                   "frame differs by %.1f mm of %.0f mm, rotation by %.2f deg; RMS %.3f px/point (caliscope %s)\n",
                   c, mine[0], m[0], mine[1], m[4], mine[2], m[2], mine[3], m[5], dpos * 1e3, T_c_0.t.norm() * 1e3,

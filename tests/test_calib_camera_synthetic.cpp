@@ -2,6 +2,7 @@
 // rig with Gaussian pixel noise; the calibration must recover the rig within its
 // reported uncertainty, report the noise level as its RMS, and reject bad input
 // with an InputError naming what is missing.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -139,7 +140,7 @@ TEST(CalibCameraSynthetic, OutlierRejectionDropsGrossErrorsAndSettles) {
     const size_t o = static_cast<size_t>(rng.Uniform(0.0, static_cast<double>(in.observations.size()) - 1e-9));
     const size_t i = static_cast<size_t>(rng.Uniform(0.0, static_cast<double>(in.observations[o].pixels.size()) - 1e-9));
     if (std::find(gross.begin(), gross.end(), std::make_pair(o, i)) != gross.end()) continue;
-    const double a = rng.Uniform(0.0, 2.0 * M_PI), len = rng.Uniform(3.0, 10.0);
+    const double a = rng.Uniform(0.0, 2.0 * std::numbers::pi), len = rng.Uniform(3.0, 10.0);
     in.observations[o].pixels[i] += len * Vec2(std::cos(a), std::sin(a));
     gross.emplace_back(o, i);
   }

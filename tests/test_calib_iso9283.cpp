@@ -1,4 +1,5 @@
 // ISO 9283 characteristics on small examples computed by hand (calib/iso9283.h).
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -38,7 +39,7 @@ TEST(Iso9283, PoseAccuracyAndRepeatabilityByHand) {
 TEST(Iso9283, OrientationIsMeasuredFromTheCommandedPose) {
   // Commanded orientation 90 deg about x; attained 90 deg about x, then 0.01 rad about
   // base y: AP_b = 0.01 in the base frame, the other angles 0.
-  const Mat3 Rc = Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix();
+  const Mat3 Rc = Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix();
   const Mat3 Ra = Eigen::AngleAxisd(0.01, Vec3::UnitY()).toRotationMatrix() * Rc;
   const auto c = PoseAccuracyRepeatability(Pose{Rc, Vec3::Zero()}, {Pose{Ra, Vec3::Zero()}, Pose{Ra, Vec3::Zero()}});
   EXPECT_NEAR(c.AP_b, 0.01, 1e-12);
@@ -91,11 +92,11 @@ TEST(Iso9283, PathAccuracyOnACircle) {
   // 1.01 and 1.03 up to the chord sagitta (r (1 - cos(pi / 720)) < 1e-5), so AT = 0.02,
   // and l = 0.01 for both: RT = 0.01.
   std::vector<Vec3> cmd;
-  for (int k = 0; k < 36; ++k) cmd.push_back(Vec3(std::cos(k * M_PI / 20), std::sin(k * M_PI / 20), 0));
+  for (int k = 0; k < 36; ++k) cmd.push_back(Vec3(std::cos(k * std::numbers::pi / 20), std::sin(k * std::numbers::pi / 20), 0));
   std::vector<std::vector<Vec3>> runs(2);
   for (int r = 0; r < 2; ++r)
     for (int k = -10; k < 740; ++k) {
-      const double a = k * M_PI / 360, rad = r == 0 ? 1.01 : 1.03;
+      const double a = k * std::numbers::pi / 360, rad = r == 0 ? 1.01 : 1.03;
       runs[r].push_back(Vec3(rad * std::cos(a), rad * std::sin(a), 0));
     }
   const PathCharacteristics p = PathAccuracyRepeatability(cmd, runs);

@@ -10,6 +10,7 @@
 // starting registration is T_camera_base = T_world_camera^-1 * T_world_positionerbase and
 // the starting tool T_flange_tool = T_mount_target. The upstream DH rows (d, theta, r,
 // alpha) are standard DH: Rz(theta) Tz(d) Tx(r) Rx(alpha).
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <yaml-cpp/yaml.h>
@@ -30,7 +31,7 @@ namespace {
 
 // Acceptance figures of the upstream test (on all measurements) and of the issue.
 constexpr double kMaxMeanPositionM = 2e-3;
-constexpr double kMaxMeanRotationRad = 0.2 * M_PI / 180.0;
+constexpr double kMaxMeanRotationRad = 0.2 * std::numbers::pi / 180.0;
 // Improvement over the nominal DH table with the upstream starting guesses for the sensor
 // and the target mount (the upstream "nominal model" before any fitting).
 constexpr double kMinImprovement = 0.10;
@@ -65,7 +66,7 @@ Stats Of(const std::vector<PoseError>& e) {
 
 void Print(const char* what, const Stats& s) {
   std::printf("%-34s position mean %.3f mm (sd %.3f), rotation mean %.4f deg (sd %.4f)\n", what, s.pos_mean * 1e3,
-              s.pos_std * 1e3, s.rot_mean * 180 / M_PI, s.rot_std * 180 / M_PI);
+              s.pos_std * 1e3, s.rot_mean * 180 / std::numbers::pi, s.rot_std * 180 / std::numbers::pi);
 }
 
 TEST(Positioner, RealDataCalibrationBeatsNominalModel) {
@@ -75,7 +76,7 @@ TEST(Positioner, RealDataCalibrationBeatsNominalModel) {
   const YAML::Node guesses = YAML::LoadFile((dir / "pose_initial_guesses.yaml").string());
   const Pose T_world_camera = ReadGuess(guesses["camera_mount_to_camera_guess"]);
   const Pose T_mount_target = ReadGuess(guesses["target_mount_to_target_guess"]);
-  const Pose T_world_base{Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix(), Vec3(2.2, 0.0, 1.6)};
+  const Pose T_world_base{Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix(), Vec3(2.2, 0.0, 1.6)};
   const Pose guess = T_world_camera.Inverse() * T_world_base;
   const RobotModel nominal = Positioner(T_mount_target);
 
@@ -83,7 +84,7 @@ TEST(Positioner, RealDataCalibrationBeatsNominalModel) {
   // About the per-axis scatter of the final residuals (variance factor ~ 1); the results
   // change by < 0.01 mm for ratios of the two sigmas from 1e-2 to 1e2 m/rad.
   opt.position_sigma_m = 0.25e-3;
-  opt.rotation_sigma_rad = 0.03 * M_PI / 180;
+  opt.rotation_sigma_rad = 0.03 * std::numbers::pi / 180;
   const RobotCalibrationResult cal = CalibrateRobot(nominal, guess, ms, opt);
   RobotCalibrationOptions reg_opt = opt;
   reg_opt.estimate_dh = false;
@@ -142,12 +143,12 @@ TEST(Positioner, TurntableErrorMotionExplainsTheResidual) {
   MCMS_REQUIRE_DATA(dir, "industrial-calibration-positioner");
   const auto ms = ReadRobotMeasurements(dir / "measurements.yaml");
   const YAML::Node guesses = YAML::LoadFile((dir / "pose_initial_guesses.yaml").string());
-  const Pose T_world_base{Eigen::AngleAxisd(M_PI / 2, Vec3::UnitX()).toRotationMatrix(), Vec3(2.2, 0.0, 1.6)};
+  const Pose T_world_base{Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix(), Vec3(2.2, 0.0, 1.6)};
   const Pose guess = ReadGuess(guesses["camera_mount_to_camera_guess"]).Inverse() * T_world_base;
   const RobotModel nominal = Positioner(ReadGuess(guesses["target_mount_to_target_guess"]));
   RobotCalibrationOptions opt;
   opt.position_sigma_m = 0.25e-3;
-  opt.rotation_sigma_rad = 0.03 * M_PI / 180;
+  opt.rotation_sigma_rad = 0.03 * std::numbers::pi / 180;
   std::vector<Stats> held;
   int best = 0;
   for (int H = 0; H <= kMaxHarmonics; ++H) {
@@ -156,7 +157,7 @@ TEST(Positioner, TurntableErrorMotionExplainsTheResidual) {
     const CrossValidation cv = CrossValidateRobot(nominal, guess, ms, o, 5);
     held.push_back(Of(cv.calibrated));
     std::printf("turntable error motion, %d harmonics: 5-fold held out %.3f mm / %.4f deg\n", H,
-                held.back().pos_mean * 1e3, held.back().rot_mean * 180 / M_PI);
+                held.back().pos_mean * 1e3, held.back().rot_mean * 180 / std::numbers::pi);
     if (held.back().pos_mean < held[best].pos_mean) best = H;
   }
   // Each harmonic added up to kMaxHarmonics predicts held-out poses better.
@@ -217,7 +218,7 @@ TEST(Positioner, FindsInjectedErrorMotion) {
   for (int a = 0; a < 13; ++a)
     for (int b = 0; b < 16; ++b) {
       RobotMeasurement m;
-      m.q = Eigen::Vector2d((a - 6) * 5.0 * M_PI / 180, b * 22.5 * M_PI / 180);
+      m.q = Eigen::Vector2d((a - 6) * 5.0 * std::numbers::pi / 180, b * 22.5 * std::numbers::pi / 180);
       const Pose T = T_meas_base * truth.T_base_tool(m.q);
       m.p_meas = T.t + Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * kSigmaP;
       m.R_meas_tool = ExpSO3(Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * kSigmaR) * T.R;

@@ -1,6 +1,7 @@
 // Kinematic calibration and base registration on a synthetic KUKA KR 5 arc with injected
 // DH, base and tool errors and noisy measurements (calib/robot_calibration.h,
 // calib/registration.h).
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -19,7 +20,7 @@
 namespace mcms {
 namespace {
 
-constexpr double kDeg = M_PI / 180.0;
+constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr double kNoise = 0.05e-3;  // m per axis
 // Held-out 3-D RMS error may exceed the noise's 3-D RMS by this factor (model error from
 // the finite fitting set adds about sqrt(1 + p / (3 N)) ~ 1.04 for p ~ 26, N = 120).
@@ -186,7 +187,7 @@ TEST(RobotCalibration, ModifiedDhRobotCalibrates) {
   j[0].name = "J1";
   j[0].d = 0.3;
   j[1].name = "J2";
-  j[1].alpha = -M_PI / 2;
+  j[1].alpha = -std::numbers::pi / 2;
   j[1].a = 0.05;
   j[2].name = "J3";
   j[2].a = 0.4;
@@ -269,7 +270,7 @@ TEST(RobotCalibration, ErrorMotionSameInSolverAndModelForBothConventions) {
   for (const DhConvention conv : {DhConvention::kStandard, DhConvention::kModified}) {
     std::vector<Joint> j(3);
     j[0].d = 0.3;
-    j[1].alpha = -M_PI / 2;
+    j[1].alpha = -std::numbers::pi / 2;
     j[1].a = 0.05;
     j[2].a = 0.4;
     j[2].alpha = 0.3;

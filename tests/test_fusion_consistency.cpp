@@ -1,6 +1,7 @@
 // The chi-square consistency check: false-alarm rate on consistent sensors, the
 // leave-one-out identity, detection and attribution of an offset sensor (positions, and
 // poses with a robot whose joint offset is wrong and a bumped camera).
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -9,13 +10,13 @@
 #include "model/robot_model.h"
 #include "core/error.h"
 #include "core/random.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 #include "fusion/consistency.h"
 
 namespace mcms {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 
 Vec3 SampleDiag(Rng& rng, const Vec3& sigma) {
   return Vec3(sigma.x() * rng.Normal(), sigma.y() * rng.Normal(), sigma.z() * rng.Normal());

@@ -6,6 +6,7 @@
 // step in the tracker's time stamps. On clean logs the rows changed by the exclusion must be
 // as rare as the significance level says. Each fault is also fused the old way
 // (exclude_faults false) and both are printed: the figures of the report.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -17,13 +18,13 @@
 #include <Eigen/LU>
 
 #include "core/random.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 #include "fusion/stream_fusion.h"
 
 namespace mcms {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 constexpr int kFrames = 80;  // camera at 10 Hz from 0.5 s
 constexpr double kEncoderSigma = 3e-5, kAccuracyPos = 2e-5, kAccuracyRot = 2e-5;
 

@@ -1,6 +1,7 @@
 // Kalman filters: the paper's per-sensor random-walk filter and eq. 14 fusion, and the
 // multi-sensor pose filter, Monte-Carlo consistent (NEES, NIS, prediction NEES inside their
 // bands) on a smooth simulated trajectory with asynchronous camera, inclinometer and robot.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,14 +11,14 @@
 #include "model/robot_model.h"
 #include "core/error.h"
 #include "core/random.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 #include "fusion/kalman.h"
 #include "tests/test_util.h"
 
 namespace mcms {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 
 using test::ErrorOf;
 

@@ -4,6 +4,7 @@
 // joints (J^-1 e), the tracker log T_rig_target with a correlated covariance, the
 // inclinometer log tilts with bias and noise. The fused error must be consistent with the
 // fused covariance (mean NEES in a band) and smaller than every sensor's own.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -94,7 +95,7 @@ Scenario MakeScenario(const std::string& name, uint64_t seed, const Vec2& incl_b
   // Sensor axes level at q0: the readings stay near zero over the motion.
   s.incl.R_flange_incl = s.robot.T_base_flange(s.q0).R.transpose();
   s.incl.bias = Vec2(1.0e-3, -5e-4);
-  s.incl.sigma = 0.01 * 3.14159265358979323846 / 180.0;
+  s.incl.sigma = 0.01 * std::numbers::pi / 180.0;
   s.incl.period = 0.02;
 
   // Camera covariance in the rig frame: 1e-4 rad and 3e-5 m per axis, correlated.
@@ -155,7 +156,7 @@ Scenario MakeScenario(const std::string& name, uint64_t seed, const Vec2& incl_b
       const double t = 2 * k / 100.0;
       const auto r = in_data.Simulate(s.Truth(t).R, rng);
       if (!r) continue;
-      f << N(t) << "," << N(r->x() * 180 / 3.14159265358979323846) << "," << N(r->y() * 180 / 3.14159265358979323846)
+      f << N(t) << "," << N(r->x() * 180 / std::numbers::pi) << "," << N(r->y() * 180 / std::numbers::pi)
         << "\n";
     }
   }

@@ -1,6 +1,7 @@
 // MOIFA: weights sum to the identity, eq. 19, the paper's misprinted eq. 13, Monte-Carlo
 // NEES of positions and poses, partial (information-form) inputs, the inclinometer's
 // rank-2 orientation information, and singular inputs.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -10,7 +11,7 @@
 #include "model/inclinometer.h"
 #include "core/error.h"
 #include "core/random.h"
-#include "fusion/chi_square.h"
+#include "core/statistics.h"
 #include "fusion/moifa.h"
 
 namespace mcms {
@@ -158,7 +159,7 @@ Mat3 LevelFlange() {  // the KR 5 arc's flange at q = 0: z along base x
 }
 Inclinometer MountedInclinometer() {
   Inclinometer s;
-  s.R_flange_incl = Eigen::AngleAxisd(3.14159265358979323846 / 2, Vec3::UnitY()).toRotationMatrix();
+  s.R_flange_incl = Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitY()).toRotationMatrix();
   return s;
 }
 

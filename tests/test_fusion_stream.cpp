@@ -4,6 +4,7 @@
 // the camera frames and the inclinometer add independent noise. MOIFA and the static KF must
 // both be consistent with the truth, and the KF, which sees every robot reading, must not
 // count the robot's one systematic error once per reading.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -153,7 +154,7 @@ TEST(StreamFusion, FaultsInAWindowAreLeftOutAndNamed) {
   Static s = MakeStatic(15);
   const auto in = [&](double t, int w) { return t >= s.windows[w].start_s && t < s.windows[w].end_s; };
   for (auto& r : s.logs.robot->samples)
-    if (in(r.time_s, 5)) r.q[1] += 0.5 * 3.14159265358979323846 / 180.0;
+    if (in(r.time_s, 5)) r.q[1] += 0.5 * std::numbers::pi / 180.0;
   for (auto& c : s.logs.tracker.samples)
     if (c.time_s == s.windows[9].start_s)
       c.T_rig_target = BoxPlus(c.T_rig_target, (Vec6() << 3e-3, 0, 0, 2e-3, 0, 0).finished());

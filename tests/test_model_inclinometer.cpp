@@ -1,5 +1,6 @@
 // Inclinometer: tilt geometry, Jacobian against central differences, blindness to yaw,
 // simulated noise statistics, and the rank-2 information-form constraint.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -15,7 +16,7 @@
 namespace mcms {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
 
 Mat3 Rot(const Vec3& axis, double angle) { return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix(); }

@@ -1,6 +1,7 @@
 // Robot model: KR 5 arc forward kinematics at the zero pose, the geometric Jacobian against
 // central differences of FK in the [dtheta; dp] layout, standard vs modified DH on an
 // equivalent robot, J Q J^T against Monte Carlo, YAML round trips and bad files.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -14,7 +15,7 @@
 namespace mcms {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
 
 Eigen::VectorXd Vec(std::initializer_list<double> v) {

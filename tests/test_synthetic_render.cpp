@@ -3,6 +3,7 @@
 // sphere-projection bias must be in the images), determinism of the output, the
 // default scenario's geometry, the effect options against the truth, scenario file
 // round trips and bad scenario files.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -16,6 +17,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "synthetic/renderer.h"
+#include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tests/test_util.h"
 #include "vision/sphere_projection.h"
@@ -329,11 +331,11 @@ TEST(DefaultScenario, TargetStaysInsideTheVolumeAndInEveryCamera) {
   }
   std::printf("[ figures ] default scenario: %zu/%zu ball images complete in view, %zu overlapped by a nearer "
               "ball, largest rotation %.1f deg\n",
-              visible, total, overlapped, max_angle * 180 / M_PI);
+              visible, total, overlapped, max_angle * 180 / std::numbers::pi);
   EXPECT_EQ(visible, total);
   EXPECT_LE(overlapped, total / 50);  // nearly always every ball separately
-  EXPECT_LE(max_angle, 30.0 * M_PI / 180 + 1e-9);
-  EXPECT_GE(max_angle, 15.0 * M_PI / 180);  // the orientation does vary
+  EXPECT_LE(max_angle, 30.0 * std::numbers::pi / 180 + 1e-9);
+  EXPECT_GE(max_angle, 15.0 * std::numbers::pi / 180);  // the orientation does vary
 }
 
 TEST(Effects, EventRatesMatchTheOptions) {
@@ -467,7 +469,7 @@ TEST(Scenario, ReadsJsonAndOtherForms) {
   EXPECT_NEAR(j.rig.cameras[0].T_cam_rig().t.x(), 0.1, 1e-15);
   EXPECT_EQ(j.target.balls_target.size(), 3u);
   EXPECT_EQ(j.times, (std::vector<double>{0.0, 0.2}));
-  EXPECT_NEAR(RotationAngle(j.T_rig_target[1].R, Mat3::Identity()), M_PI / 2, 1e-4);
+  EXPECT_NEAR(RotationAngle(j.T_rig_target[1].R, Mat3::Identity()), std::numbers::pi / 2, 1e-4);
   EXPECT_EQ(j.render.bit_depth, 16);
   EXPECT_EQ(j.render.spurious_radius_max_px, 3.0);
   const RenderedFrame fr = RenderFrame(j, 1);

@@ -1,6 +1,7 @@
 // The per-pose precision prediction of the field-of-view map: the centre-noise table,
 // the ball covariance against an independent Gauss-Newton computation, the pose
 // covariance's scaling with the centre noise, and visibility.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -54,7 +55,7 @@ TEST(CentroidCovarianceTable, InterpolatesAndRotates) {
   Ellipse e;
   e.a = 8;
   e.b = 4;
-  e.angle = M_PI / 2;  // major axis along y
+  e.angle = std::numbers::pi / 2;  // major axis along y
   const Mat2 C = t(e);
   EXPECT_NEAR(C(1, 1), 2 * 0.01 / 16, 1e-12);
   EXPECT_NEAR(C(0, 0), 0.01 / 16, 1e-12);

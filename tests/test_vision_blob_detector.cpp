@@ -1,6 +1,7 @@
 // Blob detector: centres against the analytic area centroid of discs and ellipses rendered
 // here by supersampling, Monte-Carlo bias and covariance honesty (NEES) under Poisson and
 // read noise, dark dots, merged blobs, flags, bad input, and two real ViSP data sets.
+#include <numbers>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -162,13 +163,13 @@ TEST(BlobDetector, DescribesTheBlob) {
   const auto blobs = DetectBlobs(image, {}, &stats);
   ASSERT_EQ(blobs.size(), 1u);
   const Blob& b = blobs[0];
-  EXPECT_NEAR(b.flux, amplitude * M_PI * e.a * e.b, 1e-3 * amplitude * M_PI * e.a * e.b);
+  EXPECT_NEAR(b.flux, amplitude * std::numbers::pi * e.a * e.b, 1e-3 * amplitude * std::numbers::pi * e.a * e.b);
   EXPECT_NEAR(b.background, background, 0.5);
   EXPECT_NEAR(b.peak, amplitude, 0.02 * amplitude);
-  EXPECT_NEAR(b.radius_px, std::sqrt(b.area_px / M_PI), 1e-12);
+  EXPECT_NEAR(b.radius_px, std::sqrt(b.area_px / std::numbers::pi), 1e-12);
   // The region is the blurred ellipse above a low threshold: a little larger than a*b.
-  EXPECT_GT(b.area_px, M_PI * e.a * e.b);
-  EXPECT_LT(b.area_px, M_PI * (e.a + 3) * (e.b + 3));
+  EXPECT_GT(b.area_px, std::numbers::pi * e.a * e.b);
+  EXPECT_LT(b.area_px, std::numbers::pi * (e.a + 3) * (e.b + 3));
   EXPECT_NEAR(b.circularity, e.b / e.a, 0.1);
   const double angle = 0.5 * std::atan2(2 * b.shape(0, 1), b.shape(0, 0) - b.shape(1, 1));
   EXPECT_NEAR(angle, e.angle, 0.05);

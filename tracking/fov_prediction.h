@@ -9,7 +9,7 @@
 //     information of the bundle adjustment the tracker minimises (sphere-bias model
 //     included), started at the truth so its residuals are zero.
 // The blob-centre covariance is a function of the ball image's ellipse (size, elongation,
-// orientation); synthetic/fov_map.h fills CentroidCovarianceTable by running the blob
+// orientation); jobs/fov_map.h fills CentroidCovarianceTable by running the blob
 // detector's own covariance propagation on rendered noise-free images.
 //
 // Which observations count, as in the tracker: a ball image whose detection window

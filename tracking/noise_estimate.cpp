@@ -1,6 +1,7 @@
 #include "tracking/noise_estimate.h"
 
-#include <boost/math/distributions/chi_squared.hpp>
+#include "core/statistics.h"
+
 #include <cmath>
 #include <cstdio>
 #include <mutex>
@@ -58,8 +59,7 @@ SequenceNoiseModel EstimateSequenceNoise(const ImageSequence& seq,
   }
   m.homogeneity_dof = std::max(valid - 1, 0);
   m.cameras_differ = m.homogeneity_dof > 0 &&
-                     m.homogeneity_chi2 > boost::math::quantile(boost::math::chi_squared(m.homogeneity_dof),
-                                                                1 - options.homogeneity_p);
+                     m.homogeneity_chi2 > ChiSquareQuantile(1 - options.homogeneity_p, m.homogeneity_dof);
   for (size_t c = 0; c < ncam; ++c) {
     const PixelNoiseEstimate& e = m.cameras_differ && m.per_camera[c].valid() ? m.per_camera[c] : m.pooled;
     m.gain_e_per_dn.push_back(e.valid() ? e.gain_e_per_dn : 0.0);
@@ -109,9 +109,8 @@ void PoseResidualCheck::Add(const FrameResult& f) {
 
 void PoseResidualCheck::Finish() {
   if (dof > 0) {
-    const boost::math::chi_squared d(dof);
-    band_lo = boost::math::quantile(d, 0.025) / dof;
-    band_hi = boost::math::quantile(d, 0.975) / dof;
+    band_lo = ChiSquareQuantile(0.025, dof) / dof;
+    band_hi = ChiSquareQuantile(0.975, dof) / dof;
   }
 }
 

@@ -1,5 +1,6 @@
 #include "vision/blob_detector.h"
 
+#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -135,7 +136,7 @@ double EllipseResidual(const Region& g,
   // Ramanujan's perimeter of the ellipse with semi-axes a >= b (S's eigenvalues are a^2/4, b^2/4).
   const double a = 2 * std::sqrt(shape.l1), b = 2 * std::sqrt(std::max(shape.l2, 0.0));
   const double h = (a - b) * (a - b) / ((a + b) * (a + b));
-  const double perimeter = M_PI * (a + b) * (1 + 3 * h / (10 + std::sqrt(4 - 3 * h)));
+  const double perimeter = std::numbers::pi * (a + b) * (1 + 3 * h / (10 + std::sqrt(4 - 3 * h)));
   return (g.n + n_ellipse - 2 * inter) / perimeter;
 }
 
@@ -459,7 +460,7 @@ bool Measure(const Context& ctx, const Region& r, const RegionShape& shape, Scra
   const double a = 2 * std::sqrt(shape.l1), b = 2 * std::sqrt(std::max(shape.l2, 1.0 / 12));
 
   blob->area_px = static_cast<int>(r.n);
-  blob->radius_px = std::sqrt(r.n / M_PI);
+  blob->radius_px = std::sqrt(r.n / std::numbers::pi);
   blob->shape = shape.S;
 
   // Gathers the window (the equivalent ellipse widened by `margin`) and its ring, and fits

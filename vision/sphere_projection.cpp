@@ -1,5 +1,6 @@
 #include "vision/sphere_projection.h"
 
+#include <numbers>
 #include <Eigen/Eigenvalues>
 #include <cmath>
 #include <map>
@@ -15,7 +16,7 @@ const std::vector<Vec2>& UnitCircle(int n) {
   if (v.empty()) {
     v.reserve(n);
     for (int i = 0; i < n; ++i) {
-      const double phi = 2.0 * M_PI * i / n;
+      const double phi = 2.0 * std::numbers::pi * i / n;
       v.emplace_back(std::cos(phi), std::sin(phi));
     }
   }

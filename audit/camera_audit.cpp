@@ -1,0 +1,902 @@
+#include "audit/camera_audit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <numeric>
+#include <set>
+
+#include <ceres/ceres.h>
+
+#include "core/error.h"
+#include "audit/model_selection.h"
+#include "tracking/pose_refinement.h"
+#include "vision/sphere_projection.h"
+#include "vision/triangulation.h"
+
+namespace mcms {
+
+bool CameraAuditOptions::IsValid(std::string* why) const {
+  auto fail = [&](const char* m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (folds < 2) return fail("folds must be >= 2");
+  if (!(false_alarm > 0 && false_alarm < 0.5)) return fail("false_alarm must be in (0, 0.5)");
+  if (!(noise_tolerance >= 0 && noise_tolerance < 1)) return fail("noise_tolerance must be in [0, 1)");
+  if (!(undecided_nats >= 0)) return fail("undecided_nats must be >= 0");
+  if (max_effects < 1) return fail("max_effects must be >= 1");
+  if (change_points < 0) return fail("change_points must be >= 0");
+  if (!(gate_px > 0)) return fail("gate_px must be > 0");
+  return true;
+}
+
+namespace {
+
+bool HasK1(const CameraModel& cam) {
+  return cam.LensModelName().rfind("LENSMODEL_OPENCV", 0) == 0 && cam.NumIntrinsics() > 4;
+}
+
+Pose ToPose(const PoseT<double>& p) { return Pose{p.R, p.t}; }
+
+// The intrinsics of camera `c` with the named intrinsics effects applied.
+void ApplyIntrinsics(const std::vector<CameraModelTerm>& terms, int c, std::vector<double>* in) {
+  for (const auto& t : terms)
+    if (t.extension.index == c && t.extension.effect != Effect::kTargetGeometry)
+      ExtendIntrinsicsT<double>(t.extension, t.parameters.data(), in->data(), static_cast<int>(in->size()));
+}
+
+// At time `t`: a camera moved from a change time on has its old pose before it.
+CameraRig ExtendRig(const CameraRig& rig, const std::vector<CameraModelTerm>& terms,
+                    double t = std::numeric_limits<double>::infinity()) {
+  CameraRig out = rig;
+  for (size_t c = 0; c < rig.size(); ++c) {
+    ApplyIntrinsics(terms, static_cast<int>(c), &out.cameras[c].MutableIntrinsics());
+    Pose T_rig_cam = rig.cameras[c].T_cam_rig().Inverse();
+    for (const auto& m : terms)
+      if (m.extension.effect == Effect::kCameraMoved && m.extension.index == static_cast<int>(c) &&
+          t >= m.from_time_s)
+        T_rig_cam = ToPose(MovedCameraT<double>(T_rig_cam, m.parameters.data()));
+    out.cameras[c].SetT_cam_rig(T_rig_cam.Inverse());
+  }
+  return out;
+}
+
+Target ExtendTarget(const Target& target, const std::vector<CameraModelTerm>& terms) {
+  Target out = target;
+  for (const auto& t : terms)
+    if (t.extension.effect == Effect::kTargetGeometry)
+      out.balls_target[t.extension.index] = MovedBallT<double>(target.balls_target[t.extension.index], t.parameters.data());
+  return out;
+}
+
+struct Obs {
+  int camera, ball;
+  Vec2 q;
+  Mat2 cov;
+};
+
+struct Frame {
+  size_t result;
+  double t;
+  Pose T;      // the tracker's pose
+  Vec6 twist;  // [omega; v] in the rig frame with v = pdot - omega x p (TimeShiftedPoseT)
+  int block;
+};
+
+struct Sample {
+  int camera, ball, block;
+  double t;
+  Pose T;  // leave-one-out pose
+  Vec6 twist;
+  Vec2 q, bias;
+};
+
+// The samples of one unit in one frame, whitened together: they share the error of the
+// leave-one-out pose. W = L^-1 for S = L L^T, S = blockdiag(blob covariances) + J C_pose J^T
+// (camera units: with the pose part / s_c^2, the whitened residual then divided by s_c;
+// ball units: the cameras' s_c^2 built in).
+struct Group {
+  int begin = 0, n = 0, block = 0;
+  int camera = -1;  // camera units: the camera whose s divides the residual; -1: built in
+  Eigen::MatrixXd W;
+};
+
+struct UnitData {
+  std::vector<Sample> s;
+  std::vector<Group> g;
+  bool empty() const { return s.empty(); }
+  size_t size() const { return s.size(); }
+};
+
+// Prediction of a sample's ball image through the extension units.
+Vec2 Predict(const CameraRig& rig, const Target& target, const Sample& s, const std::vector<CameraModelTerm>& terms,
+             CameraModel* cam) {
+  const CameraModel& nom = rig.cameras[s.camera];
+  std::vector<double>& in = cam->MutableIntrinsics();
+  in = nom.Intrinsics();
+  Pose T_rig_cam = nom.T_cam_rig().Inverse();
+  Pose T = s.T;
+  Vec3 ball = target.balls_target[s.ball];
+  for (const auto& term : terms) {
+    const Extension& e = term.extension;
+    const double* p = term.parameters.data();
+    if (e.effect == Effect::kTargetGeometry) {
+      if (e.index == s.ball) ball = MovedBallT<double>(target.balls_target[s.ball], p);
+      continue;
+    }
+    if (e.index != s.camera) continue;
+    switch (e.effect) {
+      case Effect::kCameraMoved:
+        if (s.t >= term.from_time_s) T_rig_cam = ToPose(MovedCameraT<double>(T_rig_cam, p));
+        break;
+      case Effect::kCameraTimeOffset: T = ToPose(TimeShiftedPoseT<double>(T, s.twist, p)); break;
+      default: ExtendIntrinsicsT<double>(e, p, in.data(), static_cast<int>(in.size()));
+    }
+  }
+  const Vec3 p_cam = T_rig_cam.Inverse() * (T * ball);
+  return cam->Project(p_cam) + s.bias;
+}
+
+// One sample's whitened residual as a function of the free terms' parameter blocks.
+struct GroupResidual {
+  const CameraRig* rig;
+  const Target* target;
+  const Sample* s;  // the group's first sample
+  const Group* g;
+  const std::vector<CameraModelTerm>* terms;
+  std::vector<int> free;
+  double inv_scale;
+  mutable std::vector<CameraModel> cams;
+  mutable std::vector<CameraModelTerm> work;
+  bool operator()(double const* const* p, double* r) const {
+    work = *terms;
+    for (size_t k = 0; k < free.size(); ++k) {
+      auto& v = work[free[k]].parameters;
+      std::copy(p[k], p[k] + v.size(), v.begin());
+    }
+    Eigen::VectorXd d(2 * g->n);
+    for (int i = 0; i < g->n; ++i) d.segment<2>(2 * i) = s[i].q - Predict(*rig, *target, s[i], work, &cams[s[i].camera]);
+    const Eigen::VectorXd e = inv_scale * (g->W * d);
+    for (int i = 0; i < 2 * g->n; ++i) {
+      r[i] = e[i];
+      if (!std::isfinite(r[i])) return false;
+    }
+    return true;
+  }
+};
+
+struct Eval {
+  double ll = 0, sq = 0, chi2 = 0;
+  long n = 0;  // samples (2 residuals each)
+};
+
+// A fitted model of one unit (a camera or a ball): its terms and, for a camera, s.
+struct UnitFit {
+  std::vector<CameraModelTerm> terms;
+  double scale = 1;
+};
+
+enum class ScaleMode { kBand, kFree, kFixed };
+
+class Auditor {
+ public:
+  Auditor(const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results,
+          const CameraAuditOptions& o)
+      : rig_(rig), target_(target), results_(results), o_(o) {
+    for (size_t i = 0; i < results.size(); ++i)
+      if (results[i].T_rig_target) frames_.push_back({i, results[i].time_s, *results[i].T_rig_target, Vec6::Zero(), 0});
+    std::sort(frames_.begin(), frames_.end(), [](const Frame& a, const Frame& b) { return a.t < b.t; });
+    std::vector<double> dts;
+    for (size_t i = 1; i < frames_.size(); ++i) dts.push_back(frames_[i].t - frames_[i - 1].t);
+    double med = 0;
+    if (!dts.empty()) {
+      std::nth_element(dts.begin(), dts.begin() + dts.size() / 2, dts.end());
+      med = dts[dts.size() / 2];
+    }
+    for (size_t i = 0; i < frames_.size(); ++i) {
+      frames_[i].block = TimeBlockFold(static_cast<long>(i), static_cast<long>(frames_.size()), o.folds);
+      size_t a = i, b = i;
+      if (i > 0 && frames_[i].t - frames_[i - 1].t <= 3 * med) a = i - 1;
+      if (i + 1 < frames_.size() && frames_[i + 1].t - frames_[i].t <= 3 * med) b = i + 1;
+      if (a == b || !(frames_[b].t > frames_[a].t)) continue;
+      const double dt = frames_[b].t - frames_[a].t;
+      const Vec3 w = LogSO3(frames_[b].T.R * frames_[a].T.R.transpose()) / dt;
+      const Vec3 pdot = (frames_[b].T.t - frames_[a].T.t) / dt;
+      frames_[i].twist << w, pdot - w.cross(frames_[i].T.t);
+    }
+  }
+
+  size_t NumFrames() const { return frames_.size(); }
+  const UnitData& CameraSamples(int c) const { return cam_samples_[c]; }
+  const UnitData& BallSamples(int b) const { return ball_samples_[b]; }
+
+  // Associates every camera's blobs with the balls and re-fits the leave-one-out poses
+  // under the model (terms, per-camera noise scales).
+  void Rebuild(const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale) {
+    const Target target_x = ExtendTarget(target_, terms);
+    const int nc = static_cast<int>(rig_.size()), nb = static_cast<int>(target_.balls_target.size());
+    cam_samples_.assign(nc, {});
+    ball_samples_.assign(nb, {});
+    PoseRefinementOptions po;
+    po.outlier_sigma = 1e9;
+    for (const Frame& f : frames_) {
+      const FrameResult& r = results_[f.result];
+      const CameraRig rig_x = ExtendRig(rig_, terms, f.t);
+      std::vector<Obs> obs;
+      for (int c = 0; c < nc && c < static_cast<int>(r.image_points.size()); ++c) {
+        const CameraModel& cam = rig_x.cameras[c];
+        // A late camera's images: predicted at the shifted pose; its blobs are moved back
+        // by the difference so that the other cameras' poses are not pulled.
+        Pose T_c = f.T;
+        for (const auto& t : terms)
+          if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == c)
+            T_c = ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data()));
+        const auto& blobs = r.image_points[c];
+        std::vector<bool> used(blobs.size(), false);
+        for (int b = 0; b < nb; ++b) {
+          const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[b]);
+          if (!cam.Sees(p_cam, 10)) continue;
+          const Vec3 p_cam_c = cam.T_cam_rig() * (T_c * target_x.balls_target[b]);
+          const Vec2 q0 = cam.Project(p_cam);
+          const Vec2 q = cam.Project(p_cam_c) + SphereProjectionBias(cam, p_cam_c, target_x.ball_radius, 32);
+          const int best = ClaimNearest(blobs, q, o_.gate_px, &used);
+          if (best < 0) continue;
+          obs.push_back({c, b, blobs[best].q - (cam.Project(p_cam_c) - q0), blobs[best].cov});
+        }
+      }
+      // Leave one camera out, then one ball out.
+      for (int pass = 0; pass < 2; ++pass) {
+        const int units = pass == 0 ? nc : nb;
+        for (int u = 0; u < units; ++u) {
+          std::vector<BallObservation> others;
+          std::set<int> balls;
+          bool any = false;
+          for (const Obs& x : obs) {
+            const bool out = pass == 0 ? x.camera == u : x.ball == u;
+            if (out) {
+              any = true;
+              continue;
+            }
+            others.push_back({x.camera, x.ball, x.q, x.cov * scale[x.camera] * scale[x.camera]});
+            balls.insert(x.ball);
+          }
+          if (!any || balls.size() < 3) continue;
+          const PoseRefinement pr = RefinePose(rig_x, target_x, f.T, others, po);
+          UnitData& ud = pass == 0 ? cam_samples_[u] : ball_samples_[u];
+          Group grp;
+          grp.begin = static_cast<int>(ud.s.size());
+          grp.block = f.block;
+          grp.camera = pass == 0 ? u : -1;
+          std::vector<Mat2> blob;
+          std::vector<Eigen::Matrix<double, 2, 6>> Js;
+          for (const Obs& x : obs) {
+            if ((pass == 0 ? x.camera : x.ball) != u) continue;
+            // Undo this camera's own time-offset correction: its prediction applies it.
+            const CameraModel& cam = rig_x.cameras[x.camera];
+            Vec2 q = x.q;
+            for (const auto& t : terms)
+              if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == x.camera) {
+                const Vec3 a = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
+                const Vec3 b = cam.T_cam_rig() *
+                               (ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data())) *
+                                target_x.balls_target[x.ball]);
+                q += cam.Project(b) - cam.Project(a);
+              }
+            const Vec3 p_cam = cam.T_cam_rig() * (pr.T_rig_target * target_x.balls_target[x.ball]);
+            Eigen::Matrix<double, 2, 3> dq;
+            cam.Project(p_cam, &dq);
+            Eigen::Matrix<double, 3, 6> dp;
+            dp.leftCols<3>() = -Skew(pr.T_rig_target.R * target_x.balls_target[x.ball]);
+            dp.rightCols<3>() = Mat3::Identity();
+            const Eigen::Matrix<double, 2, 6> J = dq * cam.T_cam_rig().R * dp;
+            const double s2 = scale[x.camera] * scale[x.camera];
+            blob.push_back(pass == 0 ? x.cov : Mat2(x.cov * s2));
+            Js.push_back(pass == 0 ? Eigen::Matrix<double, 2, 6>(J / scale[x.camera]) : J);
+            ud.s.push_back({x.camera, x.ball, f.block, f.t, pr.T_rig_target, f.twist, q,
+                            SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32)});
+          }
+          grp.n = static_cast<int>(blob.size());
+          Eigen::MatrixXd S = Eigen::MatrixXd::Zero(2 * grp.n, 2 * grp.n);
+          Eigen::MatrixXd Jall(2 * grp.n, 6);
+          for (int i = 0; i < grp.n; ++i) {
+            S.block<2, 2>(2 * i, 2 * i) = blob[i];
+            Jall.middleRows<2>(2 * i) = Js[i];
+          }
+          S += Jall * pr.cov * Jall.transpose();
+          const Eigen::LLT<Eigen::MatrixXd> llt(S);
+          grp.W = llt.matrixL().solve(Eigen::MatrixXd::Identity(2 * grp.n, 2 * grp.n));
+          ud.g.push_back(std::move(grp));
+        }
+      }
+    }
+  }
+
+  // Log-likelihood (up to a constant) of the samples outside (fold < 0: all) or inside
+  // block `fold` (inside = true), and the raw squared residuals (px^2).
+  Eval Evaluate(const UnitData& u, const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale,
+                int fold, bool inside) const {
+    Eval e;
+    std::vector<CameraModel> cams = rig_.cameras;
+    for (const Group& g : u.g) {
+      if (fold >= 0 && (g.block == fold) != inside) continue;
+      Eigen::VectorXd d(2 * g.n);
+      for (int i = 0; i < g.n; ++i) {
+        const Sample& x = u.s[g.begin + i];
+        d.segment<2>(2 * i) = x.q - Predict(rig_, target_, x, terms, &cams[x.camera]);
+        e.sq += d.segment<2>(2 * i).squaredNorm();
+      }
+      const double sc = g.camera >= 0 ? scale[g.camera] : 1.0;
+      const double c2 = (g.W * d).squaredNorm() / (sc * sc);
+      e.chi2 += c2;
+      e.ll += -0.5 * c2 - 2 * g.n * std::log(sc);
+      e.n += g.n;
+    }
+    return e;
+  }
+
+  // The whitened residuals of a unit's samples (under the model: i.i.d. N(0, 1), in time
+  // order), each with the covariates it may depend on.
+  std::vector<WhitenedResidual> Whitened(const UnitData& u, const std::vector<CameraModelTerm>& terms,
+                                         const std::vector<double>& scale) const {
+    std::vector<WhitenedResidual> out;
+    std::vector<CameraModel> cams = rig_.cameras;
+    for (const Group& g : u.g) {
+      Eigen::VectorXd d(2 * g.n);
+      std::vector<Vec2> q(g.n);
+      for (int i = 0; i < g.n; ++i) {
+        const Sample& x = u.s[g.begin + i];
+        q[i] = Predict(rig_, target_, x, terms, &cams[x.camera]);
+        d.segment<2>(2 * i) = x.q - q[i];
+      }
+      const double sc = g.camera >= 0 ? scale[g.camera] : 1.0;
+      const Eigen::VectorXd w = g.W * d / sc;
+      for (int i = 0; i < g.n; ++i) {
+        const Sample& x = u.s[g.begin + i];
+        const CameraModel& cam = rig_.cameras[x.camera];
+        WhitenedResidual r;
+        r.camera = x.camera;
+        r.ball = x.ball;
+        r.time_s = x.t;
+        r.q = q[i];
+        r.w = w.segment<2>(2 * i);
+        r.range_m = (cam.T_cam_rig() * (x.T * target_.balls_target[x.ball])).norm();
+        r.radius_px = (q[i] - Vec2(0.5 * (cam.Width() - 1), 0.5 * (cam.Height() - 1))).norm();
+        out.push_back(r);
+      }
+    }
+    return out;
+  }
+
+  // Fits the terms `free` (indices into terms) of a unit on its samples outside block
+  // `fold` (-1: all): Ceres least squares, then the camera's noise scale (camera units) by
+  // maximum likelihood, free or within the tolerance band. *cov (optional) receives the
+  // covariance of the free parameters, in order.
+  UnitFit Fit(const UnitData& s, int camera, std::vector<CameraModelTerm> terms,
+              const std::vector<int>& free, std::vector<double> scale, ScaleMode mode, int fold,
+              Eigen::MatrixXd* cov = nullptr) const {
+    std::vector<int> geo;
+    for (int k : free)
+      if (terms[k].extension.effect != Effect::kPixelNoiseScale) geo.push_back(k);
+    if (!geo.empty()) {
+      ceres::Problem::Options po;
+      po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+      ceres::Problem problem(po);
+      std::vector<double*> blocks;
+      for (int k : geo) blocks.push_back(terms[k].parameters.data());
+      std::vector<CameraModelTerm> frozen = terms;  // the functors' copy; free blocks overwrite
+      for (const Group& g : s.g) {
+        if (fold >= 0 && g.block == fold) continue;
+        const Sample& x = s.s[g.begin];
+        auto* f = new GroupResidual{&rig_, &target_, &x, &g, &frozen, geo, 1.0, rig_.cameras, {}};
+        auto* cost = new ceres::DynamicNumericDiffCostFunction<GroupResidual, ceres::CENTRAL>(f);
+        for (int k : geo) cost->AddParameterBlock(static_cast<int>(terms[k].parameters.size()));
+        cost->SetNumResiduals(2 * g.n);
+        problem.AddResidualBlock(cost, nullptr, blocks);
+      }
+      if (problem.NumResidualBlocks() > 0) {
+        ceres::Solver::Options so;
+        so.linear_solver_type = ceres::DENSE_QR;
+        so.max_num_iterations = 30;
+        so.num_threads = 1;
+        so.logging_type = ceres::SILENT;
+        ceres::Solver::Summary summary;
+        ceres::Solve(so, &problem, &summary);
+        if (cov) {
+          ceres::Problem::EvaluateOptions eo;
+          eo.parameter_blocks = blocks;
+          ceres::CRSMatrix crs;
+          problem.Evaluate(eo, nullptr, nullptr, nullptr, &crs);
+          Eigen::MatrixXd J = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+          for (int r = 0; r < crs.num_rows; ++r)
+            for (int i = crs.rows[r]; i < crs.rows[r + 1]; ++i) J(r, crs.cols[i]) = crs.values[i];
+          *cov = (J.transpose() * J).ldlt().solve(Eigen::MatrixXd::Identity(J.cols(), J.cols()));
+        }
+      }
+    }
+    UnitFit out;
+    if (camera >= 0) {
+      scale[camera] = 1.0;
+      const Eval e = Evaluate(s, terms, scale, fold, false);
+      double sc = e.n > 0 ? std::sqrt(e.chi2 / (2.0 * e.n)) : 1.0;
+      if (mode == ScaleMode::kBand) sc = std::clamp(sc, 1.0 / (1.0 + o_.noise_tolerance), 1.0 + o_.noise_tolerance);
+      if (mode == ScaleMode::kFixed) sc = 1.0;
+      out.scale = sc;
+      if (cov) *cov *= sc * sc;
+      for (int k : free)
+        if (terms[k].extension.effect == Effect::kPixelNoiseScale) terms[k].parameters[0] = sc;
+    }
+    out.terms = std::move(terms);
+    return out;
+  }
+
+  const CameraRig& rig_;
+  const Target& target_;
+  const std::vector<FrameResult>& results_;
+  const CameraAuditOptions& o_;
+  std::vector<Frame> frames_;
+  std::vector<UnitData> cam_samples_, ball_samples_;
+};
+
+struct Candidate {
+  CameraModelTerm term;
+  bool camera_unit = true;
+  int unit = 0;
+  int k = 0;           // parameters it adds (a change time counts as one)
+  bool step = false;   // camera_moved from a change time on
+  double lr = 0, bic_gain = 0, heldout_gain = 0, rms_before = 0, rms_after = 0, p_value = 1;
+  bool eligible = false;
+  std::vector<CameraModelTerm> fitted;  // the unit's terms fitted on all data
+  double scale = 1;
+  std::vector<double> sigma;            // of the candidate's parameters
+  std::string label;
+};
+
+
+}  // namespace
+
+CameraRig CameraAuditResult::ExtendedRig(const CameraRig& rig) const { return ExtendRig(rig, terms); }
+Target CameraAuditResult::ExtendedTarget(const Target& target) const { return ExtendTarget(target, terms); }
+bool CameraAuditResult::ChangesRig() const {
+  for (const auto& t : terms)
+    if (t.extension.effect != Effect::kPixelNoiseScale && t.extension.effect != Effect::kCameraTimeOffset &&
+        t.extension.effect != Effect::kTargetGeometry)
+      return true;
+  return false;
+}
+
+CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results,
+                                   const CameraAuditOptions& options,
+                                   const std::function<void(const std::string&)>& log) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("camera audit options: ", why);
+  const int nc = static_cast<int>(rig.size()), nb = static_cast<int>(target.balls_target.size());
+  CameraAuditResult res;
+  AuditReport& rep = res.report;
+  rep.mode = "cameras";
+  rep.rms_unit = "px";
+  Auditor a(rig, target, results, options);
+  if (a.NumFrames() < static_cast<size_t>(2 * options.folds))
+    Throw("audit cameras: ", a.NumFrames(), " tracked frames, expected at least ", 2 * options.folds,
+          " (", options.folds, " folds of time)");
+  std::vector<double> scale(nc, 1.0);
+  std::vector<CameraModelTerm> terms;
+  a.Rebuild(terms, scale);
+  res.residuals.assign(nc, {});
+
+  // The nominal model's tests: each camera's leave-one-out residuals against chi-square,
+  // allowing the noise tolerance, two-sided (a noise model too pessimistic is also wrong).
+  long n_total = 0;
+  double chi2_total = 0;
+  const double tol2 = (1 + options.noise_tolerance) * (1 + options.noise_tolerance);
+  for (int c = 0; c < nc; ++c) {
+    const Eval e = a.Evaluate(a.CameraSamples(c), terms, std::vector<double>(nc, 1.0), -1, false);
+    n_total += 2 * e.n;
+    chi2_total += e.chi2;
+    if (e.n == 0) {
+      rep.notes.push_back(rig.names[c] + ": no ball image predicted from the other cameras; not audited");
+      continue;
+    }
+    const double dof = 2.0 * e.n;
+    const double p_hi = ChiSquareSurvival(e.chi2 / tol2, dof);
+    const double p_lo = ChiSquareCdf(e.chi2 * tol2, dof);
+    const double p = std::min(1.0, 2 * std::min(p_hi, p_lo));
+    rep.tests.push_back({"chi-square of " + rig.names[c] + "'s leave-one-out residuals (chi2/dof, noise tolerance " +
+                             std::to_string(static_cast<int>(std::lround(100 * options.noise_tolerance))) + " %)",
+                         e.chi2 / dof, p, p < options.false_alarm / (4.0 * nc)});
+  }
+  // Each camera's whitened leave-one-out residuals (u, v) against time (lag-1
+  // autocorrelation, trend), the position in the view (u, v, distance from the image
+  // centre) and the distance to the camera: an effect the catalog lacks shows here first.
+  {
+    std::vector<AuditTest> tests;
+    for (int c = 0; c < nc; ++c) {
+      if (a.CameraSamples(c).empty()) continue;
+      res.residuals[c] = a.Whitened(a.CameraSamples(c), terms, std::vector<double>(nc, 1.0));
+      const auto& rs = res.residuals[c];
+      std::vector<double> cov[5];
+      const char* cov_name[5] = {"time", "image u", "image v", "distance from the image centre", "distance to the camera"};
+      for (const auto& r : rs) {
+        cov[0].push_back(r.time_s);
+        cov[1].push_back(r.q.x());
+        cov[2].push_back(r.q.y());
+        cov[3].push_back(r.radius_px);
+        cov[4].push_back(r.range_m);
+      }
+      for (int k = 0; k < 2; ++k) {
+        std::vector<double> w;
+        for (const auto& r : rs) w.push_back(r.w[k]);
+        const std::string comp = k == 0 ? "u" : "v";
+        tests.push_back(AutocorrelationTest(rig.names[c] + ": autocorrelation in time (" + comp + ")", w));
+        for (int j = 0; j < 5; ++j)
+          if (auto t = TrendTest(rig.names[c] + ": trend vs " + cov_name[j] + " (" + comp + ")", cov[j], w))
+            tests.push_back(*t);
+      }
+    }
+    // A share of the tests' half of the false-alarm rate (the chi-square tests above have
+    // the other half of it), Bonferroni over these tests; the three strongest are shown.
+    const double per = options.false_alarm / 4 / std::max<size_t>(1, tests.size());
+    for (auto& t : tests) t.failed = t.p_value < per;
+    std::stable_sort(tests.begin(), tests.end(),
+                     [](const AuditTest& x, const AuditTest& y) { return x.p_value < y.p_value; });
+    int shown = 0;
+    for (const auto& t : tests)
+      if (t.failed || shown++ < 3) rep.tests.push_back(t);
+    char b[200];
+    std::snprintf(b, sizeof b, "%zu residual tests against time, the position in the view and the distance (each at %.3g)",
+                  tests.size(), per);
+    rep.notes.push_back(b);
+  }
+  rep.nominal_n = n_total;
+  rep.nominal_chi2_per_dof = n_total > 0 ? chi2_total / n_total : 0.0;
+  if (n_total == 0) Throw("audit cameras: no ball image could be predicted from the other cameras");
+  const double ln_n = std::log(static_cast<double>(n_total));
+  // The noise model first: each camera's scale, fitted within the tolerance band.
+  for (int c = 0; c < nc; ++c) {
+    const auto& s = a.CameraSamples(c);
+    if (s.empty()) continue;
+    scale[c] = a.Fit(s, c, terms, {}, scale, ScaleMode::kBand, -1).scale;
+    const UnitFit f = a.Fit(s, c, terms, {}, scale, ScaleMode::kFree, -1);
+    std::vector<double> sc = scale;
+    sc[c] = f.scale;
+    const double lr = 2 * (a.Evaluate(s, terms, sc, -1, false).ll - a.Evaluate(s, terms, scale, -1, false).ll);
+    rep.tests.push_back({"pixel noise scale of " + rig.names[c] + " (estimated factor on sigma; p against the band)",
+                         f.scale, ChiSquareSurvival(lr, 1),
+                         ChiSquareSurvival(lr, 1) < options.false_alarm / (2.0 * (7 * nc + nb))});
+  }
+
+  std::set<std::pair<bool, int>> blocked;  // units in an undecided group
+  std::vector<bool> noise_named(nc, false);
+  for (int round = 0; round < options.max_effects; ++round) {
+    // The candidates.
+    std::vector<Candidate> cands;
+    auto has = [&](Effect e, int idx) {
+      for (const auto& t : terms)
+        if (t.extension.effect == e && t.extension.index == idx) return true;
+      return false;
+    };
+    for (int c = 0; c < nc; ++c) {
+      if (blocked.count({true, c}) || a.CameraSamples(c).empty()) continue;
+      for (Effect e : {Effect::kPixelNoiseScale, Effect::kCameraMoved, Effect::kFocalLength, Effect::kPrincipalPoint,
+                       Effect::kRadialDistortion, Effect::kCameraTimeOffset}) {
+        if (has(e, c)) continue;
+        if (e == Effect::kRadialDistortion && !HasK1(rig.cameras[c])) continue;
+        Candidate x;
+        x.term.extension = Extension{e, c, 0};
+        x.term.parameters = x.term.extension.InitialParameters();
+        x.unit = c;
+        x.k = x.term.extension.NumParameters();
+        cands.push_back(x);
+        if (e == Effect::kCameraMoved && options.change_points > 0) {
+          x.k += 1;
+          x.step = true;  // the change time is scanned below
+          cands.push_back(x);
+        }
+      }
+    }
+    for (int b = 0; b < nb; ++b) {
+      if (blocked.count({false, b}) || has(Effect::kTargetGeometry, b) || a.BallSamples(b).empty()) continue;
+      Candidate x;
+      x.term.extension = Extension{Effect::kTargetGeometry, b, 0};
+      x.term.parameters = x.term.extension.InitialParameters();
+      x.camera_unit = false;
+      x.unit = b;
+      x.k = 3;
+      cands.push_back(x);
+    }
+    if (cands.empty()) break;
+
+    // The current model of each unit, fitted on all data and on each fold, once.
+    auto unit_free = [&](bool cam_unit, int u) {
+      std::vector<int> f;
+      for (size_t k = 0; k < terms.size(); ++k) {
+        const auto& e = terms[k].extension;
+        if (cam_unit ? (e.effect != Effect::kTargetGeometry && e.index == u)
+                     : (e.effect == Effect::kTargetGeometry && e.index == u))
+          f.push_back(static_cast<int>(k));
+      }
+      return f;
+    };
+    auto mode_of = [&](bool cam_unit, int u) {
+      if (!cam_unit) return ScaleMode::kFixed;
+      return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
+    };
+    // Held-out evaluation of a unit model `t_all` with its free terms `free`: sum over folds.
+    auto heldout = [&](bool cam_unit, int u, const std::vector<CameraModelTerm>& t0, const std::vector<int>& free,
+                       ScaleMode mode, double* ll, double* sq, long* n) {
+      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+      *ll = *sq = 0;
+      *n = 0;
+      for (int f = 0; f < options.folds; ++f) {
+        const UnitFit fit = a.Fit(s, cam_unit ? u : -1, t0, free, scale, mode, f);
+        std::vector<double> sc = scale;
+        if (cam_unit) sc[u] = fit.scale;
+        const Eval e = a.Evaluate(s, fit.terms, sc, f, true);
+        *ll += e.ll;
+        *sq += e.sq;
+        *n += e.n;
+      }
+    };
+    struct Base {
+      double ll_all = 0, ll_held = 0, sq_held = 0;
+      long n_held = 0;
+    };
+    std::map<std::pair<bool, int>, Base> base;
+    for (const auto& x : cands) {
+      const auto key = std::make_pair(x.camera_unit, x.unit);
+      if (base.count(key)) continue;
+      Base bs;
+      const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
+      const auto free = unit_free(x.camera_unit, x.unit);
+      const UnitFit fit = a.Fit(s, x.camera_unit ? x.unit : -1, terms, free, scale, mode_of(x.camera_unit, x.unit), -1);
+      std::vector<double> sc = scale;
+      if (x.camera_unit) sc[x.unit] = fit.scale;
+      bs.ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
+      heldout(x.camera_unit, x.unit, terms, free, mode_of(x.camera_unit, x.unit), &bs.ll_held, &bs.sq_held,
+              &bs.n_held);
+      base[key] = bs;
+    }
+
+    for (auto& x : cands) {
+      const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
+      std::vector<CameraModelTerm> t = terms;
+      t.push_back(x.term);
+      std::vector<int> free = unit_free(x.camera_unit, x.unit);
+      free.push_back(static_cast<int>(t.size()) - 1);
+      const bool noise = x.term.extension.effect == Effect::kPixelNoiseScale;
+      const ScaleMode mode = noise ? ScaleMode::kFree : mode_of(x.camera_unit, x.unit);
+      const int cu = x.camera_unit ? x.unit : -1;
+      // A part-way move: the change time that fits all data best, among the candidates.
+      if (x.step) {
+        std::vector<double> times;
+        for (const auto& smp : s.s) times.push_back(smp.t);
+        std::sort(times.begin(), times.end());
+        times.erase(std::unique(times.begin(), times.end()), times.end());
+        double best_ll = -std::numeric_limits<double>::infinity(), best_t = 0;
+        for (int g = 1; g <= options.change_points; ++g) {
+          const double tc = times[times.size() * g / (options.change_points + 1)];
+          t.back().from_time_s = tc;
+          const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1);
+          std::vector<double> sc = scale;
+          if (cu >= 0) sc[cu] = fit.scale;
+          const double ll = a.Evaluate(s, fit.terms, sc, -1, false).ll;
+          if (ll > best_ll) {
+            best_ll = ll;
+            best_t = tc;
+          }
+        }
+        t.back().from_time_s = best_t;
+        x.term.from_time_s = best_t;
+      }
+      Eigen::MatrixXd cov;
+      const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1, &cov);
+      std::vector<double> sc = scale;
+      if (cu >= 0) sc[cu] = fit.scale;
+      const Base& bs = base[{x.camera_unit, x.unit}];
+      const double ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
+      x.lr = 2 * (ll_all - bs.ll_all);
+      double ll_h, sq_h;
+      long n_h;
+      heldout(x.camera_unit, x.unit, t, free, mode, &ll_h, &sq_h, &n_h);
+      x.heldout_gain = ll_h - bs.ll_held;
+      x.rms_before = bs.n_held > 0 ? std::sqrt(bs.sq_held / bs.n_held) : 0;
+      x.rms_after = n_h > 0 ? std::sqrt(sq_h / n_h) : 0;
+      x.fitted = fit.terms;
+      x.scale = fit.scale;
+      x.term = fit.terms.back();
+      if (noise) {
+        // s from a sample variance: sd(s) = s / sqrt(2 n) for n residuals.
+        x.sigma = {fit.scale / std::sqrt(4.0 * s.size())};
+      } else {
+        // The candidate's block is the last in the fitted covariance.
+        const int np = x.term.extension.NumParameters();
+        for (int i = 0; i < np; ++i) {
+          const int j = static_cast<int>(cov.rows()) - np + i;
+          x.sigma.push_back(j >= 0 ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+        }
+      }
+      x.label = x.term.extension.Label(rig.names);
+      if (x.step)
+        x.label += " from t = " + std::to_string(x.term.from_time_s) + " s";
+    }
+    // The decision (audit/model_selection.h): candidates on the same data (the same camera,
+    // or the same ball) explain the same residual and may tie; candidates elsewhere are
+    // each taken in their turn. Part-way moves scan the change time: Bonferroni over it.
+    SelectionRule rule;
+    rule.alpha = options.false_alarm / 2;
+    rule.ln_n = ln_n;
+    rule.close_bic = 2 * options.undecided_nats;
+    rule.undecided_heldout = options.undecided_nats;
+    rule.undecided_bic = 2 * options.undecided_nats;
+    std::vector<SelectionCandidate> sel(cands.size());
+    for (size_t i = 0; i < cands.size(); ++i) {
+      sel[i].k = cands[i].k;
+      sel[i].lr = cands[i].lr;
+      sel[i].group = cands[i].camera_unit ? cands[i].unit : -1 - cands[i].unit;
+      sel[i].multiplicity = cands[i].step ? options.change_points : 1;
+      sel[i].heldout_gain = cands[i].heldout_gain;
+    }
+    const StepDecision dec = DecideStep(sel, static_cast<int>(cands.size()), rule);
+    for (size_t i = 0; i < cands.size(); ++i) {
+      cands[i].bic_gain = sel[i].bic_gain;
+      cands[i].p_value = sel[i].p_value;
+      cands[i].eligible = sel[i].passes && sel[i].heldout_gain > 0;
+    }
+    if (log) {
+      std::string line = "round " + std::to_string(round + 1) + ":";
+      std::vector<const Candidate*> sorted;
+      for (const auto& x : cands) sorted.push_back(&x);
+      std::sort(sorted.begin(), sorted.end(), [](auto* p, auto* q) { return p->bic_gain > q->bic_gain; });
+      for (size_t i = 0; i < std::min<size_t>(4, sorted.size()); ++i) {
+        char b[256];
+        std::snprintf(b, sizeof b, " [%s: LR %.1f BIC %.1f held-out %.1f%s]", sorted[i]->label.c_str(), sorted[i]->lr,
+                      sorted[i]->bic_gain, sorted[i]->heldout_gain, sorted[i]->eligible ? " ok" : "");
+        line += b;
+      }
+      log(line);
+    }
+    if (dec.outcome == StepOutcome::kNothingPasses || dec.outcome == StepOutcome::kNoHeldoutGain) break;
+    const Candidate& best = cands[dec.best];
+    std::vector<const Candidate*> tie;
+    for (int i : dec.group) tie.push_back(&cands[i]);
+    if (tie.size() > 1) {
+      std::vector<std::string> group;
+      for (const Candidate* c : tie) group.push_back(c->term.extension.Label(rig.names));
+      rep.undecided.push_back(group);
+      // The best of the group stays in the model, unnamed, so that its residual does not
+      // leak into the other cameras' leave-one-out poses; the group's places are not
+      // searched further.
+      for (const Candidate* c : tie) blocked.insert({c->camera_unit, c->unit});
+      terms = best.fitted;
+      terms.back().undecided = true;
+      if (best.camera_unit) scale[best.unit] = best.scale;
+      a.Rebuild(terms, scale);
+      continue;
+    }
+    // Name it: the unit's terms as fitted with it, the noise scale, and re-fit the poses.
+    AuditEffect ef;
+    ef.name = Name(best.term.extension.effect);
+    ef.where = best.term.extension.Where(rig.names);
+    const auto names = best.term.extension.ParameterNames();
+    for (size_t i = 0; i < names.size(); ++i) {
+      ef.parameters.push_back({names[i], best.term.parameters[i]});
+      ef.sigma.push_back({names[i], best.sigma[i]});
+    }
+    if (best.step)
+      ef.parameters.push_back({"from_time_s", best.term.from_time_s});
+    ef.heldout_rms_before = best.rms_before;
+    ef.heldout_rms_after = best.rms_after;
+    ef.heldout_loglik_gain = best.heldout_gain;
+    ef.bic_gain = best.bic_gain;
+    rep.effects.push_back(ef);
+    terms = best.fitted;
+    if (best.camera_unit) scale[best.unit] = best.scale;
+    if (best.term.extension.effect == Effect::kPixelNoiseScale) noise_named[best.unit] = true;
+    a.Rebuild(terms, scale);
+  }
+  // Backward pruning: an effect named early (e.g. the noise scale, taking up the residual of
+  // a large effect named later) must still earn its place once the others are in: each
+  // named effect is removed in turn when the likelihood ratio for it, on the poses
+  // re-fitted with every effect, no longer passes the test or its BIC gain is <= 0.
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (size_t k = terms.size(); k-- > 0;) {
+      if (terms[k].undecided) continue;
+      const Extension x = terms[k].extension;
+      const bool cam_unit = x.effect != Effect::kTargetGeometry;
+      const auto& s = cam_unit ? a.CameraSamples(x.index) : a.BallSamples(x.index);
+      std::vector<CameraModelTerm> without = terms;
+      without.erase(without.begin() + static_cast<long>(k));
+      auto free_of = [&](const std::vector<CameraModelTerm>& t) {
+        std::vector<int> f;
+        for (size_t i = 0; i < t.size(); ++i)
+          if ((t[i].extension.effect != Effect::kTargetGeometry) == cam_unit && t[i].extension.index == x.index)
+            f.push_back(static_cast<int>(i));
+        return f;
+      };
+      const bool noise = x.effect == Effect::kPixelNoiseScale;
+      const ScaleMode with_mode = !cam_unit ? ScaleMode::kFixed : noise_named[x.index] ? ScaleMode::kFree : ScaleMode::kBand;
+      const ScaleMode without_mode = noise ? ScaleMode::kBand : with_mode;
+      const UnitFit f1 = a.Fit(s, cam_unit ? x.index : -1, terms, free_of(terms), scale, with_mode, -1);
+      const UnitFit f0 = a.Fit(s, cam_unit ? x.index : -1, without, free_of(without), scale, without_mode, -1);
+      std::vector<double> s1 = scale, s0 = scale;
+      if (cam_unit) s1[x.index] = f1.scale, s0[x.index] = f0.scale;
+      const double lr = 2 * (a.Evaluate(s, f1.terms, s1, -1, false).ll - a.Evaluate(s, f0.terms, s0, -1, false).ll);
+      const int kp = x.NumParameters() + (terms[k].from_time_s > -std::numeric_limits<double>::infinity() ? 1 : 0);
+      const double m = static_cast<double>(nc * 7 + nb);
+      if (EarnsPlace(lr, kp, options.false_alarm / (2 * m), ln_n)) continue;
+      const std::string label = x.Label(rig.names);
+      rep.notes.push_back(label + " was named, then no longer earned its place once the other effects were in " +
+                          "(likelihood ratio " + std::to_string(lr) + "): removed");
+      for (size_t e = 0; e < rep.effects.size(); ++e)
+        if (rep.effects[e].name == Name(x.effect) && rep.effects[e].where == x.Where(rig.names)) {
+          rep.effects.erase(rep.effects.begin() + static_cast<long>(e));
+          break;
+        }
+      if (noise) noise_named[x.index] = false;
+      terms = f0.terms;
+      if (cam_unit) scale[x.index] = f0.scale;
+      a.Rebuild(terms, scale);
+      changed = true;
+      break;
+    }
+  }
+  // A last fit of every unit with named effects on the poses re-fitted with all of them
+  // (the noise scale, in particular, whitens with the pose covariances of its own value).
+  {
+    std::set<std::pair<bool, int>> units;
+    for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
+    for (const auto& [cam_unit, u] : units) {
+      std::vector<int> free;
+      for (size_t k = 0; k < terms.size(); ++k)
+        if ((terms[k].extension.effect != Effect::kTargetGeometry) == cam_unit && terms[k].extension.index == u)
+          free.push_back(static_cast<int>(k));
+      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+      Eigen::MatrixXd cov;
+      const ScaleMode mode = !cam_unit ? ScaleMode::kFixed : noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
+      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, mode, -1, &cov);
+      if (cam_unit) scale[u] = fit.scale;
+      int j = 0;
+      for (int k : free) {
+        terms[k].parameters = fit.terms[k].parameters;
+        const Extension& x = terms[k].extension;
+        std::vector<double> sg;
+        if (x.effect == Effect::kPixelNoiseScale) {
+          sg.push_back(fit.scale / std::sqrt(4.0 * s.size()));
+        } else {
+          for (int i = 0; i < x.NumParameters(); ++i, ++j)
+            sg.push_back(j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+        }
+        for (auto& e : rep.effects)
+          if (!terms[k].undecided && e.name == Name(x.effect) && e.where == x.Where(rig.names))
+            for (size_t i = 0; i < sg.size(); ++i) {
+              e.parameters[i].second = terms[k].parameters[i];
+              e.sigma[i].second = sg[i];
+            }
+      }
+    }
+  }
+  // The named terms with their sigmas.
+  for (const auto& t : terms) {
+    if (t.undecided) continue;
+    CameraModelTerm out = t;
+    for (const auto& e : rep.effects)
+      if (e.name == Name(t.extension.effect) && e.where == t.extension.Where(rig.names))
+        for (const auto& sg : e.sigma) out.sigma.push_back(sg.second);
+    res.terms.push_back(out);
+  }
+  res.noise_scale = scale;
+  bool failed = false;
+  for (const auto& t : rep.tests) failed = failed || t.failed;
+  rep.clean = rep.effects.empty() && rep.undecided.empty() && !failed;
+  char note[256];
+  std::snprintf(note, sizeof note,
+                "%zu tracked frames, %d folds of contiguous time; designed false-alarm rate %.3g per recording "
+                "(chi-square at alpha/(4 cameras), residual tests at alpha/4 over their number, candidates at alpha/(2 m), m candidates per round)",
+                a.NumFrames(), options.folds, options.false_alarm);
+  rep.notes.push_back(note);
+  return res;
+}
+
+}  // namespace mcms

@@ -1,0 +1,123 @@
+#include "audit/fusion_log_audit.h"
+
+#include <cstdio>
+#include <vector>
+
+#include "core/error.h"
+#include "core/io.h"
+#include "core/output_folder.h"
+
+namespace mcms {
+
+InclinometerAuditResult AuditInclinometerLogs(const FusionSetup& setup, const TrackerLog& tracker,
+                                              const InclinometerLog& inclinometer, const JointLog* motion,
+                                              const InclinometerAuditOptions& options) {
+  CellGeometry cell;
+  cell.T_base_rig = setup.T_base_rig;
+  cell.T_base_rig_covariance = setup.T_base_rig_covariance;
+  cell.T_flange_target = setup.T_flange_target;
+  std::vector<OrientationReference> reference;
+  reference.reserve(tracker.samples.size());
+  for (const TrackerSample& s : tracker.samples)
+    reference.push_back(CameraOrientationReference(cell, s.time_s, s.T_rig_target, s.covariance, s.line));
+  std::vector<InclinometerReadingSample> readings;
+  readings.reserve(inclinometer.samples.size());
+  for (const InclinometerSample& s : inclinometer.samples) readings.push_back({s.time_s, s.reading, s.line});
+  std::vector<OrientationSample> shape;
+  if (motion)
+    for (const JointSample& s : motion->samples) shape.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
+  return AuditInclinometer(setup.inclinometer, reference, readings, options, shape);
+}
+
+RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints, const std::string& tracker_name,
+                              const std::string& joints_name) {
+  RobotLog log;
+  log.source = tracker_name;
+  log.has_time = true;
+  for (const TrackerSample& s : tracker.samples) {
+    Eigen::VectorXd q, qa, qb;
+    if (!joints.Interpolate(s.time_s, &q)) continue;
+    RobotLogRow r;
+    r.time_s = s.time_s;
+    r.q = q;
+    r.p_meas = s.T_rig_target.t;
+    r.R_meas_tool = s.T_rig_target.R;
+    r.line = s.line;
+    const double h = 0.01;
+    if (joints.Interpolate(s.time_s - h, &qa) && joints.Interpolate(s.time_s + h, &qb)) r.qdot = (qb - qa) / (2 * h);
+    log.rows.push_back(r);
+  }
+  if (static_cast<int>(log.rows.size()) < kMinRobotLogRows)
+    Throw("audit fusion: only ", log.rows.size(), " tracked frames of ", tracker_name, " fall within the joint log ",
+          joints_name, "'s time span; the audit needs at least ", kMinRobotLogRows, " (are the two logs on the same clock?)");
+  return log;
+}
+
+void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const std::string&)>& print,
+                       const std::function<void(const std::string&)>& progress) {
+  if (!a.json.empty()) RequireWritableFile(a.json, "audit fusion --json");
+  if (!a.output.empty()) RequireReplaceableFolder(a.output, {"report.json"}, "audit fusion", "audit fusion -o");
+  const FusionSetup setup = ReadFusionSetup(a.setup);
+  const TrackerLog tracker = ReadTrackerLog(a.tracker);
+  const JointLog joints = ReadJointLog(a.robot, setup.robot);
+  const bool with_incl = !a.inclinometer.empty();
+  InclinometerLog incl_log;
+  if (with_incl) incl_log = ReadInclinometerLog(a.inclinometer);
+  RobotModel robot = setup.robot;
+  robot.SetT_flange_tool(setup.T_flange_target);
+  const RobotLog log = TrackerAgainstJoints(tracker, joints, a.tracker, a.robot);
+  RobotAuditOptions options;
+  options.false_alarm = with_incl ? a.false_alarm / 2 : a.false_alarm;
+  options.base_guess = setup.T_base_rig.Inverse();
+  options.progress = progress;
+  RobotAuditResult r = AuditRobot(robot, log, options);
+  r.report.mode = "fusion";
+  for (auto& e : r.report.effects)
+    if (e.name == "clock_offset") e.where = "robot";
+  InclinometerAuditResult ir;
+  if (with_incl) {
+    InclinometerAuditOptions io;
+    io.false_alarm = a.false_alarm / 2;
+    io.progress = progress;
+    try {
+      // The robot's joint log gives the motion's shape between the tracker's frames.
+      ir = AuditInclinometerLogs(setup, tracker, incl_log, &joints, io);
+    } catch (const InputError& e) {
+      Throw(a.inclinometer, " against ", a.tracker, ": ", e.what());
+    }
+    r.report.Merge(ir.report);
+  }
+  std::string text;
+  {
+    char b[512];
+    std::snprintf(b, sizeof b, "fusion logs: %zu tracked frames with joint values (tracker %s, robot %s)\n",
+                  log.rows.size(), a.tracker.c_str(), a.robot.c_str());
+    text += b;
+    if (with_incl) {
+      std::snprintf(b, sizeof b,
+                    "inclinometer %s: %zu readings, %zu of them between two tracked frames used (every other "
+                    "pair of frames)\n",
+                    a.inclinometer.c_str(), incl_log.samples.size(), ir.rows.size());
+      text += b;
+    }
+  }
+  text += r.report.Text();
+  print(text);
+  if (!a.output.empty()) {
+    WriteFolderAtomically(a.output, {"report.json"}, "audit fusion", "audit fusion -o",
+                          [&](const std::filesystem::path& dir) {
+                            WriteFileAtomically(dir / "report.txt", [&](std::ostream& os) { os << text; });
+                            if (with_incl) WriteInclinometerAuditFiles(ir, dir);
+                            if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot.NumJoints());
+                            r.report.WriteJson(dir / "report.json");
+                          });
+    print("wrote " + a.output + "\n");
+  }
+  if (!a.json.empty()) {
+    r.report.WriteJson(a.json);
+    print("wrote " + a.json + "\n");
+  }
+}
+
+
+}  // namespace mcms

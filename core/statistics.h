@@ -1,0 +1,37 @@
+// The statistics the project tests with, in one place (on boost::math): the chi-square
+// distribution (consistency tests: NIS, NEES, likelihood ratios), the F and normal tails,
+// and the NEES of an estimated pose against the truth. Every layer uses these; no other
+// file computes a chi-square, F or normal tail or quantile.
+#pragma once
+
+#include <utility>
+
+#include "core/pose_math.h"
+
+namespace mcms {
+
+// X ~ chi-square with `dof` > 0 degrees of freedom.
+// P(X <= x); 0 for x <= 0.
+double ChiSquareCdf(double x, double dof);
+// P(X > x), computed directly (not 1 - CDF), so small p-values keep their digits; 1 for x <= 0.
+double ChiSquareSurvival(double x, double dof);
+// The x with P(X <= x) = p, 0 <= p < 1.
+double ChiSquareQuantile(double p, double dof);
+// The x with P(X > x) = alpha, 0 < alpha <= 1 (a test's threshold; precise for tiny alpha).
+double ChiSquareThreshold(double dof, double alpha);
+// The central interval that holds X with probability p: [quantile((1 - p) / 2),
+// quantile((1 + p) / 2)].
+std::pair<double, double> ChiSquareBand(double dof, double p);
+
+// P(F > x) for F ~ F(d1, d2); 1 for x <= 0.
+double FisherSurvival(double x, double d1, double d2);
+// P(|Z| > |z|) for Z ~ N(0, 1).
+double TwoSidedNormalP(double z);
+
+// The error of an estimated pose against the truth in the project's [dtheta; dp] layout
+// (docs/conventions.md): BoxMinus(estimate, truth), and its NEES e^T cov^-1 e, which is
+// chi-square(6) when cov is the estimate's honest covariance.
+Vec6 PoseError(const Pose& estimate, const Pose& truth);
+double PoseNees(const Pose& estimate, const Pose& truth, const Mat6& cov);
+
+}  // namespace mcms

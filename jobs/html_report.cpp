@@ -1,0 +1,794 @@
+#include "jobs/html_report.h"
+
+#include <numbers>
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <system_error>
+
+#include "core/error.h"
+#include "core/io.h"
+#include "core/pose_math.h"
+#include "core/statistics.h"
+#include "core/svg_plot.h"
+
+namespace mcms {
+
+namespace fs = std::filesystem;
+
+bool HtmlReportOptions::IsValid(std::string* why) const {
+  auto fail = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  if (dir.empty()) return fail("the folder to report on is empty");
+  if (max_table_rows < 1) return fail("max_table_rows must be at least 1");
+  if (max_text_bytes < 100) return fail("max_text_bytes must be at least 100");
+  return true;
+}
+
+namespace {
+
+constexpr size_t kMaxSvgBytes = size_t{8} << 20;  // a larger SVG is listed, not embedded
+constexpr size_t kReportHeadLines = 60;           // lines of a long report shown before "more"
+
+std::string Html(const std::string& s) {
+  std::string o;
+  o.reserve(s.size());
+  for (char c : s) {
+    switch (c) {
+      case '<': o += "&lt;"; break;
+      case '>': o += "&gt;"; break;
+      case '&': o += "&amp;"; break;
+      case '"': o += "&quot;"; break;
+      case '\'': o += "&#39;"; break;
+      default: o += c;
+    }
+  }
+  return o;
+}
+
+std::string Base64(const std::string& in) {
+  static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string o;
+  o.reserve((in.size() + 2) / 3 * 4);
+  size_t i = 0;
+  for (; i + 2 < in.size(); i += 3) {
+    const unsigned v = (static_cast<unsigned char>(in[i]) << 16) | (static_cast<unsigned char>(in[i + 1]) << 8) |
+                       static_cast<unsigned char>(in[i + 2]);
+    o += t[(v >> 18) & 63], o += t[(v >> 12) & 63], o += t[(v >> 6) & 63], o += t[v & 63];
+  }
+  if (i + 1 == in.size()) {
+    const unsigned v = static_cast<unsigned char>(in[i]) << 16;
+    o += t[(v >> 18) & 63], o += t[(v >> 12) & 63], o += "==";
+  } else if (i + 2 == in.size()) {
+    const unsigned v = (static_cast<unsigned char>(in[i]) << 16) | (static_cast<unsigned char>(in[i + 1]) << 8);
+    o += t[(v >> 18) & 63], o += t[(v >> 12) & 63], o += t[(v >> 6) & 63], o += '=';
+  }
+  return o;
+}
+
+std::string Lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+bool StartsWith(const std::string& s, const std::string& p) { return s.compare(0, p.size(), p) == 0; }
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.6g", v);
+  return buf;
+}
+
+std::string Bytes(uintmax_t n) {
+  char buf[32];
+  if (n < 10000) std::snprintf(buf, sizeof(buf), "%ju B", n);
+  else if (n < 10000000) std::snprintf(buf, sizeof(buf), "%.0f kB", n / 1e3);
+  else std::snprintf(buf, sizeof(buf), "%.0f MB", n / 1e6);
+  return buf;
+}
+
+// A CSV as written by mcms and by spreadsheets: '#' comment lines (kept), a header row,
+// cells separated by commas, double-quoted cells may hold commas and "" quotes.
+struct Table {
+  std::vector<std::string> comments, header;
+  std::vector<std::vector<std::string>> rows;
+  int Column(const std::string& name) const {
+    for (size_t i = 0; i < header.size(); ++i)
+      if (header[i] == name) return static_cast<int>(i);
+    return -1;
+  }
+  // Number in a cell; nullopt when empty or not a finite number.
+  std::optional<double> Value(size_t row, int col) const {
+    if (col < 0 || row >= rows.size() || static_cast<size_t>(col) >= rows[row].size()) return std::nullopt;
+    const std::string& c = rows[row][col];
+    if (c.empty()) return std::nullopt;
+    char* end = nullptr;
+    const double v = std::strtod(c.c_str(), &end);
+    if (end != c.c_str() + c.size() || !std::isfinite(v)) return std::nullopt;
+    return v;
+  }
+};
+
+std::vector<std::string> SplitCsv(const std::string& line) {
+  std::vector<std::string> cells;
+  std::string cell;
+  bool quoted = false;
+  for (size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted) {
+      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') cell += '"', ++i;
+      else if (c == '"') quoted = false;
+      else cell += c;
+    } else if (c == '"') {
+      quoted = true;
+    } else if (c == ',') {
+      cells.push_back(cell);
+      cell.clear();
+    } else if (c != '\r') {
+      cell += c;
+    }
+  }
+  cells.push_back(cell);
+  for (auto& s : cells) {
+    const auto b = s.find_first_not_of(" \t");
+    const auto e = s.find_last_not_of(" \t");
+    s = b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+  }
+  return cells;
+}
+
+// Parses `text`; on a malformed table returns the problem in *error (file line named).
+Table ParseCsv(std::string text, std::string* error) {
+  if (StartsWith(text, "\xEF\xBB\xBF")) text.erase(0, 3);
+  Table t;
+  std::istringstream in(text);
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    if (line[0] == '#') {
+      t.comments.push_back(line);
+      continue;
+    }
+    auto cells = SplitCsv(line);
+    if (t.header.empty()) {
+      t.header = std::move(cells);
+      continue;
+    }
+    if (cells.size() != t.header.size()) {
+      *error = "line " + std::to_string(lineno) + " has " + std::to_string(cells.size()) + " cells, the header " +
+               std::to_string(t.header.size());
+      return t;
+    }
+    t.rows.push_back(std::move(cells));
+  }
+  if (t.header.empty()) *error = "no header row";
+  return t;
+}
+
+struct File {
+  fs::path path;
+  std::string name;  // relative to the report folder
+  uintmax_t size = 0;
+};
+
+std::string FigureHtml(const std::string& svg, const std::string& caption) {
+  return "<figure><img class=\"figure\" alt=\"" + Html(caption) + "\" src=\"data:image/svg+xml;base64," + Base64(svg) +
+         "\"><figcaption>" + Html(caption) + "</figcaption></figure>\n";
+}
+
+std::string Note(const std::string& s) { return "<p class=\"note\">" + Html(s) + "</p>\n"; }
+
+// Rows of a table as HTML (all columns; the container scrolls sideways when wide).
+void TableRows(std::ostringstream& o, const Table& t, size_t begin, size_t end) {
+  for (size_t r = begin; r < end; ++r) {
+    o << "<tr>";
+    for (size_t c = 0; c < t.rows[r].size(); ++c) {
+      // Numbers to 6 significant digits (the file keeps them all); text as it is.
+      const auto v = t.Value(r, static_cast<int>(c));
+      o << "<td>" << (v && t.rows[r][c].size() > 8 ? Num(*v) : Html(t.rows[r][c])) << "</td>";
+    }
+    o << "</tr>\n";
+  }
+}
+
+std::string TableHtml(const Table& t, size_t max_rows) {
+  std::ostringstream o;
+  for (const auto& c : t.comments) o << "<div class=\"comment\">" << Html(c) << "</div>\n";
+  const size_t n = t.rows.size();
+  if (n > max_rows) {
+    // Per-column statistics.
+    o << "<p>" << n << " rows, " << t.header.size() << " columns; per column:</p>\n<div class=\"scroll\"><table>\n"
+      << "<tr><th>column</th><th>values</th><th>min</th><th>median</th><th>max</th><th>mean</th><th>text values (count)</th></tr>\n";
+    for (size_t c = 0; c < t.header.size(); ++c) {
+      std::vector<double> v;
+      std::map<std::string, size_t> text;
+      size_t empty = 0;
+      for (size_t r = 0; r < n; ++r) {
+        if (auto x = t.Value(r, static_cast<int>(c))) v.push_back(*x);
+        else if (t.rows[r][c].empty()) ++empty;
+        else ++text[t.rows[r][c]];
+      }
+      o << "<tr><td>" << Html(t.header[c]) << "</td><td>" << v.size() << " numbers";
+      if (empty) o << ", " << empty << " empty";
+      o << "</td>";
+      if (!v.empty()) {
+        double sum = 0;
+        for (double x : v) sum += x;
+        std::vector<double> s = v;
+        std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
+        const double med = s[s.size() / 2];
+        o << "<td>" << Num(*std::min_element(v.begin(), v.end())) << "</td><td>" << Num(med) << "</td><td>"
+          << Num(*std::max_element(v.begin(), v.end())) << "</td><td>" << Num(sum / static_cast<double>(v.size()))
+          << "</td>";
+      } else {
+        o << "<td></td><td></td><td></td><td></td>";
+      }
+      o << "<td>";
+      std::vector<std::pair<size_t, std::string>> by_count;
+      for (const auto& [k, m] : text) by_count.push_back({m, k});
+      std::sort(by_count.begin(), by_count.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+      for (size_t i = 0; i < by_count.size() && i < 6; ++i)
+        o << (i ? ", " : "") << Html(by_count[i].second.empty() ? "(empty)" : by_count[i].second) << " ("
+          << by_count[i].first << ")";
+      if (by_count.size() > 6) o << ", ... (" << by_count.size() << " distinct)";
+      o << "</td></tr>\n";
+    }
+    o << "</table></div>\n<p>First and last rows:</p>\n";
+  }
+  o << "<div class=\"scroll\"><table>\n<tr>";
+  for (const auto& h : t.header) o << "<th>" << Html(h) << "</th>";
+  o << "</tr>\n";
+  if (n <= max_rows) {
+    TableRows(o, t, 0, n);
+  } else {
+    const size_t k = std::max<size_t>(1, max_rows / 2);
+    TableRows(o, t, 0, k);
+    o << "<tr><td class=\"gap\" colspan=\"" << t.header.size() << "\">... " << n - 2 * k << " rows ...</td></tr>\n";
+    TableRows(o, t, n - k, n);
+  }
+  o << "</table></div>\n";
+  return o.str();
+}
+
+bool IsTrackerPoses(const Table& t) {
+  return t.Column("frame") >= 0 && t.Column("time_s") >= 0 && t.Column("status") >= 0 && t.Column("x_m") >= 0;
+}
+
+// 95 % two-sided band of a chi-square variable with k degrees of freedom.
+std::pair<double, double> ChiSquareBand95(int k) { return ChiSquareBand(k, 0.95); }
+
+// Adds err_x_mm, err_y_mm, err_z_mm, err_rot_mdeg and nees columns to a tracker pose table
+// from a truth pose table (frame,x_m,y_m,z_m,qw,qx,qy,qz: T_rig_target, what `mcms render`
+// writes to truth/poses.csv), matched by frame. The error is the estimate's against the
+// truth (core/statistics.h PoseError: BoxMinus(T_est, T_true), the [dtheta; dp] layout of
+// the covariance), NEES = e^T Cov^-1 e (PoseNees). Returns a summary line,
+// or the reason nothing was added.
+std::string AddTruthColumns(Table& t, const Table& truth) {
+  const char* pose_cols[] = {"x_m", "y_m", "z_m", "qw", "qx", "qy", "qz"};
+  int tc[7], ec[7];
+  for (int i = 0; i < 7; ++i) {
+    tc[i] = truth.Column(pose_cols[i]);
+    ec[i] = t.Column(pose_cols[i]);
+    if (tc[i] < 0) return std::string("the truth file has no ") + pose_cols[i] + " column";
+  }
+  const int tf = truth.Column("frame"), ef = t.Column("frame");
+  if (tf < 0) return "the truth file has no frame column";
+  const char* axes[] = {"rx", "ry", "rz", "px", "py", "pz"};
+  int cov[6][6];
+  bool have_cov = true;
+  for (int a = 0; a < 6; ++a)
+    for (int b = 0; b < 6; ++b) {
+      cov[a][b] = t.Column(std::string("cov_") + axes[a] + "_" + axes[b]);
+      have_cov = have_cov && cov[a][b] >= 0;
+    }
+  auto pose_of = [](const Table& tab, size_t r, const int* c) -> std::optional<Pose> {
+    double v[7];
+    for (int i = 0; i < 7; ++i) {
+      const auto x = tab.Value(r, c[i]);
+      if (!x) return std::nullopt;
+      v[i] = *x;
+    }
+    return Pose::FromQuaternion(Eigen::Quaterniond(v[3], v[4], v[5], v[6]).normalized(), Vec3(v[0], v[1], v[2]));
+  };
+  std::map<long long, Pose> truth_by_frame;
+  for (size_t r = 0; r < truth.rows.size(); ++r)
+    if (const auto f = truth.Value(r, tf))
+      if (const auto T = pose_of(truth, r, tc)) truth_by_frame[std::llround(*f)] = *T;
+  for (const char* h : {"err_x_mm", "err_y_mm", "err_z_mm", "err_rot_mdeg", "nees"}) t.header.push_back(h);
+  size_t matched = 0, with_nees = 0, inside = 0;
+  double sum_nees = 0, sum_sq_mm = 0;
+  const auto [lo, hi] = ChiSquareBand95(6);
+  for (size_t r = 0; r < t.rows.size(); ++r) {
+    std::string cells[5];
+    const auto f = t.Value(r, ef);
+    const auto est = pose_of(t, r, ec);
+    const auto tr = f ? truth_by_frame.find(std::llround(*f)) : truth_by_frame.end();
+    if (est && tr != truth_by_frame.end()) {
+      const Vec6 e = PoseError(*est, tr->second);
+      ++matched;
+      sum_sq_mm += 1e6 * e.tail<3>().squaredNorm();
+      for (int a = 0; a < 3; ++a) cells[a] = Num(1e3 * e[3 + a]);
+      cells[3] = Num(e.head<3>().norm() * 180.0 / std::numbers::pi * 1e3);
+      if (have_cov) {
+        Mat6 C;
+        bool ok = true;
+        for (int a = 0; a < 6; ++a)
+          for (int b = 0; b < 6; ++b) {
+            const auto v = t.Value(r, cov[a][b]);
+            ok = ok && v.has_value();
+            C(a, b) = v.value_or(0.0);
+          }
+        Eigen::LDLT<Mat6> ldlt(C);
+        if (ok && ldlt.info() == Eigen::Success && ldlt.isPositive() && (ldlt.vectorD().array() > 0).all()) {
+          const double nees = PoseNees(*est, tr->second, C);
+          cells[4] = Num(nees);
+          ++with_nees;
+          sum_nees += nees;
+          inside += nees >= lo && nees <= hi;
+        }
+      }
+    }
+    for (auto& c : cells) t.rows[r].push_back(c);
+  }
+  std::ostringstream o;
+  o << "against the truth (matched by frame): " << matched << " of " << t.rows.size() << " frames";
+  if (matched) o << ", position error RMS " << Num(std::sqrt(sum_sq_mm / static_cast<double>(matched))) << " mm";
+  if (with_nees)
+    o << ", mean NEES " << Num(sum_nees / static_cast<double>(with_nees)) << " (6 for a consistent covariance), "
+      << inside << " of " << with_nees << " frames inside the 95 % band [" << lo << ", " << hi << "]";
+  return o.str();
+}
+
+// Per-frame plots of a tracker pose CSV; figures appended to `out`, count returned.
+size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream& out) {
+  const char* colors[] = {"#2ca02c", "#ff7f0e", "#d62728", "#9467bd", "#8c564b", "#1f77b4"};
+  const int ct = t.Column("time_s"), cs = t.Column("status"), cb = t.Column("balls");
+  const size_t n = t.rows.size();
+  std::vector<double> time(n);
+  for (size_t r = 0; r < n; ++r) time[r] = t.Value(r, ct).value_or(NAN);
+  size_t figures = 0;
+  auto emit = [&](const Plot& p, const std::string& caption) {
+    out << FigureHtml(p.ToSvg(900, 360), name + ": " + caption);
+    ++figures;
+  };
+  // Status and balls per frame.
+  {
+    Plot p{"Per-frame status: balls identified in each frame", "time (s)", "balls identified", {}};
+    std::map<std::string, size_t> index;
+    for (size_t r = 0; r < n; ++r) {
+      const std::string& s = t.rows[r][cs];
+      if (!index.count(s)) {
+        index[s] = p.series.size();
+        p.series.push_back(PlotSeries{s, {}, {}, colors[p.series.size() % 6], true});
+      }
+      auto& ser = p.series[index[s]];
+      ser.x.push_back(time[r]);
+      ser.y.push_back(cb >= 0 ? t.Value(r, cb).value_or(0.0) : 0.0);
+    }
+    for (auto& s : p.series) s.label += " (" + std::to_string(s.x.size()) + " frames)";
+    emit(p, "status per frame");
+  }
+  // Position.
+  {
+    Plot p{"Tracked position of the target (rig frame)", "time (s)", "position (mm)", {}};
+    const char* axes[] = {"x_m", "y_m", "z_m"};
+    for (int a = 0; a < 3; ++a) {
+      PlotSeries s{std::string(1, "xyz"[a]), {}, {}, colors[(a + 3) % 6], false};
+      const int c = t.Column(axes[a]);
+      for (size_t r = 0; r < n; ++r) s.x.push_back(time[r]), s.y.push_back(t.Value(r, c).value_or(NAN) * 1e3);
+      p.series.push_back(s);
+    }
+    emit(p, "position per frame");
+  }
+  // Predicted sigma of the position, and the reprojection RMS.
+  const int cxx = t.Column("cov_px_px"), cyy = t.Column("cov_py_py"), czz = t.Column("cov_pz_pz");
+  if (cxx >= 0 && cyy >= 0 && czz >= 0) {
+    Plot p{"Predicted position sigma per frame (from the 6x6 covariance)", "time (s)", "sigma (mm)", {}};
+    const int cols[] = {cxx, cyy, czz};
+    for (int a = 0; a < 3; ++a) {
+      PlotSeries s{std::string("sigma_") + "xyz"[a], {}, {}, colors[(a + 3) % 6], false};
+      for (size_t r = 0; r < n; ++r) {
+        const auto v = t.Value(r, cols[a]);
+        s.x.push_back(time[r]);
+        s.y.push_back(v && *v >= 0 ? std::sqrt(*v) * 1e3 : NAN);
+      }
+      p.series.push_back(s);
+    }
+    emit(p, "predicted sigma per frame");
+  }
+  if (const int c = t.Column("rms_px"); c >= 0) {
+    Plot p{"Reprojection RMS per frame", "time (s)", "RMS (px)", {}};
+    PlotSeries s{"rms_px", {}, {}, colors[5], true};
+    for (size_t r = 0; r < n; ++r) s.x.push_back(time[r]), s.y.push_back(t.Value(r, c).value_or(NAN));
+    p.series.push_back(s);
+    emit(p, "reprojection RMS per frame");
+  }
+  // Errors against a truth file, one axis per plot, each with its predicted 3-sigma band.
+  {
+    const std::string axes = "xyz";
+    const int cov[] = {cxx, cyy, czz};
+    for (int a = 0; a < 3; ++a) {
+      const std::string h = std::string("err_") + axes[a] + "_mm";
+      const int c = t.Column(h);
+      if (c < 0) continue;
+      Plot p{std::string("Error in ") + axes[a] + " against the truth per frame" +
+                 (cov[a] >= 0 ? " (band: predicted +-3 sigma)" : ""),
+             "time (s)", std::string(1, axes[a]) + " error (mm)", {}};
+      PlotSeries s{"measured error", {}, {}, colors[(a + 3) % 6], true};
+      for (size_t r = 0; r < n; ++r) {
+        s.x.push_back(time[r]);
+        s.y.push_back(t.Value(r, c).value_or(NAN));
+        if (cov[a] >= 0) {
+          const auto v = t.Value(r, cov[a]);
+          const double b = v && *v >= 0 ? 3e3 * std::sqrt(*v) : NAN;
+          s.y_low.push_back(-b);
+          s.y_high.push_back(b);
+        }
+      }
+      if (cov[a] >= 0) s.label += " (band: predicted +-3 sigma)";
+      p.series.push_back(s);
+      emit(p, h + " per frame");
+    }
+    for (size_t c = 0; c < t.header.size(); ++c) {
+      const std::string& h = t.header[c];
+      const bool axis_error = h == "err_x_mm" || h == "err_y_mm" || h == "err_z_mm";  // plotted above
+      if (!StartsWith(h, "err") || axis_error) continue;
+      Plot q{"Per-frame " + h, "time (s)", h, {}};
+      PlotSeries s{h, {}, {}, colors[2], true};
+      for (size_t r = 0; r < n; ++r) s.x.push_back(time[r]), s.y.push_back(t.Value(r, static_cast<int>(c)).value_or(NAN));
+      q.series.push_back(s);
+      emit(q, h + " per frame");
+    }
+  }
+  for (size_t c = 0; c < t.header.size(); ++c) {
+    const std::string h = Lower(t.header[c]);
+    if (!StartsWith(h, "nees")) continue;
+    const int k = h.find("pos") != std::string::npos || h.find("_p") != std::string::npos ? 3 : 6;
+    const auto [lo, hi] = ChiSquareBand95(k);
+    Plot p{"NEES per frame against the truth (band: 95 % of chi-square, " + std::to_string(k) + " dof)", "time (s)",
+           t.header[c], {}};
+    PlotSeries s{t.header[c], {}, {}, colors[3], true};
+    for (size_t r = 0; r < n; ++r) {
+      s.x.push_back(time[r]);
+      s.y.push_back(t.Value(r, static_cast<int>(c)).value_or(NAN));
+      s.y_low.push_back(lo);
+      s.y_high.push_back(hi);
+    }
+    p.series.push_back(s);
+    p.log_y = true;
+    emit(p, t.header[c] + " per frame");
+  }
+  return figures;
+}
+
+bool IsIso9283Characteristics(const Table& t) {
+  return t.Column("pose") >= 0 && t.Column("AP_mm") >= 0 && t.Column("RP_mm") >= 0;
+}
+
+// Plots of an ISO 9283 characteristics table (`mcms iso9283 -o`, the demo's
+// iso9283_characteristics.csv): AP per pose on a log axis in mm, and RP measured (markers)
+// next to RP predicted from the covariances (lines) when the table has RP_pred_mm; one
+// colour per condition.
+size_t Iso9283Plots(const Table& t, const std::string& name, std::ostringstream& out) {
+  const char* colors[] = {"#d62728", "#ff7f0e", "#1f77b4", "#2ca02c", "#9467bd", "#8c564b"};
+  const int cp = t.Column("pose"), cc = t.Column("condition"), ca = t.Column("AP_mm"), cr = t.Column("RP_mm"),
+            cq = t.Column("RP_pred_mm");
+  std::vector<std::string> conditions;
+  std::map<std::string, size_t> index;
+  for (const auto& row : t.rows) {
+    const std::string c = cc >= 0 ? row[cc] : std::string("measured");
+    if (!index.count(c)) index[c] = conditions.size(), conditions.push_back(c);
+  }
+  Plot ap{"ISO 9283 pose accuracy AP per pose", "pose (P1..P5)", "AP (mm)", {}};
+  ap.log_y = true;
+  Plot rp{std::string("ISO 9283 pose repeatability RP per pose") + (cq >= 0 ? " (markers: measured, lines: predicted)" : ""),
+          "pose (P1..P5)", "RP (mm)", {}};
+  for (size_t k = 0; k < conditions.size(); ++k) {
+    PlotSeries a{conditions[k], {}, {}, colors[k % 6], true}, r = a, q{conditions[k] + " (predicted)", {}, {}, colors[k % 6], false};
+    for (size_t i = 0; i < t.rows.size(); ++i) {
+      if ((cc >= 0 ? t.rows[i][cc] : std::string("measured")) != conditions[k]) continue;
+      // Pose "P3" -> 3; a plain number is used as it is.
+      const std::string& pose = t.rows[i][cp];
+      const double x = std::strtod(pose.c_str() + (pose.size() > 1 && (pose[0] == 'P' || pose[0] == 'p') ? 1 : 0), nullptr);
+      a.x.push_back(x), a.y.push_back(t.Value(i, ca).value_or(NAN));
+      r.x.push_back(x), r.y.push_back(t.Value(i, cr).value_or(NAN));
+      if (cq >= 0) q.x.push_back(x), q.y.push_back(t.Value(i, cq).value_or(NAN));
+    }
+    ap.series.push_back(a);
+    rp.series.push_back(r);
+    if (cq >= 0) rp.series.push_back(q);
+  }
+  out << FigureHtml(ap.ToSvg(900, 420), name + ": AP per pose");
+  out << FigureHtml(rp.ToSvg(900, 420), name + ": RP per pose, measured and predicted");
+  return 2;
+}
+
+std::string DetectKind(const std::vector<File>& files, const std::map<std::string, Table>& tables,
+                       const std::map<std::string, std::string>& texts) {
+  std::set<std::string> names;
+  for (const auto& f : files) names.insert(f.name);
+  auto any = [&](auto pred) { return std::any_of(files.begin(), files.end(), [&](const File& f) { return pred(f.name); }); };
+  if (names.count("point_errors.csv") && names.count("fused_poses.csv")) return "demo";
+  if (names.count("map.csv") || any([](const std::string& n) { return StartsWith(n, "heatmap_z"); })) return "fov-map";
+  if (names.count("rig.yaml") && any([](const std::string& n) { return StartsWith(n, "residuals-"); })) return "calib-rig";
+  for (const auto& [n, text] : texts) {
+    if (text.find("# mcms calib-robot report") != std::string::npos) return "calib-robot";
+    if (text.find("\"effects\"") != std::string::npos && text.find("\"nominal\"") != std::string::npos) return "audit";
+    if (text.find("camera  observations  chi2/dof") != std::string::npos) return "audit";  // `mcms audit cameras` > FILE
+  }
+  for (const auto& [n, t] : tables) {
+    if (IsIso9283Characteristics(t) || (t.Column("pose") >= 0 && t.Column("cycle") >= 0)) return "iso9283";
+    if (IsTrackerPoses(t)) return "track";
+  }
+  return "mcms output";
+}
+
+const char* kStyle = R"(body{font-family:sans-serif;margin:24px auto;max-width:1200px;color:#222;padding:0 16px}
+h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:4px;margin-top:1.8em}h3{font-size:1.05em;margin-top:1.4em}
+pre{background:#f6f6f6;padding:10px;overflow-x:auto;font-size:12px;line-height:1.35}
+figure{margin:18px 0}figure img{max-width:100%;height:auto;border:1px solid #ddd}figcaption{font-size:13px;color:#555}
+table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right;white-space:nowrap}
+th{background:#eee}.scroll{overflow-x:auto;max-width:100%}.note{color:#a00}.comment{font-family:monospace;font-size:12px;color:#555}
+td.gap{text-align:center;color:#777}ul.files{columns:2;font-size:13px}summary{cursor:pointer;font-weight:bold})";
+
+// Counts the figures the browser decoded and logs one console line: an error naming the
+// figures that did not render, otherwise a plain log line.
+const char* kScript = R"(window.addEventListener('load', function () {
+  var imgs = document.querySelectorAll('img.figure'), ok = 0, bad = [];
+  for (var i = 0; i < imgs.length; ++i) {
+    if (imgs[i].complete && imgs[i].naturalWidth > 0) ++ok; else bad.push(imgs[i].alt);
+  }
+  document.body.setAttribute('data-figures', String(imgs.length));
+  document.body.setAttribute('data-figures-rendered', String(ok));
+  if (bad.length) console.error('mcms report: figures not rendered: ' + bad.join(', '));
+  else console.log('mcms report: ' + ok + ' of ' + imgs.length + ' figures rendered');
+});)";
+
+}  // namespace
+
+std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents* contents) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("mcms report: ", why);
+  const fs::path& dir = options.dir;
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) Throw("mcms report DIR: ", dir.string(), " does not exist; expected the output folder of an mcms command");
+  if (!fs::is_directory(dir, ec))
+    Throw("mcms report DIR: ", dir.string(), " is not a folder; expected the output folder of an mcms command");
+
+  // The folder's files, in name order; subfolders are counted.
+  std::vector<File> files;
+  std::vector<std::pair<std::string, size_t>> folders;
+  fs::directory_iterator it(dir, ec);
+  if (ec) Throw("mcms report DIR: cannot read the folder ", dir.string(), ": ", ec.message());
+  for (const auto& e : it) {
+    const std::string name = e.path().filename().string();
+    // Hidden files, temporaries of an atomic write, and HTML pages (earlier reports) are
+    // not part of the run.
+    if (name.empty() || name[0] == '.' || name.find(".partial-") != std::string::npos ||
+        Lower(e.path().extension().string()) == ".html")
+      continue;
+    if (e.is_directory(ec)) {
+      size_t count = 0;
+      for (auto sub = fs::recursive_directory_iterator(e.path(), fs::directory_options::skip_permission_denied, ec);
+           !ec && sub != fs::recursive_directory_iterator(); sub.increment(ec))
+        if (sub->is_regular_file(ec)) ++count;
+      folders.push_back({name, count});
+    } else if (e.is_regular_file(ec)) {
+      files.push_back({e.path(), name, e.file_size(ec)});
+    }
+  }
+  std::sort(files.begin(), files.end(), [](const File& a, const File& b) { return a.name < b.name; });
+  std::sort(folders.begin(), folders.end());
+
+  HtmlReportContents c;
+  std::vector<const File*> svgs, csvs, reports, inputs, others;
+  for (const auto& f : files) {
+    const std::string ext = Lower(f.path.extension().string());
+    if (ext == ".svg") svgs.push_back(&f);
+    else if (ext == ".csv") csvs.push_back(&f);
+    else if (ext == ".txt" || ext == ".md" || ext == ".log") reports.push_back(&f);
+    else if (ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel") inputs.push_back(&f);
+    else others.push_back(&f);
+  }
+  if (svgs.empty() && csvs.empty() && reports.empty() && inputs.empty())
+    Throw("mcms report DIR: ", dir.string(),
+          " holds no file a report can show; expected the output folder of an mcms command (CSV, SVG, TXT, YAML or "
+          "JSON files)");
+
+  // Read what is shown (bounded sizes), parse the tables.
+  std::map<std::string, std::string> texts;  // name -> text (reports and inputs)
+  std::map<std::string, Table> tables;
+  std::map<std::string, std::string> table_errors;
+  auto read_bounded = [&](const File& f, size_t limit, bool* cut) {
+    if (f.size > limit) {
+      std::ifstream in(f.path, std::ios::binary);
+      std::string s(limit, '\0');
+      in.read(s.data(), static_cast<std::streamsize>(limit));
+      s.resize(static_cast<size_t>(in.gcount()));
+      *cut = true;
+      return s;
+    }
+    *cut = false;
+    return ReadTextFile(f.path);
+  };
+  std::map<std::string, bool> cut;
+  for (const auto* group : {&reports, &inputs})
+    for (const File* f : *group) {
+      bool was_cut = false;
+      texts[f->name] = read_bounded(*f, options.max_text_bytes, &was_cut);
+      cut[f->name] = was_cut;
+    }
+  for (const File* f : csvs) {
+    if (f->size > kMaxTextFileBytes) {
+      table_errors[f->name] = "larger than " + Bytes(kMaxTextFileBytes) + ", not read";
+      continue;
+    }
+    std::string err;
+    Table t = ParseCsv(ReadTextFile(f->path), &err);
+    if (!err.empty()) table_errors[f->name] = err;
+    else tables[f->name] = std::move(t);
+  }
+  // A tracker pose table beside the truth of a rendered recording (`mcms render` writes
+  // truth/poses.csv, `mcms track DIR` poses.csv): errors and NEES against the truth, unless
+  // the table carries them already.
+  std::vector<std::string> truth_notes;
+  const fs::path truth_file = dir / "truth" / "poses.csv";
+  for (auto& [name, t] : tables) {
+    if (!IsTrackerPoses(t) || t.Column("nees") >= 0 || !fs::is_regular_file(truth_file, ec)) continue;
+    std::string err;
+    const Table truth = ParseCsv(ReadTextFile(truth_file), &err);
+    truth_notes.push_back(name + " " +
+                          (err.empty() ? AddTruthColumns(t, truth) : "not compared with truth/poses.csv: " + err));
+  }
+  c.kind = DetectKind(files, tables, texts);
+
+  std::ostringstream o;
+  const std::string title = options.title.empty() ? "mcms report: " + fs::absolute(dir).lexically_normal().filename().string()
+                                                  : options.title;
+  o << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" << Html(title) << "</title>\n"
+    << "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src 'unsafe-inline'; "
+       "script-src 'unsafe-inline'\">\n<style>"
+    << kStyle << "</style>\n</head>\n<body>\n<h1>" << Html(title) << "</h1>\n";
+  o << "<p>Folder <code>" << Html(fs::absolute(dir).lexically_normal().string()) << "</code>, the output of <b>"
+    << Html(c.kind == "mcms output" ? "an mcms command" : "mcms " + c.kind) << "</b>: " << files.size() << " files";
+  if (!folders.empty()) o << ", " << folders.size() << " folders";
+  o << ".</p>\n";
+
+  // Sections; the table of contents is filled as they are written.
+  std::ostringstream body;
+  std::vector<std::pair<std::string, std::string>> toc;
+  auto section = [&](const std::string& id, const std::string& heading) {
+    toc.push_back({id, heading});
+    body << "<h2 id=\"" << id << "\">" << Html(heading) << "</h2>\n";
+  };
+
+  // Reports: summary*.txt first, then the rest in name order.
+  std::vector<const File*> ordered = reports;
+  auto rank = [](const File* f) {
+    const std::string n = Lower(f->name);
+    return n == "summary.txt" ? 0 : n.find("summary") != std::string::npos ? 1 : 2;
+  };
+  std::stable_sort(ordered.begin(), ordered.end(), [&](const File* a, const File* b) { return rank(a) < rank(b); });
+  if (!ordered.empty()) {
+    section("reports", "Results");
+    for (const File* f : ordered) {
+      // A long report shows its head; the rest is one click away.
+      const std::string& text = texts[f->name];
+      size_t cut_at = 0, lines = 0;
+      for (size_t i = 0; i < text.size() && lines < kReportHeadLines; ++i)
+        if (text[i] == '\n') ++lines, cut_at = i + 1;
+      const size_t total_lines = static_cast<size_t>(std::count(text.begin(), text.end(), '\n'));
+      body << "<h3>" << Html(f->name) << "</h3>\n";
+      if (total_lines > kReportHeadLines + 10) {
+        body << "<pre>" << Html(text.substr(0, cut_at)) << "</pre>\n<details><summary>" << total_lines - kReportHeadLines
+             << " more lines</summary><pre>" << Html(text.substr(cut_at)) << "</pre></details>\n";
+      } else {
+        body << "<pre>" << Html(text) << "</pre>\n";
+      }
+      if (cut[f->name]) body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
+      ++c.texts;
+    }
+  }
+
+  // Figures: the SVG files, then plots made from tracker pose tables.
+  std::ostringstream figs;
+  for (const File* f : svgs) {
+    if (f->size > kMaxSvgBytes) {
+      figs << Note(f->name + ": " + Bytes(f->size) + ", larger than " + Bytes(kMaxSvgBytes) + "; not embedded");
+      c.listed.push_back(f->name);
+      continue;
+    }
+    const std::string svg = ReadTextFile(f->path);
+    const auto open = svg.find("<svg");
+    if (open == std::string::npos || svg.rfind("</svg>") == std::string::npos || svg.rfind("</svg>") < open) {
+      figs << Note(f->name + ": not an SVG document (no <svg> ... </svg>); not embedded");
+      c.listed.push_back(f->name);
+      continue;
+    }
+    figs << FigureHtml(svg, f->name);
+    ++c.figures;
+  }
+  std::ostringstream track;
+  for (const auto& [name, t] : tables)
+    if (IsTrackerPoses(t) && !t.rows.empty()) c.figures += TrackerPlots(t, name, track);
+  // ISO 9283 characteristics get their plots unless the folder has them already (the demo).
+  const bool has_iso_svg = std::any_of(svgs.begin(), svgs.end(), [](const File* f) { return StartsWith(f->name, "iso9283_"); });
+  for (const auto& [name, t] : tables)
+    if (IsIso9283Characteristics(t) && !t.rows.empty() && !has_iso_svg) c.figures += Iso9283Plots(t, name, figs);
+  if (!figs.str().empty() || !track.str().empty()) {
+    section("figures", "Figures");
+    body << figs.str();
+    if (!track.str().empty()) {
+      body << "<h3>Per-frame tracking</h3>\n";
+      for (const auto& n : truth_notes) body << "<p>" << Html(n) << "</p>\n";
+      body << track.str();
+    }
+  }
+
+  if (!csvs.empty()) {
+    section("tables", "Tables");
+    for (const File* f : csvs) {
+      const auto t = tables.find(f->name);
+      const bool small = t != tables.end() && t->second.rows.size() <= options.max_table_rows;
+      body << "<details" << (small ? " open" : "") << "><summary>" << Html(f->name) << " (";
+      if (t != tables.end()) body << t->second.rows.size() << " rows)";
+      else body << Bytes(f->size) << ")";
+      body << "</summary>\n";
+      if (t != tables.end()) {
+        body << TableHtml(t->second, options.max_table_rows);
+        ++c.tables;
+      } else {
+        body << Note(f->name + ": not shown as a table: " + table_errors[f->name]);
+        c.listed.push_back(f->name);
+      }
+      body << "</details>\n";
+    }
+  }
+
+  if (!inputs.empty()) {
+    section("inputs", "Inputs and models");
+    for (const File* f : inputs) {
+      body << "<details><summary>" << Html(f->name) << " (" << Bytes(f->size) << ")</summary>\n<pre>"
+           << Html(texts[f->name]) << "</pre>\n";
+      if (cut[f->name]) body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
+      body << "</details>\n";
+      ++c.inputs;
+    }
+  }
+
+  section("files", "Files");
+  body << "<ul class=\"files\">\n";
+  for (const auto& f : files) body << "<li>" << Html(f.name) << " (" << Bytes(f.size) << ")</li>\n";
+  for (const auto& [name, count] : folders) body << "<li>" << Html(name) << "/ (" << count << " files, not embedded)</li>\n";
+  body << "</ul>\n";
+  for (const File* f : others) c.listed.push_back(f->name);
+
+  o << "<nav><p>";
+  for (size_t i = 0; i < toc.size(); ++i)
+    o << (i ? " &middot; " : "") << "<a href=\"#" << toc[i].first << "\">" << Html(toc[i].second) << "</a>";
+  o << "</p></nav>\n" << body.str() << "<script>" << kScript << "</script>\n</body>\n</html>\n";
+  if (contents) *contents = c;
+  return o.str();
+}
+
+HtmlReportContents WriteHtmlReport(const HtmlReportOptions& options, const fs::path& output) {
+  RequireWritableFile(output, "mcms report -o");
+  HtmlReportContents c;
+  const std::string page = BuildHtmlReport(options, &c);
+  WriteFileAtomically(output, [&](std::ostream& out) { out << page; });
+  return c;
+}
+
+}  // namespace mcms

@@ -1,0 +1,343 @@
+// The HTML report (jobs/html_report.h) and the readability of the SVG plots it embeds
+// (core/svg_plot.h): every figure of the folder is on the page byte for byte, tables are
+// shown or summarised, a tracker pose CSV gets its per-frame plots (error with the predicted
+// band, NEES with its chi-square band), the page references nothing outside itself, bad
+// files are named on the page, and a bad folder or output is refused with nothing written.
+// Log axes are labelled in real units and the legend never overlaps the plot area.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <string>
+
+#include "core/error.h"
+#include "jobs/html_report.h"
+#include "core/io.h"
+#include "core/svg_plot.h"
+#include "tests/test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string Base64Decode(const std::string& in) {
+  auto val = [](char c) -> int {
+    if (c >= 'A' && c <= 'Z') return c - 'A';
+    if (c >= 'a' && c <= 'z') return c - 'a' + 26;
+    if (c >= '0' && c <= '9') return c - '0' + 52;
+    if (c == '+') return 62;
+    if (c == '/') return 63;
+    return -1;
+  };
+  std::string out;
+  int bits = 0, acc = 0;
+  for (char c : in) {
+    const int v = val(c);
+    if (v < 0) break;
+    acc = (acc << 6) | v;
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      out += static_cast<char>((acc >> bits) & 0xff);
+    }
+  }
+  return out;
+}
+
+// The decoded SVG documents embedded as figures, in page order.
+std::vector<std::string> EmbeddedFigures(const std::string& html) {
+  std::vector<std::string> out;
+  const std::string key = "src=\"data:image/svg+xml;base64,";
+  for (size_t p = html.find(key); p != std::string::npos; p = html.find(key, p + 1)) {
+    const size_t b = p + key.size(), e = html.find('"', b);
+    out.push_back(Base64Decode(html.substr(b, e - b)));
+  }
+  return out;
+}
+
+template <typename F>
+std::string InputErrorOf(F&& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no InputError";
+  return "";
+}
+
+size_t Count(const std::string& s, const std::string& needle) {
+  size_t n = 0;
+  for (size_t p = s.find(needle); p != std::string::npos; p = s.find(needle, p + 1)) ++n;
+  return n;
+}
+
+Plot SamplePlot() {
+  Plot p{"Errors <per> point & more", "distance (m)", "error (mm)", {}};
+  PlotSeries a{"measured", {0.5, 1.0, 1.5, 2.0}, {0.004, 0.02, 0.3, 0.9}, "#d62728", true};
+  PlotSeries b{"predicted", {0.5, 1.0, 1.5, 2.0}, {0.005, 0.03, 0.2, 0.8}, "#1f77b4", false};
+  p.series = {a, b};
+  return p;
+}
+
+TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
+  const fs::path d = test::ScratchDir("html_report_mixed");
+  SamplePlot().WriteSvg(d / "errors.svg");
+  HeatMap h{"map", "x (m)", "y (m)", "sigma (mm)", {0, 1}, {0, 1}, {1, 2, 3, NAN}, {}, {}, false, 2.5};
+  h.WriteSvg(d / "heatmap.svg");
+  test::WriteText(d / "summary.txt", "mean error 0.02 mm < 0.05 mm & fine\n");
+  test::WriteText(d / "setup.yaml", "rig: {cameras: 4}\n");
+  std::string long_text;
+  for (int i = 0; i < 200; ++i) long_text += "line " + std::to_string(i) + "\n";
+  test::WriteText(d / "region.txt", long_text);
+  test::WriteText(d / "small.csv", "point,err_mm\n1,0.5\n2,0.25\n");
+  std::string big = "# a comment line\ncondition,value\n";
+  for (int i = 0; i < 100; ++i) big += std::string(i % 3 ? "\"a, b\"" : "c") + "," + std::to_string(i) + "\n";
+  test::WriteText(d / "big.csv", big);
+  test::WriteText(d / "broken.svg", "<html>not a figure</html>");
+  test::WriteText(d / "ragged.csv", "a,b\n1,2\n3\n");
+  test::WriteText(d / "picture.png", "\x89PNG");
+  fs::create_directories(d / "images" / "cam0");
+  test::WriteText(d / "images" / "cam0" / "0.png", "x");
+  test::WriteText(d / "out.csv.partial-123", "half");
+
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d, "", 25, 100000}, &c);
+  EXPECT_EQ(c.figures, 2u);
+  EXPECT_EQ(c.tables, 2u);  // small and big; ragged is named with its problem
+  EXPECT_EQ(c.texts, 2u);
+  // summary.txt before the other reports; a long report shows 60 lines, the rest collapsed.
+  EXPECT_LT(html.find("<h3>summary.txt</h3>"), html.find("<h3>region.txt</h3>"));
+  EXPECT_NE(html.find("line 59\n</pre>\n<details><summary>140 more lines</summary><pre>line 60\n"), std::string::npos);
+  EXPECT_EQ(c.inputs, 1u);
+  // The figures are the files, byte for byte.
+  const auto figs = EmbeddedFigures(html);
+  ASSERT_EQ(figs.size(), 2u);
+  EXPECT_EQ(figs[0], test::ReadAll(d / "errors.svg"));
+  EXPECT_EQ(figs[1], test::ReadAll(d / "heatmap.svg"));
+  // Text is escaped; tables shown or summarised.
+  EXPECT_NE(html.find("mean error 0.02 mm &lt; 0.05 mm &amp; fine"), std::string::npos);
+  EXPECT_NE(html.find("<td>0.25</td>"), std::string::npos);
+  EXPECT_NE(html.find("100 rows, 2 columns"), std::string::npos);
+  EXPECT_NE(html.find("a, b (66)"), std::string::npos);  // a quoted cell with a comma, counted
+  EXPECT_NE(html.find("# a comment line"), std::string::npos);
+  EXPECT_NE(html.find("... 76 rows ..."), std::string::npos);
+  EXPECT_NE(html.find("rig: {cameras: 4}"), std::string::npos);
+  // Bad files are named on the page, with the problem.
+  EXPECT_NE(html.find("broken.svg: not an SVG document"), std::string::npos);
+  EXPECT_NE(html.find("ragged.csv: not shown as a table: line 3 has 1 cells"), std::string::npos);
+  EXPECT_NE(html.find("images/ (1 files, not embedded)"), std::string::npos);
+  EXPECT_EQ(html.find("partial-123"), std::string::npos);
+  // Nothing outside the page: no URL but the SVG namespace inside the (encoded) figures.
+  for (const char* ext : {"src=\"http", "href=\"http", "url(http", "src=\"file", "<link", "@import"})
+    EXPECT_EQ(html.find(ext), std::string::npos) << ext;
+  EXPECT_EQ(Count(html, "<script>"), 1u);
+  EXPECT_EQ(c.kind, "mcms output");
+}
+
+TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
+  const fs::path d = test::ScratchDir("html_report_track");
+  std::string csv = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,rms_px,cov_px_px,cov_py_py,cov_pz_pz,"
+                    "err_x_mm,err_y_mm,err_z_mm,err_rot_mdeg,nees\n";
+  for (int i = 0; i < 40; ++i) {
+    const bool lost = i % 10 == 7;
+    char row[400];
+    if (lost)
+      std::snprintf(row, sizeof(row), "%d,%.2f,lost,\"2 balls, 1 camera\",,,,,,,,2,,,,,,,,,\n", i, 0.1 * i);
+    else
+      std::snprintf(row, sizeof(row), "%d,%.2f,ok,\"\",0.1,0.2,%.4f,1,0,0,0,5,0.12,1e-10,4e-10,9e-10,%.4f,%.4f,%.4f,%.3f,%.3f\n",
+                    i, 0.1 * i, 1.0 + 0.001 * i, 0.01 * std::sin(i), 0.02 * std::cos(i), -0.03 * std::sin(i), 1.5, 3.0 + i % 5);
+    csv += row;
+  }
+  test::WriteText(d / "poses.csv", csv);
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d, "track run", 25, 100000}, &c);
+  EXPECT_EQ(c.kind, "track");
+  const auto figs = EmbeddedFigures(html);
+  // status, position, predicted sigma, RMS, error in x, y, z with bands, err_rot_mdeg, NEES.
+  ASSERT_EQ(figs.size(), 9u);
+  EXPECT_EQ(c.figures, 9u);
+  auto find = [&](const std::string& title) -> std::string {
+    for (const auto& f : figs)
+      if (f.find(title) != std::string::npos) return f;
+    ADD_FAILURE() << "no figure titled " << title;
+    return "";
+  };
+  const std::string status = find("Per-frame status");
+  EXPECT_NE(status.find("ok (36 frames)"), std::string::npos);
+  EXPECT_NE(status.find("lost (4 frames)"), std::string::npos);
+  for (const char* axis : {"x", "y", "z"}) {
+    const std::string err = find(std::string("Error in ") + axis + " against the truth per frame (band: predicted +-3 sigma)");
+    EXPECT_EQ(Count(err, "<polygon"), 1u);  // the band
+    EXPECT_EQ(Count(err, "<circle cx"), 36u + 1u);  // the tracked frames and the legend's marker
+  }
+  const std::string nees = find("NEES per frame");
+  EXPECT_NE(nees.find("6 dof"), std::string::npos);
+  EXPECT_EQ(Count(nees, "<polygon"), 1u);
+  EXPECT_NE(nees.find("(log scale)"), std::string::npos);
+  EXPECT_NE(html.find("<title>track run</title>"), std::string::npos);
+}
+
+// A tracker's poses.csv beside the truth of a rendered recording (truth/poses.csv): the
+// page computes the error and NEES per frame, in the covariance's [dtheta; dp] layout.
+TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
+  const fs::path d = test::ScratchDir("html_report_truth");
+  fs::create_directories(d / "truth");
+  const char* axes[] = {"rx", "ry", "rz", "px", "py", "pz"};
+  std::string est = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,rms_px";
+  for (const char* a : axes)
+    for (const char* b : axes) est += std::string(",cov_") + a + "_" + b;
+  est += "\n";
+  std::string truth = "frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz\n";
+  // Frame k: the estimate is 1 mm off in x and k * 0.1 mrad about z; sigma 1 mm and 0.1 mrad.
+  for (int k = 0; k < 4; ++k) {
+    const double half = 0.5 * 1e-4 * k;
+    char row[200];
+    std::snprintf(row, sizeof(row), "%d,%d,ok,\"\",0.101,0.2,0.9,%.12f,0,0,%.12f,5,0.1", k, k, std::cos(half), -std::sin(half));
+    est += row;
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 6; ++j) est += i != j ? ",0" : i < 3 ? ",1e-8" : ",1e-6";
+    est += "\n";
+    std::snprintf(row, sizeof(row), "%d,%d,0.1,0.2,0.9,1,0,0,0\n", k, k);
+    truth += row;
+  }
+  est += "4,4,lost,\"no balls\",,,,,,,,0,";
+  for (int i = 0; i < 36; ++i) est += ",";
+  est += "\n";
+  test::WriteText(d / "poses.csv", est);
+  test::WriteText(d / "truth" / "poses.csv", truth);
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d}, &c);
+  EXPECT_EQ(c.kind, "track");
+  // NEES = (1 mm / 1 mm)^2 + (k * 0.1 mrad / 0.1 mrad)^2 = 1 + k^2: mean (1 + 2 + 5 + 10) / 4 = 4.5.
+  EXPECT_NE(html.find("poses.csv against the truth (matched by frame): 4 of 5 frames, position error RMS 1 mm, "
+                      "mean NEES 4.5 (6 for a consistent covariance), 3 of 4 frames inside the 95 % band"),
+            std::string::npos);
+  EXPECT_EQ(c.figures, 9u);  // status, position, sigma, RMS, errors x, y, z, rotation error, NEES
+  // The table on the page carries the new columns: x error +1 mm (estimate - truth, the error
+  // of core/statistics.h PoseError, as every NEES in the project), NEES 1 + k^2.
+  EXPECT_NE(html.find("<th>nees</th>"), std::string::npos);
+  EXPECT_EQ(html.find("<td>-1</td>"), std::string::npos);
+  for (const char* v : {"<td>1</td>", "<td>2</td>", "<td>5</td>", "<td>10</td>"}) EXPECT_NE(html.find(v), std::string::npos) << v;
+}
+
+TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
+  const fs::path d = test::ScratchDir("html_report_bad");
+  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "missing"}); }).find("missing does not exist"), std::string::npos);
+  test::WriteText(d / "file.txt", "x");
+  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "file.txt"}); }).find("is not a folder"), std::string::npos);
+  fs::create_directories(d / "empty");
+  test::WriteText(d / "empty" / "x.bin", "x");
+  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"), std::string::npos);
+  // An output that is a folder: refused before anything is built.
+  fs::create_directories(d / "run" / "out.html");
+  test::WriteText(d / "run" / "summary.txt", "ok");
+  EXPECT_NE(InputErrorOf([&] { WriteHtmlReport({d / "run"}, d / "run" / "out.html"); }).find("is a folder"),
+            std::string::npos);
+  // A failing build leaves no file.
+  EXPECT_THROW(WriteHtmlReport({d / "empty"}, d / "empty.html"), InputError);
+  EXPECT_FALSE(fs::exists(d / "empty.html"));
+  // A good run writes the page; a report.html in the folder is not reported on itself.
+  WriteHtmlReport({d / "run"}, d / "run" / "report.html");
+  const std::string first = test::ReadAll(d / "run" / "report.html");
+  WriteHtmlReport({d / "run"}, d / "run" / "report.html");
+  EXPECT_EQ(test::ReadAll(d / "run" / "report.html"), first);  // deterministic, and does not include itself
+}
+
+// Tick labels of the y axis: the text of every right-aligned label.
+std::vector<std::string> YTickLabels(const std::string& svg) {
+  std::vector<std::string> out;
+  const std::regex re("text-anchor='end'>([^<]*)</text>");
+  for (auto it = std::sregex_iterator(svg.begin(), svg.end(), re); it != std::sregex_iterator(); ++it)
+    out.push_back((*it)[1]);
+  return out;
+}
+
+TEST(SvgPlot, LogAxisIsLabelledInRealUnits) {
+  Plot p = SamplePlot();
+  p.log_y = true;
+  const std::string svg = p.ToSvg();
+  const auto labels = YTickLabels(svg);
+  ASSERT_GE(labels.size(), 4u);
+  // Ticks from 0.002 up to 1: real values, not the exponents -3..0.
+  EXPECT_EQ(labels.front(), "0.002");
+  EXPECT_EQ(labels.back(), "1");
+  for (const char* v : {"0.01", "0.1"}) EXPECT_NE(std::find(labels.begin(), labels.end(), v), labels.end()) << v;
+  for (const auto& l : labels) EXPECT_GT(std::stod(l), 0) << l;
+  EXPECT_NE(svg.find("error (mm) (log scale)"), std::string::npos);
+  EXPECT_NE(svg.find("Errors &lt;per&gt; point &amp; more"), std::string::npos);
+}
+
+TEST(SvgPlot, LegendSitsAboveThePlotAreaAndLinearTicksHaveNoRoundingNoise) {
+  Plot p = SamplePlot();
+  for (int k = 0; k < 6; ++k)
+    p.series.push_back(PlotSeries{"a rather long series label number " + std::to_string(k), {0.5, 2.0}, {-0.3, 0.6}, "#000", false});
+  const std::string svg = p.ToSvg(900, 420);
+  // The plot area is the framed rect; every legend label is above its top edge.
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(svg, m, std::regex("<rect x='80' y='([0-9.]+)' width='[0-9.]+' height='[0-9.]+' fill='none' stroke='black'/>")));
+  const double top = std::stod(m[1]);
+  const std::regex legend("<text x='[0-9.]+' y='([0-9.]+)'>(measured|predicted|a rather long[^<]*)</text>");
+  int n = 0;
+  for (auto it = std::sregex_iterator(svg.begin(), svg.end(), legend); it != std::sregex_iterator(); ++it, ++n)
+    EXPECT_LT(std::stod((*it)[1]), top) << (*it)[2];
+  EXPECT_EQ(n, 8);
+  EXPECT_GT(top, 60.0);  // the legend wrapped to more than one row
+  // Ticks through zero read 0, not 1e-17.
+  for (const auto& l : YTickLabels(svg)) EXPECT_EQ(l.find("e-"), std::string::npos) << l;
+}
+
+TEST(SvgPlot, ResidualVectorsOverTheImageKeepImageAxes) {
+  // Residuals of 0.5 px drawn 100 times magnified over a 640 x 480 image, rows downwards.
+  Plot p{"residuals over the image", "u (px)", "v (px)", {}};
+  p.y_down = true;
+  p.equal_scale = true;
+  p.x_range = {{0.0, 640.0}};
+  p.y_range = {{0.0, 480.0}};
+  PlotSeries r{"residual x 100", {100, 500}, {20, 400}, "#d62728", true};
+  r.dx = {0.5, 0.0};
+  r.dy = {0.0, -0.5};
+  r.vector_scale = 100;
+  p.series = {r};
+  const std::string svg = p.ToSvg(900, 600);
+  // Two arrow shafts, two heads; the base markers at the points.
+  const std::regex shaft("<line x1='([0-9.]+)' y1='([0-9.]+)' x2='([0-9.]+)' y2='([0-9.]+)' stroke='#d62728' stroke-width='1'/>");
+  std::vector<std::array<double, 4>> shafts;
+  for (auto it = std::sregex_iterator(svg.begin(), svg.end(), shaft); it != std::sregex_iterator(); ++it)
+    shafts.push_back({std::stod((*it)[1]), std::stod((*it)[2]), std::stod((*it)[3]), std::stod((*it)[4])});
+  ASSERT_EQ(shafts.size(), 2u);
+  EXPECT_EQ(Count(svg, "<polyline fill='none' stroke='#d62728'"), 2u);
+  // The first points right (+u), 50 px of image long; the second points up the image (-v).
+  EXPECT_GT(shafts[0][2], shafts[0][0]);
+  EXPECT_NEAR(shafts[0][3], shafts[0][1], 0.11);
+  EXPECT_LT(shafts[1][3], shafts[1][1]);
+  // Rows downwards: v = 20 is above v = 400; equal scale: 50 px of image are as long on both axes.
+  EXPECT_LT(shafts[0][1], shafts[1][1]);
+  EXPECT_NEAR(shafts[0][2] - shafts[0][0], shafts[1][1] - shafts[1][3], 0.2);
+  // The axes span the image: ticks from 0 to 600 px.
+  EXPECT_NE(svg.find(">600</text>"), std::string::npos);
+  EXPECT_NE(svg.find(">0</text>"), std::string::npos);
+}
+
+TEST(SvgPlot, GridPlacesEachPlotInItsCell) {
+  std::vector<Plot> plots(5, SamplePlot());
+  for (int i = 0; i < 5; ++i) plots[i].title = "panel " + std::to_string(i);
+  const std::string svg = PlotGridSvg(plots, 3, 400, 300);
+  // 3 columns, 2 rows; each panel a nested viewport at its cell, all titles present.
+  EXPECT_EQ(svg.rfind("<svg xmlns='http://www.w3.org/2000/svg' width='1200' height='600'", 0), 0u) << svg.substr(0, 120);
+  for (const char* cell : {"<svg x='0' y='0'", "<svg x='400' y='0'", "<svg x='800' y='0'", "<svg x='0' y='300'",
+                           "<svg x='400' y='300'"})
+    EXPECT_EQ(Count(svg, cell), 1u) << cell;
+  EXPECT_EQ(Count(svg, "<svg"), 6u);
+  EXPECT_EQ(Count(svg, "</svg>"), 6u);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(Count(svg, ">panel " + std::to_string(i) + "<"), 1u) << i;
+  EXPECT_THROW(PlotGridSvg({}, 3), std::invalid_argument);
+  EXPECT_THROW(PlotGridSvg(plots, 0), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mcms
