@@ -3,7 +3,7 @@
 //
 //   from files  every frame set read from its 4 files (decoding included), as `mcms track`
 //               reads a recording, once per reader and format (vision/image_file.h):
-//                 png          our PNG reader (libdeflate inflate, our unfiltering): `mcms track`
+//                 png          our PNG reader (ISA-L inflate, our unfiltering): `mcms track`
 //                 png/opencv   the same PNG files through cv::imread (libpng)
 //                 png/libspng  the same PNG files through libspng (when built with it)
 //                 pgm, tiff    the same frames as binary PGM and uncompressed TIFF files

@@ -8,12 +8,11 @@
 // Every input runs twice: as it is, and with its checksums made right (each PNG chunk's
 // CRC, the zlib stream's Adler-32), so that mutations reach the inflate and the
 // unfiltering rather than stopping at the first checksum.
-#include <libdeflate.h>
+#include <zlib.h>
 
 #include <opencv2/imgcodecs.hpp>
 
 #include <cstring>
-#include <memory>
 #include <string>
 #include <vector>
 
@@ -57,15 +56,23 @@ std::vector<uint8_t> WithChecksumsRepaired(const uint8_t* data, size_t size) {
   std::vector<uint8_t> stream;
   for (const Chunk& c : idats) stream.insert(stream.end(), b.begin() + long(c.pos + 8), b.begin() + long(c.pos + 8 + c.length));
   if (stream.size() > 2 && raw_size > 0 && raw_size <= (uint64_t{1} << 22)) {
-    std::unique_ptr<libdeflate_decompressor, void (*)(libdeflate_decompressor*)> d(libdeflate_alloc_decompressor(),
-                                                                                  libdeflate_free_decompressor);
     std::vector<uint8_t> out(raw_size);
+    z_stream z{};
     size_t in_used = 0, out_size = 0;
-    if (d && libdeflate_deflate_decompress_ex(d.get(), stream.data() + 2, stream.size() - 2, out.data(), out.size(),
-                                              &in_used, &out_size) == LIBDEFLATE_SUCCESS &&
-        2 + in_used + 4 <= stream.size()) {
+    bool ok = inflateInit2(&z, -15) == Z_OK;  // the raw deflate stream: no header, no checksum
+    if (ok) {
+      z.next_in = stream.data() + 2;
+      z.avail_in = static_cast<uInt>(stream.size() - 2);
+      z.next_out = out.data();
+      z.avail_out = static_cast<uInt>(out.size());
+      ok = inflate(&z, Z_FINISH) == Z_STREAM_END;
+      in_used = z.total_in;
+      out_size = z.total_out;
+      inflateEnd(&z);
+    }
+    if (ok && 2 + in_used + 4 <= stream.size()) {
       uint8_t adler[4];
-      PutBe32(adler, libdeflate_adler32(1, out.data(), out_size));
+      PutBe32(adler, static_cast<uint32_t>(adler32(1, out.data(), static_cast<uInt>(out_size))));
       size_t at = 2 + in_used, offset = 0;  // stream offset -> file position, across the IDATs
       for (const Chunk& c : idats) {
         for (int k = 0; k < 4; ++k)
@@ -74,7 +81,8 @@ std::vector<uint8_t> WithChecksumsRepaired(const uint8_t* data, size_t size) {
       }
     }
   }
-  for (const Chunk& c : chunks) PutBe32(&b[c.pos + 8 + c.length], libdeflate_crc32(0, &b[c.pos + 4], 4 + size_t{c.length}));
+  for (const Chunk& c : chunks)
+    PutBe32(&b[c.pos + 8 + c.length], static_cast<uint32_t>(crc32(0, &b[c.pos + 4], 4 + c.length)));
   return b;
 }
 

@@ -5,7 +5,7 @@
 // image and a reason naming the file and what was wrong.
 #include <gtest/gtest.h>
 
-#include <libdeflate.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -39,7 +39,7 @@ void Chunk(Bytes* png, const std::string& type, const Bytes& data) {
   const size_t start = png->size();
   png->insert(png->end(), type.begin(), type.end());
   png->insert(png->end(), data.begin(), data.end());
-  Put32(png, static_cast<uint32_t>(libdeflate_crc32(0, png->data() + start, png->size() - start)));
+  Put32(png, static_cast<uint32_t>(crc32(0, png->data() + start, static_cast<uInt>(png->size() - start))));
 }
 
 int Paeth(int a, int b, int c) {
@@ -65,7 +65,7 @@ struct PngOptions {
   bool empty_idats = false;                 // zero-length IDATs between the others
   bool interlace = false;                   // Adam7
   std::vector<std::pair<std::string, Bytes>> before_idat, after_idat;  // extra chunks
-  int level = 6;                            // libdeflate compression level
+  int level = 6;                            // zlib compression level
 };
 
 // The rows of `im` (CV_8UC1 or CV_16UC1; at bit depths below 8 the low bits of CV_8U
@@ -97,10 +97,10 @@ Bytes FilteredRows(const cv::Mat& im, const PngOptions& o) {
 }
 
 Bytes Deflate(const Bytes& raw, int level) {
-  libdeflate_compressor* c = libdeflate_alloc_compressor(level);
-  Bytes z(libdeflate_zlib_compress_bound(c, raw.size()));
-  z.resize(libdeflate_zlib_compress(c, raw.data(), raw.size(), z.data(), z.size()));
-  libdeflate_free_compressor(c);
+  uLongf size = compressBound(static_cast<uLong>(raw.size()));
+  Bytes z(size);
+  EXPECT_EQ(compress2(z.data(), &size, raw.data(), static_cast<uLong>(raw.size()), level), Z_OK);
+  z.resize(size);
   return z;
 }
 
@@ -402,7 +402,13 @@ TEST(PngReader, BadPngsAreRefusedWithTheFileAndTheReason) {
     cases.push_back({"bad_filter", "row 7 has filter type 5", AssemblePng(Ihdr(64, 48, 8, 0, 0), Deflate(bad_filter, 9), z)});
     Bytes zlib = Deflate(Bytes(raw_size, 0), 9);
     zlib[zlib.size() - 1] ^= 1;  // the Adler-32 checksum
-    cases.push_back({"adler", "corrupt or truncated", AssemblePng(Ihdr(64, 48, 8, 0, 0), zlib, z)});
+    cases.push_back({"adler", "wrong Adler-32 checksum", AssemblePng(Ihdr(64, 48, 8, 0, 0), zlib, z)});
+    Bytes cut = Deflate(Bytes(raw_size, 0), 0);  // stored blocks, cut in the middle
+    cut.resize(cut.size() / 2);
+    cases.push_back({"cut_stream", "zlib stream is truncated", AssemblePng(Ihdr(64, 48, 8, 0, 0), cut, z)});
+    Bytes garbage = Deflate(Bytes(raw_size, 0), 9);
+    garbage[2] = 0xff;  // the first block's header: type 3 is reserved
+    cases.push_back({"bad_deflate", "corrupt (bad deflate data)", AssemblePng(Ihdr(64, 48, 8, 0, 0), garbage, z)});
     z.before_idat = {{"CrIt", {1}}};
     cases.push_back({"critical", "unknown critical chunk 'CrIt'", AssemblePng(Ihdr(64, 48, 8, 0, 0), Deflate(Bytes(raw_size, 0), 9), z)});
     Bytes no_idat = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};

@@ -3,7 +3,7 @@
 //
 // Readers, chosen by the file's first bytes (never by its name):
 //   PNG, 8- or 16-bit grey, not interlaced: our decoder. The chunks' CRCs are checked, the
-//     IDAT chunks' zlib stream is inflated in one call (libdeflate) into a buffer of exactly
+//     IDAT chunks' zlib stream is inflated in one call (ISA-L) into a buffer of exactly
 //     height x (1 + row bytes), the size the header gives, and the rows are unfiltered into
 //     the image. The result equals OpenCV's cv::imread(IMREAD_UNCHANGED) bit for bit
 //     (16-bit samples in native byte order, as OpenCV returns them). It is stricter than
@@ -84,8 +84,8 @@ const char* ExtensionOf(ImageFileFormat f);         // ".png", ".pgm", ".tif"
 // "png", "pgm", "tiff" (or "tif"); InputError naming `what` otherwise.
 ImageFileFormat ParseImageFileFormat(const std::string& text, const std::string& what);
 
-// Writes a CV_8UC1 or CV_16UC1 image: PNG (zlib level 1, Huffman coding only: noise
-// defeats dictionary matching, so this gives the smallest files at the lowest cost),
+// Writes a CV_8UC1 or CV_16UC1 image: PNG (filter None and Huffman coding only: for
+// camera frames the smallest files, and the fastest to decode; see EncodePng in the .cpp),
 // binary PGM, or TIFF without compression. The same image gives the same bytes.
 // InputError naming the file when it cannot be written.
 void WriteImageFile(const std::filesystem::path& path, const cv::Mat& image, ImageFileFormat format);
