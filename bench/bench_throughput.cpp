@@ -1,8 +1,13 @@
 // Throughput of processing a recording, frame sets per second, against the OpenCV baseline
 // in the same process, on 1 to N threads.
 //
-//   from files  every frame set read from its 4 PNG files (decoding included), as
-//               `mcms track` reads a recording;
+//   from files  every frame set read from its 4 files (decoding included), as `mcms track`
+//               reads a recording, once per reader and format (vision/image_file.h):
+//                 png          our PNG reader (ISA-L inflate, our unfiltering): `mcms track`
+//                 png/opencv   the same PNG files through cv::imread (libpng)
+//                 png/libspng  the same PNG files through libspng (when built with it)
+//                 pgm, tiff    the same frames as binary PGM and uncompressed TIFF files
+//                              (written beside, in a temporary folder), memory-mapped
 //   in memory   the same frame sets decoded once beforehand (the images handed over as
 //               cv::Mat, no copy).
 //
@@ -17,7 +22,9 @@
 //               one thread so that the two pipelines parallelize the same way).
 //
 // The recording is a run of consecutive frames of Scenario::Default() (4 cameras, 1280 x
-// 1024, 8-bit PNG) rendered into a temporary folder with the project's renderer. Every
+// 1024, 8-bit PNG) rendered into a temporary folder with the project's renderer; the PGM and
+// TIFF copies are written from its decoded frames. A table of the decoding alone follows
+// (one thread, every reader and format). Every
 // configuration runs --repeat times; the figures are the median wall-clock rate, and the
 // process CPU time per frame set (the figure that does not depend on what else the machine
 // runs, for one thread). At the end, the results of ours on N threads are compared with
@@ -39,6 +46,7 @@
 #include <ctime>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -48,12 +56,17 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#ifdef MCMS_HAVE_SPNG
+#include <spng.h>
+#endif
+
 #include "bench/opencv_baseline.h"
 #include "synthetic/renderer.h"
 #include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tracking/sequence.h"
 #include "tracking/tracker.h"
+#include "vision/image_file.h"
 
 namespace fs = std::filesystem;
 
@@ -95,8 +108,38 @@ TrackerOptions OurOptions(double gain_e_per_dn) {
 struct Row {
   std::string source;
   int threads;
-  Timing ours, base;
+  Timing ours;
+  std::optional<Timing> base;  // the OpenCV pipeline, from PNG files and from memory
 };
+
+#ifdef MCMS_HAVE_SPNG
+// libspng's decode of a grey 8- or 16-bit PNG (16-bit samples in host order, as OpenCV
+// returns them); empty when it refuses the file. CRC errors are errors, as in our reader.
+cv::Mat DecodeWithSpng(const fs::path& p) {
+  thread_local std::vector<unsigned char> bytes;
+  FILE* f = std::fopen(p.c_str(), "rb");
+  if (!f) return {};
+  std::fseek(f, 0, SEEK_END);
+  bytes.resize(static_cast<size_t>(std::ftell(f)));
+  std::fseek(f, 0, SEEK_SET);
+  const size_t got = std::fread(bytes.data(), 1, bytes.size(), f);
+  std::fclose(f);
+  if (got != bytes.size()) return {};
+  spng_ctx* ctx = spng_ctx_new(0);
+  cv::Mat im;
+  spng_ihdr ihdr;
+  size_t size = 0;
+  if (ctx && spng_set_crc_action(ctx, SPNG_CRC_ERROR, SPNG_CRC_ERROR) == 0 &&
+      spng_set_png_buffer(ctx, bytes.data(), bytes.size()) == 0 && spng_get_ihdr(ctx, &ihdr) == 0 &&
+      ihdr.color_type == SPNG_COLOR_TYPE_GRAYSCALE && (ihdr.bit_depth == 8 || ihdr.bit_depth == 16) &&
+      spng_decoded_image_size(ctx, SPNG_FMT_PNG, &size) == 0) {
+    im.create(static_cast<int>(ihdr.height), static_cast<int>(ihdr.width), ihdr.bit_depth == 8 ? CV_8UC1 : CV_16UC1);
+    if (size != im.total() * im.elemSize() || spng_decode_image(ctx, im.data, size, SPNG_FMT_PNG, 0) != 0) im.release();
+  }
+  spng_ctx_free(ctx);
+  return im;
+}
+#endif
 
 int Usage(const char* argv0) {
   std::fprintf(stderr, "usage: %s [--frames N (>= 2, default 40)] [--threads N (default: all cores)] "
@@ -187,17 +230,81 @@ int Main(int argc, char** argv) {
     }
   }
   const cv::Mat& first = decoded[0][0];
+  const double pixel_bytes = static_cast<double>(n * ncam * first.total() * first.elemSize());
   std::printf("%zu frame sets x %zu cameras %dx%d %s; PNG files %.1f MB, decoded %.1f MB\n", n, ncam, first.cols,
               first.rows, first.depth() == CV_8U ? "8-bit" : "16-bit", static_cast<double>(file_bytes) / 1e6,
-              static_cast<double>(n * ncam * first.total() * first.elemSize()) / 1e6);
+              pixel_bytes / 1e6);
 
-  // 2. The two pipelines, each from files and from memory.
+  // 1b. The same frames as binary PGM and as uncompressed TIFF files (what `mcms render
+  // --format pgm|tiff` writes), in a temporary folder.
+  const fs::path formats_dir = fs::temp_directory_path() / ("mcms_bench_throughput_formats_" + std::to_string(::getpid()));
+  const Cleanup formats_cleanup{formats_dir};
+  auto write_copy = [&](ImageFileFormat format) {
+    const fs::path images = formats_dir / ToString(format);
+    for (const std::string& name : rig.names) fs::create_directories(images / name);
+    for (size_t i = 0; i < n; ++i)
+      for (size_t c = 0; c < ncam; ++c)
+        WriteImageFile(images / rig.names[c] / fs::path(seq.image_names[i * ncam + c]).stem().concat(ExtensionOf(format)),
+                       decoded[i][c], format);
+    ImageSequence copy = ScanImageSequence({images, dir / "frames.csv", 10.0}, rig);
+    if (copy.frames != seq.frames) throw std::runtime_error("the copies' frames differ from the recording's");
+    return copy;
+  };
+  const ImageSequence seq_pgm = write_copy(ImageFileFormat::kPgm), seq_tiff = write_copy(ImageFileFormat::kTiff);
+
+  // 2. The sources: every reader and format, and memory.
   FrameSource memory;
   memory.count = n;
   memory.frame = [&](size_t i) { return seq.frames[i]; };
   memory.time_s = [&](size_t i) { return seq.times_s[i]; };
   memory.images = [&](size_t i, std::vector<std::string>*) { return decoded[i]; };
-  const FrameSource files = FilesOf(seq);
+  // A source of the PNG files decoded by `decode` (path -> image, empty when refused).
+  auto png_source = [&](std::function<cv::Mat(const fs::path&)> decode) {
+    FrameSource s = memory;
+    s.images = [&seq, ncam, decode](size_t i, std::vector<std::string>* problems) {
+      std::vector<cv::Mat> images(ncam);
+      for (size_t c = 0; c < ncam; ++c) {
+        images[c] = decode(seq.ImagePath(i, c));
+        if (images[c].empty()) (*problems)[c] = "cannot decode " + seq.ImagePath(i, c).string();
+      }
+      return images;
+    };
+    return s;
+  };
+  auto opencv_decode = [](const fs::path& p) { return cv::imread(p.string(), cv::IMREAD_UNCHANGED); };
+  struct Source {
+    std::string name;
+    FrameSource frames;
+    std::function<cv::Mat(size_t, size_t)> decode_one;  // (frame index, camera) -> image
+  };
+  auto decode_file = [](const ImageSequence& s) {
+    return [&s](size_t i, size_t c) {
+      std::string problem;
+      ImageFileOptions o;
+      o.expected_size = s.image_sizes[c];
+      return ReadImageFile(s.ImagePath(i, c), o, &problem);
+    };
+  };
+  std::vector<Source> sources = {
+      {"png", FilesOf(seq), decode_file(seq)},
+      {"png/opencv", png_source(opencv_decode), [&](size_t i, size_t c) { return opencv_decode(seq.ImagePath(i, c)); }},
+  };
+#ifdef MCMS_HAVE_SPNG
+  sources.push_back({"png/libspng", png_source(DecodeWithSpng), [&](size_t i, size_t c) { return DecodeWithSpng(seq.ImagePath(i, c)); }});
+#endif
+  sources.push_back({"pgm", FilesOf(seq_pgm), decode_file(seq_pgm)});
+  sources.push_back({"tiff", FilesOf(seq_tiff), decode_file(seq_tiff)});
+  sources.push_back({"memory", memory, [&](size_t i, size_t c) { return decoded[i][c]; }});
+  // Every reader gives the same pixels (the tracking results are compared below too).
+  for (const Source& src : sources)
+    for (size_t c = 0; c < ncam; ++c) {
+      const cv::Mat im = src.decode_one(0, c);
+      if (im.empty() || im.size() != decoded[0][c].size() || im.type() != decoded[0][c].type() ||
+          cv::norm(im, decoded[0][c], cv::NORM_INF) != 0) {
+        std::fprintf(stderr, "reader %s: frame 0 camera %zu differs from the recording's decode\n", src.name.c_str(), c);
+        return 1;
+      }
+    }
 
   std::vector<FrameResult> reference;  // ours, in memory, 1 thread
   bool identical = true;
@@ -238,13 +345,13 @@ int Main(int argc, char** argv) {
   ours(memory, 1, true);  // the reference (and a warm-up)
   if (!poses.empty()) WritePoseCsv(poses, reference);
   std::vector<Row> rows;
-  for (const bool from_files : {true, false})
+  for (const Source& src : sources)
     for (int t = 1; t <= max_threads; ++t) {
-      Row row{from_files ? "files" : "memory", t, {}, {}};
-      row.ours = Measure(repeat, [&] { ours(from_files ? files : memory, t, true); });
-      row.base = Measure(repeat, [&] { baseline(from_files, t); });
+      Row row{src.name, t, Measure(repeat, [&] { ours(src.frames, t, true); }), std::nullopt};
+      if (src.name == "png" || src.name == "memory")
+        row.base = Measure(repeat, [&] { baseline(src.name == "png", t); });
       rows.push_back(row);
-      std::printf("  measured %-6s %d thread(s)\n", row.source.c_str(), t);
+      std::printf("  measured %-11s %d thread(s)\n", row.source.c_str(), t);
       std::fflush(stdout);
     }
   // Ours with TrackerOptions::predicted_windows (detection in windows around the predicted
@@ -266,51 +373,87 @@ int Main(int argc, char** argv) {
     window_dets = tracker.window_detections();
     whole_dets = tracker.whole_image_detections();
   };
-  for (const bool from_files : {true, false})
+  for (const Source& src : sources) {
+    if (src.name != "png" && src.name != "pgm" && src.name != "memory") continue;
     for (int t : max_threads > 1 ? std::vector<int>{1, max_threads} : std::vector<int>{1}) {
-      window_rows.push_back({from_files ? "files" : "memory", t, Measure(repeat, [&] { ours_windows(from_files ? files : memory, t); })});
-      std::printf("  measured %-6s %d thread(s), predicted windows\n", window_rows.back().source.c_str(), t);
+      window_rows.push_back({src.name, t, Measure(repeat, [&] { ours_windows(src.frames, t); })});
+      std::printf("  measured %-11s %d thread(s), predicted windows\n", window_rows.back().source.c_str(), t);
       std::fflush(stdout);
     }
-  Timing decode1 = Measure(repeat, [&] {
-    for (size_t i = 0; i < n; ++i) {
-      std::vector<std::string> problems;
-      const auto images = LoadFrameImages(seq, i, &problems);
-    }
-  });
+  }
+  // The decoding alone, one thread: every image of every frame set, then one byte read per
+  // 4 KB page of its pixels (so that a mapped file's page faults count, as in tracking).
+  struct DecodeRow {
+    std::string reader;
+    Timing t;
+  };
+  std::vector<DecodeRow> decode_rows;
+  volatile unsigned sink = 0;
+  auto decode_all = [&](const std::function<cv::Mat(size_t, size_t)>& decode) {
+    unsigned sum = 0;
+    for (size_t i = 0; i < n; ++i)
+      for (size_t c = 0; c < ncam; ++c) {
+        const cv::Mat im = decode(i, c);
+        const size_t bytes = im.total() * im.elemSize();
+        for (size_t b = 0; b < bytes; b += 4096) sum += im.data[b];
+      }
+    sink = sink + sum;
+  };
+  for (const Source& src : sources)
+    if (src.name != "memory") decode_rows.push_back({src.name, Measure(repeat, [&] { decode_all(src.decode_one); })});
+  decode_rows.push_back({"pgm/opencv", Measure(repeat, [&] {
+                           decode_all([&](size_t i, size_t c) { return opencv_decode(seq_pgm.ImagePath(i, c)); });
+                         })});
+  decode_rows.push_back({"tiff/opencv", Measure(repeat, [&] {
+                           decode_all([&](size_t i, size_t c) { return opencv_decode(seq_tiff.ImagePath(i, c)); });
+                         })});
 
-  // 3. The table.
+  // 3. The tables.
   const double dn = static_cast<double>(n);
   std::printf("\n==== bench_throughput: %zu frame sets of %zu cameras, %d core(s), median of %d runs ====\n", n, ncam,
               static_cast<int>(std::thread::hardware_concurrency()), repeat);
-  std::printf("%-7s %7s | %12s %12s %8s | %14s %14s %8s\n", "source", "threads", "ours fps", "baseline fps",
+  std::printf("%-11s %7s | %12s %12s %8s | %14s %14s %8s\n", "source", "threads", "ours fps", "baseline fps",
               "ratio", "ours CPU ms/set", "base CPU ms/set", "CPU ratio");
   for (const Row& r : rows) {
-    const double of = dn / r.ours.wall_s, bf = dn / r.base.wall_s;
-    std::printf("%-7s %7d | %12.1f %12.1f %7.1fx | %14.3f %14.3f %7.1fx\n", r.source.c_str(), r.threads, of, bf, of / bf,
-                1e3 * r.ours.cpu_s / dn, 1e3 * r.base.cpu_s / dn, r.base.cpu_s / r.ours.cpu_s);
+    const double of = dn / r.ours.wall_s;
+    if (r.base) {
+      const double bf = dn / r.base->wall_s;
+      std::printf("%-11s %7d | %12.1f %12.1f %7.1fx | %14.3f %14.3f %7.1fx\n", r.source.c_str(), r.threads, of, bf,
+                  of / bf, 1e3 * r.ours.cpu_s / dn, 1e3 * r.base->cpu_s / dn, r.base->cpu_s / r.ours.cpu_s);
+    } else {
+      std::printf("%-11s %7d | %12.1f %12s %8s | %14.3f %14s %8s\n", r.source.c_str(), r.threads, of, "-", "-",
+                  1e3 * r.ours.cpu_s / dn, "-", "-");
+    }
   }
-  std::printf("scaling, wall-clock rate on %d threads / on 1 thread:\n", max_threads);
-  for (const std::string src : {"files", "memory"}) {
-    const Row *one = nullptr, *all = nullptr;
+  auto find = [&](const std::string& src, int threads) -> const Row* {
     for (const Row& r : rows)
-      if (r.source == src) {
-        if (r.threads == 1) one = &r;
-        if (r.threads == max_threads) all = &r;
-      }
-    if (one && all)
-      std::printf("  %-6s ours %.2fx, baseline %.2fx\n", src.c_str(), one->ours.wall_s / all->ours.wall_s,
-                  one->base.wall_s / all->base.wall_s);
+      if (r.source == src && r.threads == threads) return &r;
+    return nullptr;
+  };
+  std::printf("scaling, wall-clock rate on %d threads / on 1 thread:\n", max_threads);
+  for (const Source& src : sources) {
+    const Row *one = find(src.name, 1), *all = find(src.name, max_threads);
+    if (!one || !all) continue;
+    std::printf("  %-11s ours %.2fx", src.name.c_str(), one->ours.wall_s / all->ours.wall_s);
+    if (one->base && all->base) std::printf(", baseline %.2fx", one->base->wall_s / all->base->wall_s);
+    std::printf("\n");
+  }
+  if (const Row *png = find("png", 1), *mem = find("memory", 1); png && mem && png->base) {
+    std::printf("from PNG files, 1 thread: %.1f frame sets/s, %.2fx OpenCV's imread pipeline (%.1f)\n",
+                dn / png->ours.wall_s, png->base->wall_s / png->ours.wall_s, dn / png->base->wall_s);
+    for (const char* src : {"pgm", "tiff"})
+      if (const Row* r = find(src, 1))
+        std::printf("from %s files, 1 thread: %.1f frame sets/s, %.2fx slower than in memory (%.1f)\n", src,
+                    dn / r->ours.wall_s, r->ours.wall_s / mem->ours.wall_s, dn / mem->ours.wall_s);
   }
   std::printf("ours with predicted windows (mcms track --predicted-windows):\n");
   for (const WindowRow& w : window_rows) {
-    const Row* full = nullptr;
-    for (const Row& r : rows)
-      if (r.source == w.source && r.threads == w.threads) full = &r;
+    const Row* full = find(w.source, w.threads);
+    const Row* png = find("png", w.threads);
     const double f = dn / w.t.wall_s;
-    std::printf("%-7s %7d | %12.1f fps, %.3f ms CPU/set; %.2fx the whole-image rate, %.1fx the baseline\n",
+    std::printf("%-11s %7d | %12.1f fps, %.3f ms CPU/set; %.2fx the whole-image rate, %.1fx the baseline from PNG\n",
                 w.source.c_str(), w.threads, f, 1e3 * w.t.cpu_s / dn, full ? full->ours.wall_s / w.t.wall_s : 0.0,
-                full ? full->base.wall_s / w.t.wall_s : 0.0);
+                png && png->base ? png->base->wall_s / w.t.wall_s : 0.0);
   }
   double max_dp = 0, max_dr = 0;
   size_t same_status = 0;
@@ -324,12 +467,15 @@ int Main(int argc, char** argv) {
   std::printf("  detections in windows %zu, whole images %zu (last run); same status as the whole-image "
               "run on %zu/%zu frame sets, poses differ by at most %.3g m and %.3g rad\n",
               window_dets, whole_dets, same_status, n, max_dp, max_dr);
-  std::printf("PNG decoding alone (LoadFrameImages, 1 thread): %.1f frame sets/s, %.3f ms CPU per set\n",
-              dn / decode1.wall_s, 1e3 * decode1.cpu_s / dn);
+  std::printf("decoding alone, 1 thread (then one byte read per 4 KB page of the pixels):\n");
+  std::printf("  %-12s %12s %14s %14s\n", "reader", "sets/s", "ms per set", "pixels MB/s");
+  for (const DecodeRow& d : decode_rows)
+    std::printf("  %-12s %12.1f %14.3f %14.0f\n", d.reader.c_str(), dn / d.t.wall_s, 1e3 * d.t.wall_s / dn,
+                pixel_bytes / 1e6 / d.t.wall_s);
   size_t posed = 0;
   for (const FrameResult& r : reference) posed += r.T_rig_target.has_value();
-  std::printf("ours posed %zu/%zu frame sets; results on every thread count and source identical to 1 thread "
-              "in memory, in frame order: %s; at most %zu frame sets held at once\n",
+  std::printf("ours posed %zu/%zu frame sets; results on every thread count, reader and source identical to 1 "
+              "thread in memory, in frame order: %s; at most %zu frame sets held at once\n",
               posed, n, identical ? "yes" : "NO", max_held);
   return identical ? 0 : 1;
 }

@@ -18,6 +18,8 @@ packages=(
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
+  libisal-dev  # the PNG frame reader (vision/image_file.h): ISA-L inflate and CRC-32
+  libspng-dev  # bench_throughput's comparison row of PNG readers (skipped without it)
   mrcal python3-mrcal python3-opencv python3-numpy pybind11-dev python3-dev
   python3-distributed  # `mcms batch`: Dask distributed (its test runs a local cluster)
   chromium  # the HTML report's test opens `mcms report` pages in headless Chromium (skipped without it)

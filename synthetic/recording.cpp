@@ -11,7 +11,6 @@
 #include <stdexcept>
 #include <thread>
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
@@ -249,7 +248,7 @@ void WriteTruth(const Scenario& s, const std::vector<FrameTruth>& truths, const 
 
 }  // namespace
 
-void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quiet, int threads) {
+void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quiet, int threads, ImageFileFormat format) {
   std::string why;
   if (!scenario.IsValid(&why)) Throw("scenario: ", why);
   if (out_dir.empty()) Throw("render: no output folder given");
@@ -280,22 +279,9 @@ void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quie
         try {
           RenderedFrame r = renderer.Render(f);
           char name[32];
-          std::snprintf(name, sizeof(name), "%06zu.png", f);
-          for (size_t c = 0; c < r.images.size(); ++c) {
-            if (r.images[c].empty()) continue;
-            const fs::path png = tmp / "images" / scenario.rig.names[c] / name;
-            bool ok = false;
-            try {
-              // Noise defeats dictionary matching: Huffman coding alone gives the
-              // smallest files here at the lowest cost.
-              ok = cv::imwrite(png.string(), r.images[c],
-                               {cv::IMWRITE_PNG_COMPRESSION, 1, cv::IMWRITE_PNG_STRATEGY,
-                                cv::IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY});
-            } catch (const cv::Exception&) {
-              ok = false;
-            }
-            if (!ok) Throw("cannot write image ", png.string());
-          }
+          std::snprintf(name, sizeof(name), "%06zu%s", f, ExtensionOf(format));
+          for (size_t c = 0; c < r.images.size(); ++c)
+            if (!r.images[c].empty()) WriteImageFile(tmp / "images" / scenario.rig.names[c] / name, r.images[c], format);
           std::lock_guard<std::mutex> lock(m);
           truths[f] = std::move(r.truth);
           progress.Update(++done);

@@ -10,6 +10,7 @@
 
 #include "synthetic/renderer.h"
 #include "synthetic/scenario.h"
+#include "vision/image_file.h"
 
 namespace mcms {
 
@@ -39,7 +40,8 @@ RenderedFrame RenderFrame(const Scenario& scenario, size_t frame);
 //   scenario.yaml                  the effective scenario (Scenario::Write)
 //   rig.yaml, cameras/<name>.cameramodel, target.yaml
 //   frames.csv                     frame,time_s
-//   images/<camera>/<frame %06d>.png   8- or 16-bit grey; absent when that camera dropped out
+//   images/<camera>/<frame %06d>.png   8- or 16-bit grey (or .pgm, .tif: `format`, written by
+//                                  WriteImageFile); absent when that camera dropped out
 //   truth/poses.csv                frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz       (T_rig_target)
 //   truth/balls.csv                frame,ball,x_m,y_m,z_m                      (rig frame)
 //   truth/observations.csv         frame,camera,ball,visible,occluded,u_centre_px,v_centre_px,
@@ -52,6 +54,7 @@ RenderedFrame RenderFrame(const Scenario& scenario, size_t frame);
 // Everything is written into a temporary folder beside out_dir and renamed into
 // place at the end; a previous render in out_dir is replaced, any other non-empty
 // out_dir is refused. Frames render on `threads` threads; output does not depend on it.
-void RenderSequence(const Scenario& scenario, const std::filesystem::path& out_dir, bool quiet, int threads = 2);
+void RenderSequence(const Scenario& scenario, const std::filesystem::path& out_dir, bool quiet, int threads = 2,
+                    ImageFileFormat format = ImageFileFormat::kPng);
 
 }  // namespace mcms

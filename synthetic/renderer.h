@@ -21,7 +21,7 @@
 // Randomness: the events (dropout, occlusion, spurious reflections) and the pixel
 // noise of image (frame f, camera c) come from mcms::Rng streams seeded by
 // StreamSeed(scenario seed, f, c, stream), a fixed splitmix64 mix, so frames render
-// independently and in any order, and a scenario and seed give byte-identical PNGs.
+// independently and in any order, and a scenario and seed give byte-identical image files.
 #pragma once
 
 #include <algorithm>

@@ -15,6 +15,7 @@
 #include <sstream>
 #include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
+#include <zlib.h>
 
 #include "core/io.h"
 #include "model/inclinometer.h"
@@ -23,6 +24,7 @@
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"
 #include "vision/camera_model.h"
+#include "vision/image_file.h"
 
 namespace mcms {
 namespace {
@@ -277,6 +279,110 @@ TEST(Inputs, HugePngHeaderDegradesItsFrameOnly) {
   EXPECT_NE(t.rows[3][re].find("header says 60000x60000 but the rig says 1280x1024"), std::string::npos)
       << t.rows[3][re];
   EXPECT_FALSE(t.rows[3][t.Column("x_m")].empty()) << "three cameras still give a pose";
+}
+
+// Damaged PNG frames (vision/image_file.h): a wrong CRC, a truncated file and a zlib bomb
+// (a valid stream that inflates to twice the 1280 x 1024 the header gives) each degrade
+// their frame only, with the reason naming the file; nothing of the bomb is inflated beyond
+// the header's size.
+TEST(Inputs, DamagedPngFramesDegradeTheirFrameOnly) {
+  const fs::path d = Copy("damagedpng");
+  auto image = [&](const char* cam, int frame) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d.png", frame);
+    return d / "images" / cam / name;
+  };
+  auto write = [](const fs::path& p, const std::string& bytes) {
+    std::ofstream(p, std::ios::trunc | std::ios::binary) << bytes;
+  };
+  std::string crc = ReadTextFile(image("cam1", 1));
+  ASSERT_GT(crc.size(), 1000u);
+  crc[crc.size() / 2] = static_cast<char>(crc[crc.size() / 2] ^ 0x10);  // inside an IDAT chunk's data
+  write(image("cam1", 1), crc);
+  const std::string whole = ReadTextFile(image("cam2", 2));
+  write(image("cam2", 2), whole.substr(0, whole.size() / 2));
+  {
+    std::string png = "\x89PNG\r\n\x1a\n";
+    auto chunk = [&](const std::string& type, const std::string& data) {
+      const uint32_t n = static_cast<uint32_t>(data.size());
+      for (int k = 3; k >= 0; --k) png += static_cast<char>((n >> (8 * k)) & 0xff);
+      const std::string body = type + data;
+      const uint32_t c = Crc32(reinterpret_cast<const unsigned char*>(body.data()), body.size());
+      png += body;
+      for (int k = 3; k >= 0; --k) png += static_cast<char>((c >> (8 * k)) & 0xff);
+    };
+    chunk("IHDR", std::string("\0\0\x05\0\0\0\x04\0\x08\0\0\0\0", 13));  // 1280 x 1024, 8-bit grey
+    std::vector<unsigned char> zeros(2 * 1024 * 1281, 0), z(compressBound(2 * 1024 * 1281));
+    uLongf size = static_cast<uLongf>(z.size());
+    ASSERT_EQ(compress2(z.data(), &size, zeros.data(), static_cast<uLong>(zeros.size()), 9), Z_OK);
+    chunk("IDAT", std::string(reinterpret_cast<const char*>(z.data()), size));
+    chunk("IEND", "");
+    write(image("cam3", 3), png);
+  }
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  ASSERT_EQ(t.rows.size(), 5u);
+  const int st = t.Column("status"), re = t.Column("reason");
+  const std::vector<std::pair<int, std::string>> expected = {
+      {1, "cam1: cannot decode " + image("cam1", 1).string() + ": chunk 'IDAT' at byte "},
+      {2, "cam2: cannot decode " + image("cam2", 2).string() + ": truncated PNG"},
+      {3, "cam3: cannot decode " + image("cam3", 3).string() + ": the IDAT zlib stream inflates to more than the 1311744 bytes"}};
+  for (const auto& [f, reason] : expected) {
+    EXPECT_EQ(t.rows[f][st], "degraded") << f;
+    EXPECT_NE(t.rows[f][re].find(reason), std::string::npos) << t.rows[f][re];
+  }
+  EXPECT_NE(t.rows[1][re].find("has a wrong CRC"), std::string::npos) << t.rows[1][re];
+  EXPECT_NE(t.rows[3][re].find("zlib bomb"), std::string::npos) << t.rows[3][re];
+  for (size_t f : {0u, 4u}) EXPECT_EQ(t.rows[f][st], "ok") << f;
+}
+
+// `mcms render --format pgm|tiff` writes the same frames as PNG in those formats, and
+// `mcms track` reads them (memory-mapped) to the same poses; an unknown format is refused.
+TEST(Inputs, RenderFormatsTrackToTheSamePoses) {
+  const fs::path d = test::ScratchDir("inputs_formats");
+  const CsvTable png = [&] {
+    const fs::path rec = Copy("formats_png");
+    EXPECT_EQ(Mcms("track --quiet " + rec.string(), rec).code, 0);
+    return ReadCsv(rec / "poses.csv");
+  }();
+  for (const std::string format : {"pgm", "tiff"}) {
+    SCOPED_TRACE(format);
+    const fs::path rec = d / format;
+    const CliRun r = Mcms("render --frames 5 --quiet --format " + format + " -o " + rec.string(), d);
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(rec / "images" / "cam0" / (format == "pgm" ? "000000.pgm" : "000000.tif")));
+    EXPECT_FALSE(fs::exists(rec / "images" / "cam0" / "000000.png"));
+    const cv::Mat a = cv::imread((Recording() / "images" / "cam0" / "000002.png").string(), cv::IMREAD_UNCHANGED);
+    const cv::Mat b = cv::imread((rec / "images" / "cam0" / (format == "pgm" ? "000002.pgm" : "000002.tif")).string(),
+                                 cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(a.empty());
+    ASSERT_FALSE(b.empty());
+    EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0) << "the same pixels in every format";
+    // Every rendered frame, read by the reader of `mcms track`, equals cv::imread's decode.
+    for (const fs::path& images : {Recording() / "images", rec / "images"})
+      for (const auto& e : fs::recursive_directory_iterator(images)) {
+        if (!e.is_regular_file()) continue;
+        std::string problem;
+        ImageFileReader reader = ImageFileReader::kOpenCv;
+        const cv::Mat ours = ReadImageFile(e.path(), {}, &problem, &reader);
+        const cv::Mat theirs = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+        ASSERT_FALSE(ours.empty()) << problem;
+        EXPECT_NE(reader, ImageFileReader::kOpenCv) << e.path();
+        EXPECT_TRUE(ours.type() == theirs.type() && ours.size() == theirs.size() && cv::norm(ours, theirs, cv::NORM_INF) == 0)
+            << e.path();
+      }
+    ASSERT_EQ(Mcms("track --quiet " + rec.string(), rec).code, 0);
+    const CsvTable t = ReadCsv(rec / "poses.csv");
+    ASSERT_EQ(t.rows.size(), png.rows.size());
+    for (size_t f = 0; f < t.rows.size(); ++f)
+      for (const char* col : {"status", "x_m", "y_m", "z_m", "qw", "qx"})
+        EXPECT_EQ(t.rows[f][t.Column(col)], png.rows[f][png.Column(col)]) << f << " " << col;
+  }
+  const CliRun bad = Mcms("render --frames 1 --quiet --format jpeg -o " + (d / "jpeg").string(), d);
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.err.find("--format"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(d / "jpeg"));
 }
 
 // The same for the other formats a frame may hold under its .png name (BMP, PGM, JPEG, TIFF):

@@ -14,12 +14,12 @@
 #include <map>
 #include <optional>
 #include <sstream>
-#include <opencv2/imgcodecs.hpp>
 #include <set>
 #include <unistd.h>
 
 #include "core/error.h"
 #include "core/io.h"
+#include "vision/image_file.h"
 
 namespace mcms {
 
@@ -39,169 +39,12 @@ std::optional<size_t> FrameNumber(const fs::path& p) {
   if (digits.empty()) return std::nullopt;
   return static_cast<size_t>(std::stoull(digits));
 }
-// The image formats IsImageFile accepts (PNG, PGM/PNM, TIFF, JPEG, BMP), recognised by
-// their first bytes, with the width and height their header claims, without decoding.
-// cv::imread picks its decoder by content, not by name: a file named .png that holds, say,
-// a DICOM header goes to GDCM, which asserts on malformed input (a fuzz finding) and would
-// abort the whole run; and a header may claim any size (OpenCV allocates up to 2^30
-// pixels before it decodes). Only these formats, with a size checked first, reach OpenCV.
-struct ImageHeader {
-  std::string format;
-  std::optional<std::array<int, 2>> size;  // nullopt: the header is truncated or malformed
-};
-
-std::optional<ImageHeader> ReadImageHeader(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::vector<unsigned char> h(4096);
-  in.read(reinterpret_cast<char*>(h.data()), static_cast<std::streamsize>(h.size()));
-  h.resize(static_cast<size_t>(in.gcount()));
-  const size_t n = h.size();
-  auto be = [&](size_t o, int bytes) {
-    uint32_t v = 0;
-    for (int i = 0; i < bytes; ++i) v = (v << 8) | h[o + i];
-    return v;
-  };
-  auto le = [&](size_t o, int bytes) {
-    uint32_t v = 0;
-    for (int i = bytes - 1; i >= 0; --i) v = (v << 8) | h[o + i];
-    return v;
-  };
-  auto size_of = [](int64_t w, int64_t hh) -> std::optional<std::array<int, 2>> {
-    if (w > 0x7fffffff || hh > 0x7fffffff || w < 0 || hh < 0) return std::array<int, 2>{-1, -1};
-    return std::array<int, 2>{static_cast<int>(w), static_cast<int>(hh)};
-  };
-  static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  if (n >= 8 && std::equal(kPng, kPng + 8, h.begin())) {
-    ImageHeader r{"PNG", std::nullopt};
-    if (n >= 24 && std::string(reinterpret_cast<const char*>(&h[12]), 4) == "IHDR") r.size = size_of(be(16, 4), be(20, 4));
-    return r;
-  }
-  if (n >= 2 && h[0] == 'P' && h[1] >= '1' && h[1] <= '6') {  // PNM: "P5 <w> <h> ..." with # comments
-    ImageHeader r{"PNM", std::nullopt};
-    int64_t v[2] = {-1, -1};
-    size_t i = 2;
-    for (int k = 0; k < 2; ++k) {
-      while (i < n && (std::isspace(h[i]) || h[i] == '#')) {
-        if (h[i] == '#')
-          while (i < n && h[i] != '\n') ++i;
-        else
-          ++i;
-      }
-      if (i >= n || !std::isdigit(h[i])) return r;
-      v[k] = 0;
-      while (i < n && std::isdigit(h[i]) && v[k] < (int64_t{1} << 40)) v[k] = 10 * v[k] + (h[i++] - '0');
-    }
-    r.size = size_of(v[0], v[1]);
-    return r;
-  }
-  const bool tiff_le = n >= 4 && h[0] == 'I' && h[1] == 'I' && h[2] == 42 && h[3] == 0;
-  const bool tiff_be = n >= 4 && h[0] == 'M' && h[1] == 'M' && h[2] == 0 && h[3] == 42;
-  if (tiff_le || tiff_be) {  // the first IFD's ImageWidth (256) and ImageLength (257), wherever it is
-    ImageHeader r{"TIFF", std::nullopt};
-    auto rd = [&](const unsigned char* b, int bytes) {
-      uint32_t v = 0;
-      for (int i = 0; i < bytes; ++i) v = tiff_le ? v | (uint32_t{b[i]} << (8 * i)) : (v << 8) | b[i];
-      return v;
-    };
-    if (n < 8) return r;
-    std::ifstream f(p, std::ios::binary);
-    unsigned char c[2];
-    f.seekg(rd(&h[4], 4));
-    if (!f.read(reinterpret_cast<char*>(c), 2)) return r;
-    int64_t wh[2] = {-1, -1};
-    const uint32_t count = rd(c, 2);
-    for (uint32_t e = 0; e < count; ++e) {
-      unsigned char t[12];
-      if (!f.read(reinterpret_cast<char*>(t), 12)) return r;
-      const uint32_t tag = rd(t, 2), type = rd(t + 2, 2);
-      if (tag == 256 || tag == 257) wh[tag - 256] = type == 3 ? rd(t + 8, 2) : type == 4 ? rd(t + 8, 4) : -1;
-    }
-    if (wh[0] >= 0 && wh[1] >= 0) r.size = size_of(wh[0], wh[1]);
-    return r;
-  }
-  if (n >= 3 && h[0] == 0xff && h[1] == 0xd8 && h[2] == 0xff) {  // JPEG: the first SOFn segment
-    ImageHeader r{"JPEG", std::nullopt};
-    std::ifstream f(p, std::ios::binary);
-    f.seekg(2);
-    for (int segments = 0; segments < 1000; ++segments) {
-      unsigned char m[2];
-      if (!f.read(reinterpret_cast<char*>(m), 2) || m[0] != 0xff) return r;
-      while (m[1] == 0xff)  // fill bytes
-        if (!f.read(reinterpret_cast<char*>(m + 1), 1)) return r;
-      const unsigned char marker = m[1];
-      if (marker == 0x01 || (marker >= 0xd0 && marker <= 0xd7)) continue;  // no length field
-      unsigned char l[2];
-      if (!f.read(reinterpret_cast<char*>(l), 2)) return r;
-      const int len = (l[0] << 8) | l[1];
-      if (len < 2) return r;
-      // SOF0..SOF15 except DHT (c4), JPG (c8), DAC (cc): precision, height, width.
-      if (marker >= 0xc0 && marker <= 0xcf && marker != 0xc4 && marker != 0xc8 && marker != 0xcc) {
-        unsigned char sof[5];
-        if (!f.read(reinterpret_cast<char*>(sof), 5)) return r;
-        r.size = size_of((sof[3] << 8) | sof[4], (sof[1] << 8) | sof[2]);
-        return r;
-      }
-      if (marker == 0xd9 || marker == 0xda) return r;  // end of image / scan before any frame header
-      f.seekg(len - 2, std::ios::cur);
-    }
-    return r;
-  }
-  if (n >= 26 && h[0] == 'B' && h[1] == 'M') {  // BMP: the DIB header's width and height
-    ImageHeader r{"BMP", std::nullopt};
-    const uint32_t dib = le(14, 4);
-    if (dib == 12) {
-      r.size = size_of(le(18, 2), le(20, 2));
-    } else {
-      const int64_t w = static_cast<int32_t>(le(18, 4)), hh = static_cast<int32_t>(le(22, 4));
-      r.size = size_of(w, hh < 0 ? -hh : hh);
-    }
-    return r;
-  }
-  if (n >= 2 && h[0] == 'B' && h[1] == 'M') return ImageHeader{"BMP", std::nullopt};
-  return std::nullopt;
-}
-
-constexpr double kMaxImagePixels = double(1 << 26);  // 67 MP: larger is not a camera frame of this tool
-
-// Reads an image; empty with the reason in *problem when it cannot be read, when its
-// (header) size differs from `expected` (when given), or when OpenCV refuses it.
+// Reads one frame (vision/image_file.h): empty with the reason in *problem when it cannot
+// be read or its (header) size differs from `expected` (when given).
 cv::Mat ReadImage(const fs::path& p, const std::array<int, 2>* expected, std::string* problem) {
-  const auto header = ReadImageHeader(p);
-  if (!header) {
-    *problem = "cannot decode " + p.string() + ": not a PNG/PGM/TIFF/JPEG/BMP file by its first bytes";
-    return {};
-  }
-  if (!header->size) {
-    *problem = "cannot decode " + p.string() + ": its " + header->format + " header is truncated or malformed";
-    return {};
-  }
-  const auto& hs = *header->size;
-  const bool absurd = hs[0] <= 0 || hs[1] <= 0 || double(hs[0]) * double(hs[1]) > kMaxImagePixels;
-  if ((expected && hs != *expected) || absurd) {
-    std::ostringstream s;
-    s << "image " << p.string() << " (" << header->format << ") header says " << hs[0] << "x" << hs[1];
-    if (expected) s << " but the rig says " << (*expected)[0] << "x" << (*expected)[1];
-    s << "; not decoded";
-    *problem = s.str();
-    return {};
-  }
-  cv::Mat im;
-  try {
-    im = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception& e) {
-    *problem = "cannot decode " + p.string() + " (" + e.err + ")";
-    return {};
-  }
-  if (im.empty()) {
-    *problem = "cannot decode " + p.string();
-    return {};
-  }
-  if (expected && (im.cols != (*expected)[0] || im.rows != (*expected)[1])) {
-    *problem = "image " + p.string() + " is " + std::to_string(im.cols) + "x" + std::to_string(im.rows) +
-               " but the rig says " + std::to_string((*expected)[0]) + "x" + std::to_string((*expected)[1]);
-    return {};
-  }
-  return im;
+  ImageFileOptions o;
+  if (expected) o.expected_size = *expected;
+  return ReadImageFile(p, o, problem);
 }
 }  // namespace
 

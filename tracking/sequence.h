@@ -2,7 +2,9 @@
 //
 // Folder layout (what `mcms render` writes, and what a user's recording must follow):
 //   images/<camera name>/<frame>.png   one folder per rig camera, named as in the rig
-//                                      file; file stems are frame numbers (any digits)
+//                                      file; file stems are frame numbers (any digits);
+//                                      also .pgm, .tif/.tiff (`mcms render --format`),
+//                                      .jpg, .bmp: read by vision/image_file.h
 //   frames.csv (optional)              frame,time_s  -- otherwise time = frame / rate
 #pragma once
 
@@ -51,9 +53,11 @@ struct ImageSequence {
 // rig does not have, or the first image of a camera has another size than the rig says.
 ImageSequence ScanImageSequence(const SequenceInput& input, const CameraRig& rig);
 
-// The images of frame index i (seq.frames[i]), one per camera; a missing or undecodable
-// image, or one of another size than seq.image_sizes (a PNG whose header claims 60000 x
-// 60000 is not decoded), is an empty Mat with the reason in problems[c].
+// The images of frame index i (seq.frames[i]), one per camera, read by ReadImageFile
+// (vision/image_file.h: our PNG decoder, PGM/TIFF memory-mapped, OpenCV for the rest); a
+// missing or undecodable image (a wrong CRC, a truncated file, a zlib bomb), or one of
+// another size than seq.image_sizes (a PNG whose header claims 60000 x 60000 is not
+// decoded), is an empty Mat with the reason, naming the file, in problems[c].
 std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems);
 
 // Runs fn(i) for i in [begin, end) on `threads` threads (1 = in this thread, in order).
