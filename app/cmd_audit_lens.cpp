@@ -23,31 +23,18 @@ struct AuditLensArgs {
 };
 
 int RunAuditLens(const AuditLensArgs& a) {
-  LensAuditOptions opt;
-  opt.false_alarm = a.false_alarm;
-  opt.folds = a.folds;
-  opt.contiguous_folds = a.contiguous;
-  opt.candidates = a.candidates;
-  opt.spline_nx = a.spline_nx;
-  opt.spline_ny = a.spline_ny;
-  std::string why;
-  if (!opt.IsValid(&why)) Throw("audit lens: ", why);
-  // Outputs are checked before the work (minutes with a splined candidate).
-  if (!a.output.empty()) RequireReplaceableFolder(a.output, {"report.json"}, "audit lens", "audit lens -o");
-  if (!a.json.empty()) RequireWritableFile(a.json, "audit lens --json");
-  const MrcalOptimizationInputsData data = ReadMrcalOptimizationInputs(a.model);
-  if (!a.quiet) opt.progress = [](const std::string& s) { std::fprintf(stderr, "audit lens: %s\n", s.c_str()); };
-  const LensAuditResult r = AuditLens(data, opt);
-  std::printf("%s", r.report.Text().c_str());
-  if (!a.output.empty()) {
-    WriteLensAuditFiles(r, a.output);
-    std::printf("wrote %s (report.txt, report.json, residuals.csv, plots/%s.svg%s)\n", a.output.c_str(), r.camera.c_str(),
-                r.chosen > 0 ? (", " + r.camera + ".cameramodel").c_str() : "");
-  }
-  if (!a.json.empty()) {
-    r.report.WriteJson(a.json);
-    std::printf("wrote %s\n", a.json.c_str());
-  }
+  LensAuditJob job;
+  job.model = a.model;
+  job.output = a.output;
+  job.json = a.json;
+  job.options.false_alarm = a.false_alarm;
+  job.options.folds = a.folds;
+  job.options.contiguous_folds = a.contiguous;
+  job.options.candidates = a.candidates;
+  job.options.spline_nx = a.spline_nx;
+  job.options.spline_ny = a.spline_ny;
+  if (!a.quiet) job.options.progress = [](const std::string& s) { std::fprintf(stderr, "audit lens: %s\n", s.c_str()); };
+  RunLensAuditJob(job, [](const std::string& s) { std::printf("%s", s.c_str()); });
   return 0;
 }
 

@@ -10,6 +10,7 @@
 #include "calib/iso9283_report.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "jobs/iso9283_experiment.h"
 
 namespace mcms::app {
@@ -46,6 +47,7 @@ int RunIso9283Simulation(const IsoArgs& a) {
 int RunIso9283(const IsoArgs& a) {
   if (a.simulate) return RunIso9283Simulation(a);
   if (a.poses.empty()) Throw("iso9283: POSES (a pose CSV) is required, or --simulate");
+  RequireOutputsSpareInputs({{a.output, "iso9283 -o"}}, {a.poses, a.path});
   if (!a.output.empty()) RequireWritableFile(a.output, "iso9283 -o");
   const Iso9283Report r = EvaluateIso9283Files(a.poses, a.path);
   if (!a.output.empty()) WriteFileAtomically(a.output, [&](std::ostream& o) { o << r.csv; });

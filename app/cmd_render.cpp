@@ -9,6 +9,7 @@
 #include "app/commands.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "synthetic/renderer.h"
 #include "synthetic/recording.h"
 #include "synthetic/scenario.h"
@@ -34,6 +35,7 @@ int RunRender(const RenderArgs& a) {
     return 0;
   }
   if (a.out.empty()) Throw("render: the output folder is missing; give -o DIR");
+  RequireOutputsSpareInputs({{a.out, "render -o", true}}, {a.scenario});
   RequireWritableFolder(a.out, "render -o");
   Scenario s = a.scenario.empty() ? Scenario::Default() : Scenario::Read(a.scenario);
   const std::string source = a.scenario.empty() ? std::string("the default scenario") : a.scenario;

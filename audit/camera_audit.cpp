@@ -466,28 +466,18 @@ bool CameraAuditResult::ChangesRig() const {
   return false;
 }
 
-CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results,
-                                   const CameraAuditOptions& options,
-                                   const std::function<void(const std::string&)>& log) {
-  std::string why;
-  if (!options.IsValid(&why)) Throw("camera audit options: ", why);
-  const int nc = static_cast<int>(rig.size()), nb = static_cast<int>(target.balls_target.size());
-  CameraAuditResult res;
-  AuditReport& rep = res.report;
-  rep.mode = "cameras";
-  rep.rms_unit = "px";
-  Auditor a(rig, target, results, options);
-  if (a.NumFrames() < static_cast<size_t>(2 * options.folds))
-    Throw("audit cameras: ", a.NumFrames(), " tracked frames, expected at least ", 2 * options.folds,
-          " (", options.folds, " folds of time)");
-  std::vector<double> scale(nc, 1.0);
-  std::vector<CameraModelTerm> terms;
-  a.Rebuild(terms, scale);
-  res.residuals.assign(nc, {});
+namespace {
 
+// The nominal model's tests, into res->report.tests and res->residuals; returns the number
+// of scalar residuals.
+long TestNominalModel(Auditor& a, const CameraRig& rig, const CameraAuditOptions& options,
+                      const std::vector<CameraModelTerm>& terms, CameraAuditResult* res_out) {
+  CameraAuditResult& res = *res_out;
+  AuditReport& rep = res.report;
+  const int nc = static_cast<int>(rig.size());
+  long n_total = 0;
   // The nominal model's tests: each camera's leave-one-out residuals against chi-square,
   // allowing the noise tolerance, two-sided (a noise model too pessimistic is also wrong).
-  long n_total = 0;
   double chi2_total = 0;
   const double tol2 = (1 + options.noise_tolerance) * (1 + options.noise_tolerance);
   for (int c = 0; c < nc; ++c) {
@@ -551,8 +541,15 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
   rep.nominal_n = n_total;
   rep.nominal_chi2_per_dof = n_total > 0 ? chi2_total / n_total : 0.0;
   if (n_total == 0) Throw("audit cameras: no ball image could be predicted from the other cameras");
-  const double ln_n = std::log(static_cast<double>(n_total));
-  // The noise model first: each camera's scale, fitted within the tolerance band.
+  return n_total;
+}
+
+// The noise model first: each camera's scale, fitted within the tolerance band.
+void FitNoiseScales(Auditor& a, const CameraRig& rig, int nb, const CameraAuditOptions& options,
+                    const std::vector<CameraModelTerm>& terms, std::vector<double>* scale_out, AuditReport* rep_out) {
+  std::vector<double>& scale = *scale_out;
+  AuditReport& rep = *rep_out;
+  const int nc = static_cast<int>(rig.size());
   for (int c = 0; c < nc; ++c) {
     const auto& s = a.CameraSamples(c);
     if (s.empty()) continue;
@@ -566,160 +563,297 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
                          ChiSquareSurvival(lr, 1) < options.false_alarm / (2.0 * (7 * nc + nb))});
   }
 
+}
+
+// The candidates of one selection round, each fitted on all data and on the folds, with
+// its likelihood ratio and held-out gain against its unit's current model.
+std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb, const CameraAuditOptions& options,
+                                       const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale,
+                                       const std::set<std::pair<bool, int>>& blocked,
+                                       const std::vector<bool>& noise_named) {
+  const int nc = static_cast<int>(rig.size());
+  // The candidates.
+  std::vector<Candidate> cands;
+  auto has = [&](Effect e, int idx) {
+    for (const auto& t : terms)
+      if (t.extension.effect == e && t.extension.index == idx) return true;
+    return false;
+  };
+  for (int c = 0; c < nc; ++c) {
+    if (blocked.count({true, c}) || a.CameraSamples(c).empty()) continue;
+    for (Effect e : {Effect::kPixelNoiseScale, Effect::kCameraMoved, Effect::kFocalLength, Effect::kPrincipalPoint,
+                     Effect::kRadialDistortion, Effect::kCameraTimeOffset}) {
+      if (has(e, c)) continue;
+      if (e == Effect::kRadialDistortion && !HasK1(rig.cameras[c])) continue;
+      Candidate x;
+      x.term.extension = Extension{e, c, 0};
+      x.term.parameters = x.term.extension.InitialParameters();
+      x.unit = c;
+      x.k = x.term.extension.NumParameters();
+      cands.push_back(x);
+      if (e == Effect::kCameraMoved && options.change_points > 0) {
+        x.k += 1;
+        x.step = true;  // the change time is scanned below
+        cands.push_back(x);
+      }
+    }
+  }
+  for (int b = 0; b < nb; ++b) {
+    if (blocked.count({false, b}) || has(Effect::kTargetGeometry, b) || a.BallSamples(b).empty()) continue;
+    Candidate x;
+    x.term.extension = Extension{Effect::kTargetGeometry, b, 0};
+    x.term.parameters = x.term.extension.InitialParameters();
+    x.camera_unit = false;
+    x.unit = b;
+    x.k = 3;
+    cands.push_back(x);
+  }
+  if (cands.empty()) return cands;
+
+  // The current model of each unit, fitted on all data and on each fold, once.
+  auto unit_free = [&](bool cam_unit, int u) {
+    std::vector<int> f;
+    for (size_t k = 0; k < terms.size(); ++k) {
+      const auto& e = terms[k].extension;
+      if (cam_unit ? (e.effect != Effect::kTargetGeometry && e.index == u)
+                   : (e.effect == Effect::kTargetGeometry && e.index == u))
+        f.push_back(static_cast<int>(k));
+    }
+    return f;
+  };
+  auto mode_of = [&](bool cam_unit, int u) {
+    if (!cam_unit) return ScaleMode::kFixed;
+    return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
+  };
+  // Held-out evaluation of a unit model `t_all` with its free terms `free`: sum over folds.
+  auto heldout = [&](bool cam_unit, int u, const std::vector<CameraModelTerm>& t0, const std::vector<int>& free,
+                     ScaleMode mode, double* ll, double* sq, long* n) {
+    const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+    *ll = *sq = 0;
+    *n = 0;
+    for (int f = 0; f < options.folds; ++f) {
+      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, t0, free, scale, mode, f);
+      std::vector<double> sc = scale;
+      if (cam_unit) sc[u] = fit.scale;
+      const Eval e = a.Evaluate(s, fit.terms, sc, f, true);
+      *ll += e.ll;
+      *sq += e.sq;
+      *n += e.n;
+    }
+  };
+  struct Base {
+    double ll_all = 0, ll_held = 0, sq_held = 0;
+    long n_held = 0;
+  };
+  std::map<std::pair<bool, int>, Base> base;
+  for (const auto& x : cands) {
+    const auto key = std::make_pair(x.camera_unit, x.unit);
+    if (base.count(key)) continue;
+    Base bs;
+    const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
+    const auto free = unit_free(x.camera_unit, x.unit);
+    const UnitFit fit = a.Fit(s, x.camera_unit ? x.unit : -1, terms, free, scale, mode_of(x.camera_unit, x.unit), -1);
+    std::vector<double> sc = scale;
+    if (x.camera_unit) sc[x.unit] = fit.scale;
+    bs.ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
+    heldout(x.camera_unit, x.unit, terms, free, mode_of(x.camera_unit, x.unit), &bs.ll_held, &bs.sq_held,
+            &bs.n_held);
+    base[key] = bs;
+  }
+
+  for (auto& x : cands) {
+    const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
+    std::vector<CameraModelTerm> t = terms;
+    t.push_back(x.term);
+    std::vector<int> free = unit_free(x.camera_unit, x.unit);
+    free.push_back(static_cast<int>(t.size()) - 1);
+    const bool noise = x.term.extension.effect == Effect::kPixelNoiseScale;
+    const ScaleMode mode = noise ? ScaleMode::kFree : mode_of(x.camera_unit, x.unit);
+    const int cu = x.camera_unit ? x.unit : -1;
+    // A part-way move: the change time that fits all data best, among the candidates.
+    if (x.step) {
+      std::vector<double> times;
+      for (const auto& smp : s.s) times.push_back(smp.t);
+      std::sort(times.begin(), times.end());
+      times.erase(std::unique(times.begin(), times.end()), times.end());
+      double best_ll = -std::numeric_limits<double>::infinity(), best_t = 0;
+      for (int g = 1; g <= options.change_points; ++g) {
+        const double tc = times[times.size() * g / (options.change_points + 1)];
+        t.back().from_time_s = tc;
+        const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1);
+        std::vector<double> sc = scale;
+        if (cu >= 0) sc[cu] = fit.scale;
+        const double ll = a.Evaluate(s, fit.terms, sc, -1, false).ll;
+        if (ll > best_ll) {
+          best_ll = ll;
+          best_t = tc;
+        }
+      }
+      t.back().from_time_s = best_t;
+      x.term.from_time_s = best_t;
+    }
+    Eigen::MatrixXd cov;
+    const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1, &cov);
+    std::vector<double> sc = scale;
+    if (cu >= 0) sc[cu] = fit.scale;
+    const Base& bs = base[{x.camera_unit, x.unit}];
+    const double ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
+    x.lr = 2 * (ll_all - bs.ll_all);
+    double ll_h, sq_h;
+    long n_h;
+    heldout(x.camera_unit, x.unit, t, free, mode, &ll_h, &sq_h, &n_h);
+    x.heldout_gain = ll_h - bs.ll_held;
+    x.rms_before = bs.n_held > 0 ? std::sqrt(bs.sq_held / bs.n_held) : 0;
+    x.rms_after = n_h > 0 ? std::sqrt(sq_h / n_h) : 0;
+    x.fitted = fit.terms;
+    x.scale = fit.scale;
+    x.term = fit.terms.back();
+    if (noise) {
+      // s from a sample variance: sd(s) = s / sqrt(2 n) for n residuals.
+      x.sigma = {fit.scale / std::sqrt(4.0 * s.size())};
+    } else {
+      // The candidate's block is the last in the fitted covariance.
+      const int np = x.term.extension.NumParameters();
+      for (int i = 0; i < np; ++i) {
+        const int j = static_cast<int>(cov.rows()) - np + i;
+        x.sigma.push_back(j >= 0 ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+      }
+    }
+    x.label = x.term.extension.Label(rig.names);
+    if (x.step)
+      x.label += " from t = " + std::to_string(x.term.from_time_s) + " s";
+  }
+  return cands;
+}
+
+// Backward pruning: an effect named early (e.g. the noise scale, taking up the residual of
+// a large effect named later) must still earn its place once the others are in: each
+// named effect is removed in turn when the likelihood ratio for it, on the poses
+// re-fitted with every effect, no longer passes the test or its BIC gain is <= 0.
+void PruneNamedEffects(Auditor& a, const CameraRig& rig, int nb, const CameraAuditOptions& options, double ln_n,
+                       std::vector<CameraModelTerm>* terms_out, std::vector<double>* scale_out,
+                       std::vector<bool>* noise_named_out, AuditReport* rep_out) {
+  std::vector<CameraModelTerm>& terms = *terms_out;
+  std::vector<double>& scale = *scale_out;
+  std::vector<bool>& noise_named = *noise_named_out;
+  AuditReport& rep = *rep_out;
+  const int nc = static_cast<int>(rig.size());
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (size_t k = terms.size(); k-- > 0;) {
+      if (terms[k].undecided) continue;
+      const Extension x = terms[k].extension;
+      const bool cam_unit = x.effect != Effect::kTargetGeometry;
+      const auto& s = cam_unit ? a.CameraSamples(x.index) : a.BallSamples(x.index);
+      std::vector<CameraModelTerm> without = terms;
+      without.erase(without.begin() + static_cast<long>(k));
+      auto free_of = [&](const std::vector<CameraModelTerm>& t) {
+        std::vector<int> f;
+        for (size_t i = 0; i < t.size(); ++i)
+          if ((t[i].extension.effect != Effect::kTargetGeometry) == cam_unit && t[i].extension.index == x.index)
+            f.push_back(static_cast<int>(i));
+        return f;
+      };
+      const bool noise = x.effect == Effect::kPixelNoiseScale;
+      const ScaleMode with_mode = !cam_unit ? ScaleMode::kFixed : noise_named[x.index] ? ScaleMode::kFree : ScaleMode::kBand;
+      const ScaleMode without_mode = noise ? ScaleMode::kBand : with_mode;
+      const UnitFit f1 = a.Fit(s, cam_unit ? x.index : -1, terms, free_of(terms), scale, with_mode, -1);
+      const UnitFit f0 = a.Fit(s, cam_unit ? x.index : -1, without, free_of(without), scale, without_mode, -1);
+      std::vector<double> s1 = scale, s0 = scale;
+      if (cam_unit) s1[x.index] = f1.scale, s0[x.index] = f0.scale;
+      const double lr = 2 * (a.Evaluate(s, f1.terms, s1, -1, false).ll - a.Evaluate(s, f0.terms, s0, -1, false).ll);
+      const int kp = x.NumParameters() + (terms[k].from_time_s > -std::numeric_limits<double>::infinity() ? 1 : 0);
+      const double m = static_cast<double>(nc * 7 + nb);
+      if (EarnsPlace(lr, kp, options.false_alarm / (2 * m), ln_n)) continue;
+      const std::string label = x.Label(rig.names);
+      rep.notes.push_back(label + " was named, then no longer earned its place once the other effects were in " +
+                          "(likelihood ratio " + std::to_string(lr) + "): removed");
+      for (size_t e = 0; e < rep.effects.size(); ++e)
+        if (rep.effects[e].name == Name(x.effect) && rep.effects[e].where == x.Where(rig.names)) {
+          rep.effects.erase(rep.effects.begin() + static_cast<long>(e));
+          break;
+        }
+      if (noise) noise_named[x.index] = false;
+      terms = f0.terms;
+      if (cam_unit) scale[x.index] = f0.scale;
+      a.Rebuild(terms, scale);
+      changed = true;
+      break;
+    }
+  }
+}
+
+// A last fit of every unit with named effects on the poses re-fitted with all of them
+// (the noise scale, in particular, whitens with the pose covariances of its own value).
+void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& noise_named,
+                     std::vector<CameraModelTerm>* terms_out, std::vector<double>* scale_out, AuditReport* rep_out) {
+  std::vector<CameraModelTerm>& terms = *terms_out;
+  std::vector<double>& scale = *scale_out;
+  AuditReport& rep = *rep_out;
+  std::set<std::pair<bool, int>> units;
+  for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
+  for (const auto& [cam_unit, u] : units) {
+    std::vector<int> free;
+    for (size_t k = 0; k < terms.size(); ++k)
+      if ((terms[k].extension.effect != Effect::kTargetGeometry) == cam_unit && terms[k].extension.index == u)
+        free.push_back(static_cast<int>(k));
+    const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+    Eigen::MatrixXd cov;
+    const ScaleMode mode = !cam_unit ? ScaleMode::kFixed : noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
+    const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, mode, -1, &cov);
+    if (cam_unit) scale[u] = fit.scale;
+    int j = 0;
+    for (int k : free) {
+      terms[k].parameters = fit.terms[k].parameters;
+      const Extension& x = terms[k].extension;
+      std::vector<double> sg;
+      if (x.effect == Effect::kPixelNoiseScale) {
+        sg.push_back(fit.scale / std::sqrt(4.0 * s.size()));
+      } else {
+        for (int i = 0; i < x.NumParameters(); ++i, ++j)
+          sg.push_back(j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+      }
+      for (auto& e : rep.effects)
+        if (!terms[k].undecided && e.name == Name(x.effect) && e.where == x.Where(rig.names))
+          for (size_t i = 0; i < sg.size(); ++i) {
+            e.parameters[i].second = terms[k].parameters[i];
+            e.sigma[i].second = sg[i];
+          }
+    }
+  }
+}
+
+}  // namespace
+
+CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results,
+                                   const CameraAuditOptions& options,
+                                   const std::function<void(const std::string&)>& log) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("camera audit options: ", why);
+  const int nc = static_cast<int>(rig.size()), nb = static_cast<int>(target.balls_target.size());
+  CameraAuditResult res;
+  AuditReport& rep = res.report;
+  rep.mode = "cameras";
+  rep.rms_unit = "px";
+  Auditor a(rig, target, results, options);
+  if (a.NumFrames() < static_cast<size_t>(2 * options.folds))
+    Throw("audit cameras: ", a.NumFrames(), " tracked frames, expected at least ", 2 * options.folds,
+          " (", options.folds, " folds of time)");
+  std::vector<double> scale(nc, 1.0);
+  std::vector<CameraModelTerm> terms;
+  a.Rebuild(terms, scale);
+  res.residuals.assign(nc, {});
+
+  const long n_total = TestNominalModel(a, rig, options, terms, &res);
+  const double ln_n = std::log(static_cast<double>(n_total));
+  FitNoiseScales(a, rig, nb, options, terms, &scale, &rep);
+
   std::set<std::pair<bool, int>> blocked;  // units in an undecided group
   std::vector<bool> noise_named(nc, false);
   for (int round = 0; round < options.max_effects; ++round) {
-    // The candidates.
-    std::vector<Candidate> cands;
-    auto has = [&](Effect e, int idx) {
-      for (const auto& t : terms)
-        if (t.extension.effect == e && t.extension.index == idx) return true;
-      return false;
-    };
-    for (int c = 0; c < nc; ++c) {
-      if (blocked.count({true, c}) || a.CameraSamples(c).empty()) continue;
-      for (Effect e : {Effect::kPixelNoiseScale, Effect::kCameraMoved, Effect::kFocalLength, Effect::kPrincipalPoint,
-                       Effect::kRadialDistortion, Effect::kCameraTimeOffset}) {
-        if (has(e, c)) continue;
-        if (e == Effect::kRadialDistortion && !HasK1(rig.cameras[c])) continue;
-        Candidate x;
-        x.term.extension = Extension{e, c, 0};
-        x.term.parameters = x.term.extension.InitialParameters();
-        x.unit = c;
-        x.k = x.term.extension.NumParameters();
-        cands.push_back(x);
-        if (e == Effect::kCameraMoved && options.change_points > 0) {
-          x.k += 1;
-          x.step = true;  // the change time is scanned below
-          cands.push_back(x);
-        }
-      }
-    }
-    for (int b = 0; b < nb; ++b) {
-      if (blocked.count({false, b}) || has(Effect::kTargetGeometry, b) || a.BallSamples(b).empty()) continue;
-      Candidate x;
-      x.term.extension = Extension{Effect::kTargetGeometry, b, 0};
-      x.term.parameters = x.term.extension.InitialParameters();
-      x.camera_unit = false;
-      x.unit = b;
-      x.k = 3;
-      cands.push_back(x);
-    }
+    std::vector<Candidate> cands = RoundCandidates(a, rig, nb, options, terms, scale, blocked, noise_named);
     if (cands.empty()) break;
 
-    // The current model of each unit, fitted on all data and on each fold, once.
-    auto unit_free = [&](bool cam_unit, int u) {
-      std::vector<int> f;
-      for (size_t k = 0; k < terms.size(); ++k) {
-        const auto& e = terms[k].extension;
-        if (cam_unit ? (e.effect != Effect::kTargetGeometry && e.index == u)
-                     : (e.effect == Effect::kTargetGeometry && e.index == u))
-          f.push_back(static_cast<int>(k));
-      }
-      return f;
-    };
-    auto mode_of = [&](bool cam_unit, int u) {
-      if (!cam_unit) return ScaleMode::kFixed;
-      return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
-    };
-    // Held-out evaluation of a unit model `t_all` with its free terms `free`: sum over folds.
-    auto heldout = [&](bool cam_unit, int u, const std::vector<CameraModelTerm>& t0, const std::vector<int>& free,
-                       ScaleMode mode, double* ll, double* sq, long* n) {
-      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
-      *ll = *sq = 0;
-      *n = 0;
-      for (int f = 0; f < options.folds; ++f) {
-        const UnitFit fit = a.Fit(s, cam_unit ? u : -1, t0, free, scale, mode, f);
-        std::vector<double> sc = scale;
-        if (cam_unit) sc[u] = fit.scale;
-        const Eval e = a.Evaluate(s, fit.terms, sc, f, true);
-        *ll += e.ll;
-        *sq += e.sq;
-        *n += e.n;
-      }
-    };
-    struct Base {
-      double ll_all = 0, ll_held = 0, sq_held = 0;
-      long n_held = 0;
-    };
-    std::map<std::pair<bool, int>, Base> base;
-    for (const auto& x : cands) {
-      const auto key = std::make_pair(x.camera_unit, x.unit);
-      if (base.count(key)) continue;
-      Base bs;
-      const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
-      const auto free = unit_free(x.camera_unit, x.unit);
-      const UnitFit fit = a.Fit(s, x.camera_unit ? x.unit : -1, terms, free, scale, mode_of(x.camera_unit, x.unit), -1);
-      std::vector<double> sc = scale;
-      if (x.camera_unit) sc[x.unit] = fit.scale;
-      bs.ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
-      heldout(x.camera_unit, x.unit, terms, free, mode_of(x.camera_unit, x.unit), &bs.ll_held, &bs.sq_held,
-              &bs.n_held);
-      base[key] = bs;
-    }
-
-    for (auto& x : cands) {
-      const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
-      std::vector<CameraModelTerm> t = terms;
-      t.push_back(x.term);
-      std::vector<int> free = unit_free(x.camera_unit, x.unit);
-      free.push_back(static_cast<int>(t.size()) - 1);
-      const bool noise = x.term.extension.effect == Effect::kPixelNoiseScale;
-      const ScaleMode mode = noise ? ScaleMode::kFree : mode_of(x.camera_unit, x.unit);
-      const int cu = x.camera_unit ? x.unit : -1;
-      // A part-way move: the change time that fits all data best, among the candidates.
-      if (x.step) {
-        std::vector<double> times;
-        for (const auto& smp : s.s) times.push_back(smp.t);
-        std::sort(times.begin(), times.end());
-        times.erase(std::unique(times.begin(), times.end()), times.end());
-        double best_ll = -std::numeric_limits<double>::infinity(), best_t = 0;
-        for (int g = 1; g <= options.change_points; ++g) {
-          const double tc = times[times.size() * g / (options.change_points + 1)];
-          t.back().from_time_s = tc;
-          const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1);
-          std::vector<double> sc = scale;
-          if (cu >= 0) sc[cu] = fit.scale;
-          const double ll = a.Evaluate(s, fit.terms, sc, -1, false).ll;
-          if (ll > best_ll) {
-            best_ll = ll;
-            best_t = tc;
-          }
-        }
-        t.back().from_time_s = best_t;
-        x.term.from_time_s = best_t;
-      }
-      Eigen::MatrixXd cov;
-      const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1, &cov);
-      std::vector<double> sc = scale;
-      if (cu >= 0) sc[cu] = fit.scale;
-      const Base& bs = base[{x.camera_unit, x.unit}];
-      const double ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
-      x.lr = 2 * (ll_all - bs.ll_all);
-      double ll_h, sq_h;
-      long n_h;
-      heldout(x.camera_unit, x.unit, t, free, mode, &ll_h, &sq_h, &n_h);
-      x.heldout_gain = ll_h - bs.ll_held;
-      x.rms_before = bs.n_held > 0 ? std::sqrt(bs.sq_held / bs.n_held) : 0;
-      x.rms_after = n_h > 0 ? std::sqrt(sq_h / n_h) : 0;
-      x.fitted = fit.terms;
-      x.scale = fit.scale;
-      x.term = fit.terms.back();
-      if (noise) {
-        // s from a sample variance: sd(s) = s / sqrt(2 n) for n residuals.
-        x.sigma = {fit.scale / std::sqrt(4.0 * s.size())};
-      } else {
-        // The candidate's block is the last in the fitted covariance.
-        const int np = x.term.extension.NumParameters();
-        for (int i = 0; i < np; ++i) {
-          const int j = static_cast<int>(cov.rows()) - np + i;
-          x.sigma.push_back(j >= 0 ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
-        }
-      }
-      x.label = x.term.extension.Label(rig.names);
-      if (x.step)
-        x.label += " from t = " + std::to_string(x.term.from_time_s) + " s";
-    }
     // The decision (audit/model_selection.h): candidates on the same data (the same camera,
     // or the same ball) explain the same residual and may tie; candidates elsewhere are
     // each taken in their turn. Part-way moves scan the change time: Bonferroni over it.
@@ -795,88 +929,8 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     if (best.term.extension.effect == Effect::kPixelNoiseScale) noise_named[best.unit] = true;
     a.Rebuild(terms, scale);
   }
-  // Backward pruning: an effect named early (e.g. the noise scale, taking up the residual of
-  // a large effect named later) must still earn its place once the others are in: each
-  // named effect is removed in turn when the likelihood ratio for it, on the poses
-  // re-fitted with every effect, no longer passes the test or its BIC gain is <= 0.
-  for (bool changed = true; changed;) {
-    changed = false;
-    for (size_t k = terms.size(); k-- > 0;) {
-      if (terms[k].undecided) continue;
-      const Extension x = terms[k].extension;
-      const bool cam_unit = x.effect != Effect::kTargetGeometry;
-      const auto& s = cam_unit ? a.CameraSamples(x.index) : a.BallSamples(x.index);
-      std::vector<CameraModelTerm> without = terms;
-      without.erase(without.begin() + static_cast<long>(k));
-      auto free_of = [&](const std::vector<CameraModelTerm>& t) {
-        std::vector<int> f;
-        for (size_t i = 0; i < t.size(); ++i)
-          if ((t[i].extension.effect != Effect::kTargetGeometry) == cam_unit && t[i].extension.index == x.index)
-            f.push_back(static_cast<int>(i));
-        return f;
-      };
-      const bool noise = x.effect == Effect::kPixelNoiseScale;
-      const ScaleMode with_mode = !cam_unit ? ScaleMode::kFixed : noise_named[x.index] ? ScaleMode::kFree : ScaleMode::kBand;
-      const ScaleMode without_mode = noise ? ScaleMode::kBand : with_mode;
-      const UnitFit f1 = a.Fit(s, cam_unit ? x.index : -1, terms, free_of(terms), scale, with_mode, -1);
-      const UnitFit f0 = a.Fit(s, cam_unit ? x.index : -1, without, free_of(without), scale, without_mode, -1);
-      std::vector<double> s1 = scale, s0 = scale;
-      if (cam_unit) s1[x.index] = f1.scale, s0[x.index] = f0.scale;
-      const double lr = 2 * (a.Evaluate(s, f1.terms, s1, -1, false).ll - a.Evaluate(s, f0.terms, s0, -1, false).ll);
-      const int kp = x.NumParameters() + (terms[k].from_time_s > -std::numeric_limits<double>::infinity() ? 1 : 0);
-      const double m = static_cast<double>(nc * 7 + nb);
-      if (EarnsPlace(lr, kp, options.false_alarm / (2 * m), ln_n)) continue;
-      const std::string label = x.Label(rig.names);
-      rep.notes.push_back(label + " was named, then no longer earned its place once the other effects were in " +
-                          "(likelihood ratio " + std::to_string(lr) + "): removed");
-      for (size_t e = 0; e < rep.effects.size(); ++e)
-        if (rep.effects[e].name == Name(x.effect) && rep.effects[e].where == x.Where(rig.names)) {
-          rep.effects.erase(rep.effects.begin() + static_cast<long>(e));
-          break;
-        }
-      if (noise) noise_named[x.index] = false;
-      terms = f0.terms;
-      if (cam_unit) scale[x.index] = f0.scale;
-      a.Rebuild(terms, scale);
-      changed = true;
-      break;
-    }
-  }
-  // A last fit of every unit with named effects on the poses re-fitted with all of them
-  // (the noise scale, in particular, whitens with the pose covariances of its own value).
-  {
-    std::set<std::pair<bool, int>> units;
-    for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
-    for (const auto& [cam_unit, u] : units) {
-      std::vector<int> free;
-      for (size_t k = 0; k < terms.size(); ++k)
-        if ((terms[k].extension.effect != Effect::kTargetGeometry) == cam_unit && terms[k].extension.index == u)
-          free.push_back(static_cast<int>(k));
-      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
-      Eigen::MatrixXd cov;
-      const ScaleMode mode = !cam_unit ? ScaleMode::kFixed : noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
-      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, mode, -1, &cov);
-      if (cam_unit) scale[u] = fit.scale;
-      int j = 0;
-      for (int k : free) {
-        terms[k].parameters = fit.terms[k].parameters;
-        const Extension& x = terms[k].extension;
-        std::vector<double> sg;
-        if (x.effect == Effect::kPixelNoiseScale) {
-          sg.push_back(fit.scale / std::sqrt(4.0 * s.size()));
-        } else {
-          for (int i = 0; i < x.NumParameters(); ++i, ++j)
-            sg.push_back(j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
-        }
-        for (auto& e : rep.effects)
-          if (!terms[k].undecided && e.name == Name(x.effect) && e.where == x.Where(rig.names))
-            for (size_t i = 0; i < sg.size(); ++i) {
-              e.parameters[i].second = terms[k].parameters[i];
-              e.sigma[i].second = sg[i];
-            }
-      }
-    }
-  }
+  PruneNamedEffects(a, rig, nb, options, ln_n, &terms, &scale, &noise_named, &rep);
+  RefitNamedUnits(a, rig, noise_named, &terms, &scale, &rep);
   // The named terms with their sigmas.
   for (const auto& t : terms) {
     if (t.undecided) continue;

@@ -82,6 +82,11 @@ void WriteCameraAuditFolder(const std::filesystem::path& out, const CameraRig& r
 void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const std::string&)>& print) {
   namespace fs = std::filesystem;
   const fs::path dir = a.recording;
+  RequireOutputsSpareInputs({{a.json, "audit cameras --json"},
+                             {a.output, "audit cameras -o", true},
+                             {a.repaired_rig, "audit cameras --repaired-rig"},
+                             {a.repaired_target, "audit cameras --repaired-target"}},
+                            {dir / "rig.yaml", dir / "target.yaml", dir / "frames.csv", dir / "images"});
   if (!a.repaired_rig.empty()) RequireWritableFile(a.repaired_rig, "audit --repaired-rig");
   if (!a.repaired_target.empty()) RequireWritableFile(a.repaired_target, "audit --repaired-target");
   if (!a.json.empty()) RequireWritableFile(a.json, "audit --json");

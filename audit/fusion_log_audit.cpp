@@ -55,6 +55,8 @@ RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints,
 
 void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const std::string&)>& print,
                        const std::function<void(const std::string&)>& progress) {
+  RequireOutputsSpareInputs({{a.output, "audit fusion -o", true}, {a.json, "audit fusion --json"}},
+                            {a.tracker, a.robot, a.inclinometer, a.setup});
   if (!a.json.empty()) RequireWritableFile(a.json, "audit fusion --json");
   if (!a.output.empty()) RequireReplaceableFolder(a.output, {"report.json"}, "audit fusion", "audit fusion -o");
   const FusionSetup setup = ReadFusionSetup(a.setup);

@@ -403,6 +403,103 @@ int HoldUnidentifiable(const Auditor& a, Model* m) {
 }
 
 
+// The nominal model's residual tests: chi-square against the setup's sigma, lag-1
+// autocorrelation in time, trends against time, tilt and tilt rate, per axis.
+void TestNominalResiduals(const Auditor& a, const Inclinometer& incl, const Model& cur, const Auditor::Eval& ev0,
+                          long N, double alpha_tests, const std::string& where, AuditReport* rep_out) {
+  AuditReport& rep = *rep_out;
+  std::vector<AuditTest> tests;
+  const double p_hi = ChiSquareSurvival(ev0.chi2, 2.0 * N);
+  const double p_lo = ChiSquareCdf(ev0.chi2, 2.0 * N);
+  tests.push_back({where + ": chi-square of the residuals against its sigma (chi2/dof)", rep.nominal_chi2_per_dof,
+                   std::min(1.0, 2 * std::min(p_hi, p_lo)), false});
+  std::vector<std::vector<double>> w(2);
+  std::vector<std::pair<std::string, std::vector<double>>> cov(5);
+  cov[0].first = "time";
+  cov[1].first = "tilt x";
+  cov[2].first = "tilt y";
+  cov[3].first = "tilt rate x";
+  cov[4].first = "tilt rate y";
+  const std::vector<GroupUse> use = a.Assign(cur);
+  for (size_t gi = 0; gi < a.NumGroups(); ++gi) {
+    const Group& g = a.Groups()[gi];
+    const Eigen::VectorXd r = a.Residual(cur, g, &use[gi]);
+    const OrientationReference &ra = a.Ref(g.a), &rb = a.Ref(g.a + 1);
+    // The tilt rate from the frames, not the readings (whose noise is in the residual).
+    const Vec2 rate = (incl.Tilt(rb.R_base_flange) - incl.Tilt(ra.R_base_flange)) / (rb.time_s - ra.time_s);
+    for (size_t i = 0; i < g.readings.size(); ++i) {
+      w[0].push_back(r[2 * i]);
+      w[1].push_back(r[2 * i + 1]);
+      const Vec2 tilt = incl.Tilt(a.OrientationAt(g, a.Reading(g.readings[i]).time_s));
+      cov[0].second.push_back(a.Reading(g.readings[i]).time_s);
+      cov[1].second.push_back(tilt[0]);
+      cov[2].second.push_back(tilt[1]);
+      cov[3].second.push_back(rate[0]);
+      cov[4].second.push_back(rate[1]);
+    }
+  }
+  const char* ax[2] = {"x", "y"};
+  for (int k = 0; k < 2; ++k) {
+    tests.push_back(AutocorrelationTest(where + ": autocorrelation in time (" + ax[k] + ")", w[k]));
+    for (const auto& [name, x] : cov)
+      if (auto t = TrendTest(where + ": trend vs " + name + " (" + ax[k] + ")", x, w[k])) tests.push_back(*t);
+  }
+  const double per = alpha_tests / tests.size();
+  for (auto& t : tests) t.failed = t.p_value < per;
+  std::stable_sort(tests.begin(), tests.end(),
+                   [](const AuditTest& x, const AuditTest& y) { return x.p_value < y.p_value; });
+  for (const auto& t : tests)
+    if (t.failed || rep.tests.size() < 3) rep.tests.push_back(t);
+  char b[200];
+  std::snprintf(b, sizeof b,
+                "%s: %ld readings between %zu pairs of reference frames, %zu residual tests at a family-wise rate "
+                "%.3g (each at %.3g)",
+                where.c_str(), N, a.NumGroups(), tests.size(), alpha_tests, per);
+  rep.notes.push_back(b);
+}
+
+// Sizes and sigmas of the final model, cov = s^2 (J^T J)^-1 over the free parameters, into
+// the named effects (a clock_offset later extended to clock_drift is reported once, as
+// clock_drift); returns the sigmas per extension.
+std::vector<std::vector<double>> SizesOfFinalModel(const Auditor& a, const Model& cur, InclinometerAuditResult* res_out) {
+  InclinometerAuditResult& res = *res_out;
+  AuditReport& rep = res.report;
+  const auto evf = a.Evaluate(cur, -1, false);
+  const double s2 = Auditor::Scale2(evf);
+  res.noise_scale = std::sqrt(s2);
+  std::vector<std::vector<double>> sig(cur.p.size());
+  if (cur.NumFree() > 0) {
+    const Eigen::MatrixXd J = a.Jacobian(cur);
+    const std::vector<int> cols = FreeColumns(cur);
+    Eigen::MatrixXd Jf(J.rows(), cols.size());
+    for (size_t c = 0; c < cols.size(); ++c) Jf.col(c) = J.col(cols[c]);
+    const Eigen::MatrixXd C = s2 * (Jf.transpose() * Jf).completeOrthogonalDecomposition().pseudoInverse();
+    int at = 0;
+    for (size_t k = 0; k < cur.p.size(); ++k)
+      for (size_t j = 0; j < cur.p[k].size(); ++j) {
+        sig[k].push_back(cur.held[k][j] ? 0.0 : std::sqrt(std::max(0.0, C(at, at))));
+        if (!cur.held[k][j]) ++at;
+      }
+  }
+  for (auto& ef : rep.effects)
+    for (size_t k = 0; k < cur.ext.size(); ++k) {
+      if (ef.name != Name(cur.ext[k].effect)) continue;
+      const auto names = cur.ext[k].ParameterNames();
+      for (size_t j = 0; j < names.size(); ++j) {
+        if (cur.held[k][j]) continue;
+        ef.parameters.push_back({names[j], cur.p[k][j]});
+        ef.sigma.push_back({names[j], sig[k][j]});
+      }
+    }
+  // A clock_offset later extended to clock_drift is reported once, as clock_drift.
+  const bool drift = cur.Clock() && cur.Clock()->effect == Effect::kClockDrift;
+  if (drift)
+    rep.effects.erase(std::remove_if(rep.effects.begin(), rep.effects.end(),
+                                     [](const AuditEffect& e) { return e.name == "clock_offset"; }),
+                      rep.effects.end());
+  return sig;
+}
+
 }  // namespace
 
 InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::vector<OrientationReference>& reference,
@@ -437,56 +534,7 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
   rep.nominal_n = 2 * N;
   rep.nominal_chi2_per_dof = ev0.chi2 / (2.0 * N);
   res.noise_scale_nominal = std::sqrt(rep.nominal_chi2_per_dof);
-  {
-    std::vector<AuditTest> tests;
-    const double p_hi = ChiSquareSurvival(ev0.chi2, 2.0 * N);
-    const double p_lo = ChiSquareCdf(ev0.chi2, 2.0 * N);
-    tests.push_back({where + ": chi-square of the residuals against its sigma (chi2/dof)", rep.nominal_chi2_per_dof,
-                     std::min(1.0, 2 * std::min(p_hi, p_lo)), false});
-    std::vector<std::vector<double>> w(2);
-    std::vector<std::pair<std::string, std::vector<double>>> cov(5);
-    cov[0].first = "time";
-    cov[1].first = "tilt x";
-    cov[2].first = "tilt y";
-    cov[3].first = "tilt rate x";
-    cov[4].first = "tilt rate y";
-    const std::vector<GroupUse> use = a.Assign(cur);
-    for (size_t gi = 0; gi < a.NumGroups(); ++gi) {
-      const Group& g = a.Groups()[gi];
-      const Eigen::VectorXd r = a.Residual(cur, g, &use[gi]);
-      const OrientationReference &ra = a.Ref(g.a), &rb = a.Ref(g.a + 1);
-      // The tilt rate from the frames, not the readings (whose noise is in the residual).
-      const Vec2 rate = (incl.Tilt(rb.R_base_flange) - incl.Tilt(ra.R_base_flange)) / (rb.time_s - ra.time_s);
-      for (size_t i = 0; i < g.readings.size(); ++i) {
-        w[0].push_back(r[2 * i]);
-        w[1].push_back(r[2 * i + 1]);
-        const Vec2 tilt = incl.Tilt(a.OrientationAt(g, a.Reading(g.readings[i]).time_s));
-        cov[0].second.push_back(a.Reading(g.readings[i]).time_s);
-        cov[1].second.push_back(tilt[0]);
-        cov[2].second.push_back(tilt[1]);
-        cov[3].second.push_back(rate[0]);
-        cov[4].second.push_back(rate[1]);
-      }
-    }
-    const char* ax[2] = {"x", "y"};
-    for (int k = 0; k < 2; ++k) {
-      tests.push_back(AutocorrelationTest(where + ": autocorrelation in time (" + ax[k] + ")", w[k]));
-      for (const auto& [name, x] : cov)
-        if (auto t = TrendTest(where + ": trend vs " + name + " (" + ax[k] + ")", x, w[k])) tests.push_back(*t);
-    }
-    const double per = alpha_tests / tests.size();
-    for (auto& t : tests) t.failed = t.p_value < per;
-    std::stable_sort(tests.begin(), tests.end(),
-                     [](const AuditTest& x, const AuditTest& y) { return x.p_value < y.p_value; });
-    for (const auto& t : tests)
-      if (t.failed || rep.tests.size() < 3) rep.tests.push_back(t);
-    char b[200];
-    std::snprintf(b, sizeof b,
-                  "%s: %ld readings between %zu pairs of reference frames, %zu residual tests at a family-wise rate "
-                  "%.3g (each at %.3g)",
-                  where.c_str(), N, a.NumGroups(), tests.size(), alpha_tests, per);
-    rep.notes.push_back(b);
-  }
+  TestNominalResiduals(a, incl, cur, ev0, N, alpha_tests, where, &rep);
 
   // 2. Greedy forward selection (audit/model_selection.h).
   const double ln_n = std::log(2.0 * N);
@@ -599,40 +647,8 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
     cur_rms_cv = best.rms_cv;
   }
 
-  // 3. Sizes and sigmas of the final model: cov = s^2 (J^T J)^-1 over the free parameters.
-  const auto evf = a.Evaluate(cur, -1, false);
-  const double s2 = Auditor::Scale2(evf);
-  res.noise_scale = std::sqrt(s2);
-  std::vector<std::vector<double>> sig(cur.p.size());
-  if (cur.NumFree() > 0) {
-    const Eigen::MatrixXd J = a.Jacobian(cur);
-    const std::vector<int> cols = FreeColumns(cur);
-    Eigen::MatrixXd Jf(J.rows(), cols.size());
-    for (size_t c = 0; c < cols.size(); ++c) Jf.col(c) = J.col(cols[c]);
-    const Eigen::MatrixXd C = s2 * (Jf.transpose() * Jf).completeOrthogonalDecomposition().pseudoInverse();
-    int at = 0;
-    for (size_t k = 0; k < cur.p.size(); ++k)
-      for (size_t j = 0; j < cur.p[k].size(); ++j) {
-        sig[k].push_back(cur.held[k][j] ? 0.0 : std::sqrt(std::max(0.0, C(at, at))));
-        if (!cur.held[k][j]) ++at;
-      }
-  }
-  for (auto& ef : rep.effects)
-    for (size_t k = 0; k < cur.ext.size(); ++k) {
-      if (ef.name != Name(cur.ext[k].effect)) continue;
-      const auto names = cur.ext[k].ParameterNames();
-      for (size_t j = 0; j < names.size(); ++j) {
-        if (cur.held[k][j]) continue;
-        ef.parameters.push_back({names[j], cur.p[k][j]});
-        ef.sigma.push_back({names[j], sig[k][j]});
-      }
-    }
-  // A clock_offset later extended to clock_drift is reported once, as clock_drift.
-  const bool drift = cur.Clock() && cur.Clock()->effect == Effect::kClockDrift;
-  if (drift)
-    rep.effects.erase(std::remove_if(rep.effects.begin(), rep.effects.end(),
-                                     [](const AuditEffect& e) { return e.name == "clock_offset"; }),
-                      rep.effects.end());
+  // 3. Sizes and sigmas of the final model.
+  const std::vector<std::vector<double>> sig = SizesOfFinalModel(a, cur, &res);
   res.extensions = cur.ext;
   res.parameters = cur.p;
   res.sigmas = sig;

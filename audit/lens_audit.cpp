@@ -183,6 +183,43 @@ bool LensAuditOptions::IsValid(std::string* why) const {
   return true;
 }
 
+namespace {
+
+// The decision into the report: the named lens model, or the undecided ones.
+void ReportLensDecision(const StepDecision& d, const std::vector<SelectionCandidate>& cands, const std::string& nominal,
+                        LensAuditResult* r_out) {
+  LensAuditResult& r = *r_out;
+  AuditReport& rep = r.report;
+  const LensFit& nom = r.fits[0];
+  const auto effect_of = [&](int ci) {
+    const LensFit& f = r.fits[static_cast<size_t>(ci) + 1];
+    AuditEffect e;
+    e.name = "lens_model";
+    e.where = r.camera;
+    e.labels = {{"lensmodel", f.lensmodel}, {"nominal_lensmodel", nominal}};
+    e.parameters = {{"parameters_added", static_cast<double>(cands[static_cast<size_t>(ci)].k)},
+                    {"rms_px_before", nom.rms_px},
+                    {"rms_px_after", f.rms_px},
+                    {"heldout_loglik_before", nom.heldout_loglik},
+                    {"heldout_loglik_after", f.heldout_loglik}};
+    e.heldout_rms_before = nom.heldout_rms_px;
+    e.heldout_rms_after = f.heldout_rms_px;
+    e.heldout_loglik_gain = cands[static_cast<size_t>(ci)].heldout_gain;
+    e.bic_gain = cands[static_cast<size_t>(ci)].bic_gain;
+    return e;
+  };
+  if (d.outcome == StepOutcome::kNamed) {
+    rep.effects.push_back(effect_of(d.best));
+    r.chosen = d.best + 1;
+  } else if (d.outcome == StepOutcome::kUndecided) {
+    std::vector<std::string> g;
+    for (int i : d.group) g.push_back("lens_model " + r.fits[static_cast<size_t>(i) + 1].lensmodel + " at " + r.camera);
+    rep.undecided.push_back(g);
+  }
+}
+
+}  // namespace
+
 LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAuditOptions& options) {
   std::string why;
   if (!options.IsValid(&why)) Throw("audit lens: ", why);
@@ -350,31 +387,7 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
     t.failed = sc.passes;
     rep.tests.push_back(t);
   }
-  const auto effect_of = [&](int ci) {
-    const LensFit& f = r.fits[static_cast<size_t>(ci) + 1];
-    AuditEffect e;
-    e.name = "lens_model";
-    e.where = r.camera;
-    e.labels = {{"lensmodel", f.lensmodel}, {"nominal_lensmodel", nominal}};
-    e.parameters = {{"parameters_added", static_cast<double>(cands[static_cast<size_t>(ci)].k)},
-                    {"rms_px_before", nom.rms_px},
-                    {"rms_px_after", f.rms_px},
-                    {"heldout_loglik_before", nom.heldout_loglik},
-                    {"heldout_loglik_after", f.heldout_loglik}};
-    e.heldout_rms_before = nom.heldout_rms_px;
-    e.heldout_rms_after = f.heldout_rms_px;
-    e.heldout_loglik_gain = cands[static_cast<size_t>(ci)].heldout_gain;
-    e.bic_gain = cands[static_cast<size_t>(ci)].bic_gain;
-    return e;
-  };
-  if (d.outcome == StepOutcome::kNamed) {
-    rep.effects.push_back(effect_of(d.best));
-    r.chosen = d.best + 1;
-  } else if (d.outcome == StepOutcome::kUndecided) {
-    std::vector<std::string> g;
-    for (int i : d.group) g.push_back("lens_model " + r.fits[static_cast<size_t>(i) + 1].lensmodel + " at " + r.camera);
-    rep.undecided.push_back(g);
-  }
+  ReportLensDecision(d, cands, nominal, &r);
   rep.clean = rep.effects.empty() && rep.undecided.empty();
   for (const LensFit& f : r.fits)
     rep.notes.push_back(f.lensmodel + ": " + std::to_string(f.free_intrinsics) + " free lens parameters, RMS " +
@@ -535,6 +548,27 @@ void WriteLensAuditFiles(const LensAuditResult& r, const std::filesystem::path& 
       CameraModel(f.lensmodel, f.intrinsics, r.width, r.height).WriteCameramodel(d / (r.camera + ".cameramodel"));
     }
   });
+}
+
+void RunLensAuditJob(const LensAuditJob& job, const std::function<void(const std::string&)>& print) {
+  std::string why;
+  if (!job.options.IsValid(&why)) Throw("audit lens: ", why);
+  RequireOutputsSpareInputs({{job.output, "audit lens -o", true}, {job.json, "audit lens --json"}}, {job.model});
+  // Outputs are checked before the work (minutes with a splined candidate).
+  if (!job.output.empty()) RequireReplaceableFolder(job.output, {"report.json"}, "audit lens", "audit lens -o");
+  if (!job.json.empty()) RequireWritableFile(job.json, "audit lens --json");
+  const MrcalOptimizationInputsData data = ReadMrcalOptimizationInputs(job.model);
+  const LensAuditResult r = AuditLens(data, job.options);
+  print(r.report.Text());
+  if (!job.output.empty()) {
+    WriteLensAuditFiles(r, job.output);
+    print("wrote " + job.output.string() + " (report.txt, report.json, residuals.csv, plots/" + r.camera + ".svg" +
+          (r.chosen > 0 ? ", " + r.camera + ".cameramodel" : std::string()) + ")\n");
+  }
+  if (!job.json.empty()) {
+    r.report.WriteJson(job.json);
+    print("wrote " + job.json.string() + "\n");
+  }
 }
 
 }  // namespace mcms

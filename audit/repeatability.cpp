@@ -811,124 +811,16 @@ Table2Prediction PredictLines(const MeasuredReport& R, const MeasuredLines& line
   return T;
 }
 
-}  // namespace
-
-CameraErrorModel CameraErrorModelFromFit(const NoiseModelFit& fit, const std::string& name, const std::string& source) {
-  CameraErrorModel m;
-  m.name = name;
-  m.source = source;
-  m.pixel_noise_scale = fit.scale;
-  m.floor_m = std::abs(fit.floor);
-  m.anisotropy_m = fit.anisotropy.cwiseAbs();
-  return m;
-}
-
-MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLines* lines, const CameraRig& rig,
-                               const PredictPoints& predict, const PredictLab& lab, const MeasuredAnalysisOptions& opt) {
-  MeasuredReport R;
-  R.measured = measured;
-  const bool have_positions =
-      std::all_of(measured.points.begin(), measured.points.end(), [](const MeasuredPoint& p) { return p.mean_rig.has_value(); });
-  PaperLayout layout;
-  layout.first_plane_distance_m = opt.plane_first_distance_m;
-  layout.last_plane_distance_m = opt.plane_last_distance_m;
-  std::ostringstream lt;
-  if (have_positions) {
-    for (const auto& p : measured.points) R.positions_rig.push_back(*p.mean_rig);
-    lt << "point positions: the measured means, taken to be in the rig frame of the mapped rig\n";
-  } else {
-    R.positions_rig = LayoutPositions(measured, layout, rig);
-    lt << "point positions ASSUMED (the table gives none): " << layout.planes << " horizontal planes, plane 1 at "
-       << layout.first_plane_distance_m << " m and plane " << layout.planes << " at " << layout.last_plane_distance_m
-       << " m below the cameras' mean height, evenly spaced; per plane a 3 x 3 grid " << layout.dx_m * 1e3 << " mm apart in x and "
-       << layout.dy_m * 1e3
-       << " mm in y (Table 2's 500 and 400 mm lines) centred under the rig, points numbered around the perimeter from a "
-          "corner (odd = corner), the centre last; the paper's x, y, z are the rig's x, y, z (z vertical)\n";
-  }
-  R.layout_text = lt.str();
-  const NominalAt nominal = Nominal(predict, R.positions_rig, measured.points);
-  R.nominal_sigma = nominal.sigma_rig;
-  R.nominal_trackable = nominal.trackable;
-  R.nominal_border_px = nominal.border_px;
-  R.data = MakeData(measured, nominal, layout.axis_of_paper);
-  R.fit = SelectNoiseModel(R.data);
-
-  // Held out.
-  R.heldout_extended = HeldOutLogLik(R.data, R.fit.effects);
-  NoiseModelFit nom, iso;
-  VarianceData iso_data = R.data;
-  for (auto& v : iso_data.nominal) v = Vec3::Constant(opt.paper_isotropic_sigma_m * opt.paper_isotropic_sigma_m);
-  for (size_t i = 0; i < R.data.size(); ++i) {
-    R.heldout_nominal.push_back(nom.PointLogLik(R.data.nominal[i], R.data.measured[i], R.data.repeats[i]));
-    R.heldout_isotropic.push_back(nom.PointLogLik(iso_data.nominal[i], R.data.measured[i], R.data.repeats[i]));
-  }
-  R.loglik_nominal = Sum(R.heldout_nominal);
-  R.loglik_isotropic = Sum(R.heldout_isotropic);
-  R.heldout_gain = Sum(R.heldout_extended) - R.loglik_nominal;
-  R.heldout_gain_vs_isotropic = Sum(R.heldout_extended) - R.loglik_isotropic;
-
-  // The paper's lab experiment with the fitted camera (and the nominal one beside it).
-  if (opt.lab_seeds > 0 && lab) {
-    const std::vector<PointPrediction> centre = predict({Vec3(0.0, 0.0, 0.5)});
-    if (centre[0].trackable) R.lab = lab(CameraErrorModelFromFit(R.fit, "fitted", "this fit"), centre[0].cov,
-                                   opt.lab_seeds);
-  }
-
-  // How much the conclusion depends on the layout (Table 1 only).
-  if (!have_positions && opt.sensitivity) {
-    std::vector<PaperLayout> variants;
-    PaperLayout v = layout;
-    v.name = "assumed";
-    variants.push_back(v);
-    v = layout, v.name = "planes at 2.2 and 1.2 m (slant range)", v.first_plane_distance_m += 0.2, v.last_plane_distance_m += 0.2;
-    variants.push_back(v);
-    v = layout, v.name = "planes at 2.0 and 1.5 m", v.last_plane_distance_m = 1.5;
-    variants.push_back(v);
-    v = layout, v.name = "points numbered row by row", v.perimeter_numbering = false;
-    variants.push_back(v);
-    v = layout, v.name = "paper y = rig z (vertical), paper z = rig y", v.axis_of_paper[1] = 2, v.axis_of_paper[2] = 1;
-    variants.push_back(v);
-    for (const auto& L : variants) {
-      LayoutResult lr;
-      lr.layout = L.name;
-      const std::vector<Vec3> pos = LayoutPositions(measured, L, rig);
-      const NominalAt n = Nominal(predict, pos, measured.points);
-      const VarianceData d = MakeData(measured, n, L.axis_of_paper);
-      const NoiseModelFit f = SelectNoiseModel(d);
-      const std::vector<double> h = HeldOutLogLik(d, f.effects);
-      double ln = 0, li = 0;
-      for (size_t i = 0; i < d.size(); ++i) {
-        ln += nom.PointLogLik(d.nominal[i], d.measured[i], d.repeats[i]);
-        li += nom.PointLogLik(iso_data.nominal[i], d.measured[i], d.repeats[i]);
-      }
-      lr.effects = f.effects;
-      lr.heldout_gain = Sum(h) - ln;
-      lr.heldout_gain_vs_isotropic = Sum(h) - li;
-      lr.parameters = ParamLine(f);
-      lr.untrackable_nominal = n.untrackable;
-      R.sensitivity.push_back(lr);
-    }
-  }
-
-  // Table 2 predicted from the fit of Table 1, under the assumed line directions and
-  // averaging, and under the alternatives.
-  if (lines) {
-    R.table2 = PredictLines(R, *lines, layout, false, opt.repeats_per_line_end, opt);
-    for (bool swap : {false, true})
-      for (int m : {opt.repeats_per_line_end, 1}) {
-        if (!swap && m == opt.repeats_per_line_end) continue;
-        R.table2_variants.push_back(PredictLines(R, *lines, layout, swap, m, opt));
-      }
-  }
-
-  // The report.
+// The human-readable report of the analysis.
+std::string MeasuredText(const MeasuredReport& R, const MeasuredPoints& measured, const MeasuredLines* lines,
+                         const CameraRig& rig, int untrackable, const MeasuredAnalysisOptions& opt) {
   std::ostringstream o;
   char b[512];
   o << "\nMeasured repeatability (" << measured.source.string() << ", " << measured.points.size() << " points) against the nominal model\n";
   o << R.layout_text;
   o << "nominal model: the mapped rig and pixel noise (" << rig.size() << " cameras), the target at the same orientation\n";
-  if (nominal.untrackable > 0)
-    o << "  " << nominal.untrackable
+  if (untrackable > 0)
+    o << "  " << untrackable
       << " point(s) cannot be tracked by the nominal rig at the assumed position; they take the nearest trackable point's "
          "prediction\n";
   std::snprintf(b, sizeof(b), "  %-6s %5s %9s %9s %9s   %9s %9s %9s   %9s %9s %9s   %6s\n", "point", "plane", "meas_x", "meas_y",
@@ -1080,7 +972,120 @@ MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLin
       o << b;
     }
   }
-  R.text = o.str();
+  return o.str();
+}
+
+}  // namespace
+
+CameraErrorModel CameraErrorModelFromFit(const NoiseModelFit& fit, const std::string& name, const std::string& source) {
+  CameraErrorModel m;
+  m.name = name;
+  m.source = source;
+  m.pixel_noise_scale = fit.scale;
+  m.floor_m = std::abs(fit.floor);
+  m.anisotropy_m = fit.anisotropy.cwiseAbs();
+  return m;
+}
+
+MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLines* lines, const CameraRig& rig,
+                               const PredictPoints& predict, const PredictLab& lab, const MeasuredAnalysisOptions& opt) {
+  MeasuredReport R;
+  R.measured = measured;
+  const bool have_positions =
+      std::all_of(measured.points.begin(), measured.points.end(), [](const MeasuredPoint& p) { return p.mean_rig.has_value(); });
+  PaperLayout layout;
+  layout.first_plane_distance_m = opt.plane_first_distance_m;
+  layout.last_plane_distance_m = opt.plane_last_distance_m;
+  std::ostringstream lt;
+  if (have_positions) {
+    for (const auto& p : measured.points) R.positions_rig.push_back(*p.mean_rig);
+    lt << "point positions: the measured means, taken to be in the rig frame of the mapped rig\n";
+  } else {
+    R.positions_rig = LayoutPositions(measured, layout, rig);
+    lt << "point positions ASSUMED (the table gives none): " << layout.planes << " horizontal planes, plane 1 at "
+       << layout.first_plane_distance_m << " m and plane " << layout.planes << " at " << layout.last_plane_distance_m
+       << " m below the cameras' mean height, evenly spaced; per plane a 3 x 3 grid " << layout.dx_m * 1e3 << " mm apart in x and "
+       << layout.dy_m * 1e3
+       << " mm in y (Table 2's 500 and 400 mm lines) centred under the rig, points numbered around the perimeter from a "
+          "corner (odd = corner), the centre last; the paper's x, y, z are the rig's x, y, z (z vertical)\n";
+  }
+  R.layout_text = lt.str();
+  const NominalAt nominal = Nominal(predict, R.positions_rig, measured.points);
+  R.nominal_sigma = nominal.sigma_rig;
+  R.nominal_trackable = nominal.trackable;
+  R.nominal_border_px = nominal.border_px;
+  R.data = MakeData(measured, nominal, layout.axis_of_paper);
+  R.fit = SelectNoiseModel(R.data);
+
+  // Held out.
+  R.heldout_extended = HeldOutLogLik(R.data, R.fit.effects);
+  NoiseModelFit nom, iso;
+  VarianceData iso_data = R.data;
+  for (auto& v : iso_data.nominal) v = Vec3::Constant(opt.paper_isotropic_sigma_m * opt.paper_isotropic_sigma_m);
+  for (size_t i = 0; i < R.data.size(); ++i) {
+    R.heldout_nominal.push_back(nom.PointLogLik(R.data.nominal[i], R.data.measured[i], R.data.repeats[i]));
+    R.heldout_isotropic.push_back(nom.PointLogLik(iso_data.nominal[i], R.data.measured[i], R.data.repeats[i]));
+  }
+  R.loglik_nominal = Sum(R.heldout_nominal);
+  R.loglik_isotropic = Sum(R.heldout_isotropic);
+  R.heldout_gain = Sum(R.heldout_extended) - R.loglik_nominal;
+  R.heldout_gain_vs_isotropic = Sum(R.heldout_extended) - R.loglik_isotropic;
+
+  // The paper's lab experiment with the fitted camera (and the nominal one beside it).
+  if (opt.lab_seeds > 0 && lab) {
+    const std::vector<PointPrediction> centre = predict({Vec3(0.0, 0.0, 0.5)});
+    if (centre[0].trackable) R.lab = lab(CameraErrorModelFromFit(R.fit, "fitted", "this fit"), centre[0].cov,
+                                   opt.lab_seeds);
+  }
+
+  // How much the conclusion depends on the layout (Table 1 only).
+  if (!have_positions && opt.sensitivity) {
+    std::vector<PaperLayout> variants;
+    PaperLayout v = layout;
+    v.name = "assumed";
+    variants.push_back(v);
+    v = layout, v.name = "planes at 2.2 and 1.2 m (slant range)", v.first_plane_distance_m += 0.2, v.last_plane_distance_m += 0.2;
+    variants.push_back(v);
+    v = layout, v.name = "planes at 2.0 and 1.5 m", v.last_plane_distance_m = 1.5;
+    variants.push_back(v);
+    v = layout, v.name = "points numbered row by row", v.perimeter_numbering = false;
+    variants.push_back(v);
+    v = layout, v.name = "paper y = rig z (vertical), paper z = rig y", v.axis_of_paper[1] = 2, v.axis_of_paper[2] = 1;
+    variants.push_back(v);
+    for (const auto& L : variants) {
+      LayoutResult lr;
+      lr.layout = L.name;
+      const std::vector<Vec3> pos = LayoutPositions(measured, L, rig);
+      const NominalAt n = Nominal(predict, pos, measured.points);
+      const VarianceData d = MakeData(measured, n, L.axis_of_paper);
+      const NoiseModelFit f = SelectNoiseModel(d);
+      const std::vector<double> h = HeldOutLogLik(d, f.effects);
+      double ln = 0, li = 0;
+      for (size_t i = 0; i < d.size(); ++i) {
+        ln += nom.PointLogLik(d.nominal[i], d.measured[i], d.repeats[i]);
+        li += nom.PointLogLik(iso_data.nominal[i], d.measured[i], d.repeats[i]);
+      }
+      lr.effects = f.effects;
+      lr.heldout_gain = Sum(h) - ln;
+      lr.heldout_gain_vs_isotropic = Sum(h) - li;
+      lr.parameters = ParamLine(f);
+      lr.untrackable_nominal = n.untrackable;
+      R.sensitivity.push_back(lr);
+    }
+  }
+
+  // Table 2 predicted from the fit of Table 1, under the assumed line directions and
+  // averaging, and under the alternatives.
+  if (lines) {
+    R.table2 = PredictLines(R, *lines, layout, false, opt.repeats_per_line_end, opt);
+    for (bool swap : {false, true})
+      for (int m : {opt.repeats_per_line_end, 1}) {
+        if (!swap && m == opt.repeats_per_line_end) continue;
+        R.table2_variants.push_back(PredictLines(R, *lines, layout, swap, m, opt));
+      }
+  }
+
+  R.text = MeasuredText(R, measured, lines, rig, nominal.untrackable, opt);
   return R;
 }
 

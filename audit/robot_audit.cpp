@@ -1643,6 +1643,71 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
   return np;
 }
 
+// A physical bound the data push against (a negative compliance or backlash wanted on top
+// of the final model and the whole geometry): said in a note, not named.
+void NoteViolatedBounds(const Problem& pb, const std::vector<Option>& opts, const Identifiable& ident,
+                        const FitResult& fin, double alpha_selection, const RobotAuditOptions& o, AuditReport* rep_out) {
+  AuditReport& rep = *rep_out;
+  const bool has_geometry = Union(fin.free, ident.params).size() == fin.free.size();
+  const FitResult base = has_geometry ? fin : FitProfiled(pb, Union(fin.free, ident.params), fin.theta, fin.noise);
+  std::vector<int> bounded;
+  for (size_t i = 0; i < opts.size(); ++i) {
+    bool b = false, all_free = true;
+    for (int t : opts[i].terms) {
+      b |= std::isfinite(pb.lower[t]);
+      all_free &= std::find(base.free.begin(), base.free.end(), t) != base.free.end();
+    }
+    if (b && !all_free) bounded.push_back(static_cast<int>(i));
+  }
+  std::vector<std::string> ignored;
+  for (const Screened& sc : Screen(pb, base, opts, bounded, o.identifiability_tolerance, &ignored)) {
+    const int k = ParamCount(pb, sc.terms);
+    if (sc.gain < ChiSquareThreshold(k, alpha_selection / std::max<size_t>(1, opts.size()))) continue;
+    int worst = 0;
+    for (int j = 1; j < sc.estimate.size(); ++j)
+      if (sc.estimate[j] / std::max(1e-300, sc.sigma[j]) < sc.estimate[worst] / std::max(1e-300, sc.sigma[worst]))
+        worst = j;
+    if (!(sc.estimate[worst] < -3.0 * sc.sigma[worst])) continue;
+    const Option& op = opts[sc.option];
+    const auto names = op.ext.ParameterNames();
+    const int blk = std::upper_bound(pb.offset.begin(), pb.offset.end(), sc.terms[worst]) - pb.offset.begin() - 1;
+    const int pidx = std::min<int>(sc.terms[worst] - pb.offset[blk], names.size() - 1);
+    char nb[600];
+    std::snprintf(nb, sizeof nb,
+                  "%s: the data ask for a sign no joint can have (%s = %.3g +- %.2g without its bound at 0, "
+                  "likelihood ratio %.1f): held at 0 and not named; a counterbalance spring, masses in the robot "
+                  "file that are too large, or an effect the catalog lacks would do this",
+                  op.key.c_str(), names[pidx].c_str(), sc.estimate[worst], sc.sigma[worst], sc.gain);
+    rep.notes.push_back(nb);
+  }
+}
+
+// The residual without a named finding along its direction, and the finding itself, per
+// measurement against the covariate the effect depends on.
+RobotAuditResult::EffectPlot EffectPlotOf(const Problem& pb, const RobotLog& log, const std::vector<Covariate>& cov,
+                                          const FitResult& fin, const std::string& label, const std::vector<int>& terms,
+                                          const Extension& ext) {
+  RobotAuditResult::EffectPlot pl;
+  pl.effect = label;
+  pl.covariate = CovariateOf(ext, pb.n, log.has_temperature);
+  Eigen::VectorXd th = fin.theta;
+  for (int p : terms) th[p] = pb.theta0[p];
+  Eigen::MatrixXd Rwithout;
+  Exact(pb, th, AllRows(pb), &Rwithout);
+  const Covariate* cv = nullptr;
+  for (const auto& c : cov)
+    if (c.name == pl.covariate) cv = &c;
+  for (int i = 0; i < pb.N; ++i) {
+    const Vec3 d = (Rwithout.row(i).leftCols(3) - fin.R.row(i).leftCols(3)).transpose();
+    const double nd = d.norm();
+    const Vec3 u = nd > 0 ? Vec3(d / nd) : Vec3::UnitX();
+    pl.x.push_back(cv ? cv->v[i] : log.rows[i].time_s);
+    pl.residual_before.push_back(Rwithout.row(i).leftCols(3).dot(u.transpose()));
+    pl.effect_size.push_back(nd);
+  }
+  return pl;
+}
+
 }  // namespace
 
 // Measured positions in another unit than metres (millimetres under x_m headers, say) or a
@@ -1705,7 +1770,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     return b;
   }();
   const FitResult nominal = FitModel(pb, base_free, pb.theta0, noise0);
-  const int N = pb.N, n = pb.n;
+  const int N = pb.N;
   const double logN = std::log(static_cast<double>(N));
   rep.nominal_n = static_cast<long>(N) * pb.m;
   const std::vector<Covariate> cov = Covariates(robot, log, pb);
@@ -1778,42 +1843,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     }
   }
   fin = Refit(TermsOf([](const Finding&) { return true; }));
-  // A physical bound the data push against (a negative compliance or backlash wanted on
-  // top of the final model and the whole geometry): said, not named.
-  {
-    const bool has_geometry = Union(fin.free, ident.params).size() == fin.free.size();
-    const FitResult base = has_geometry ? fin : FitProfiled(pb, Union(fin.free, ident.params), fin.theta, fin.noise);
-    std::vector<int> bounded;
-    for (size_t i = 0; i < opts.size(); ++i) {
-      bool b = false, all_free = true;
-      for (int t : opts[i].terms) {
-        b |= std::isfinite(pb.lower[t]);
-        all_free &= std::find(base.free.begin(), base.free.end(), t) != base.free.end();
-      }
-      if (b && !all_free) bounded.push_back(static_cast<int>(i));
-    }
-    std::vector<std::string> ignored;
-    for (const Screened& sc : Screen(pb, base, opts, bounded, o.identifiability_tolerance, &ignored)) {
-      const int k = ParamCount(pb, sc.terms);
-      if (sc.gain < ChiSquareThreshold(k, alpha_selection / std::max<size_t>(1, opts.size()))) continue;
-      int worst = 0;
-      for (int j = 1; j < sc.estimate.size(); ++j)
-        if (sc.estimate[j] / std::max(1e-300, sc.sigma[j]) < sc.estimate[worst] / std::max(1e-300, sc.sigma[worst]))
-          worst = j;
-      if (!(sc.estimate[worst] < -3.0 * sc.sigma[worst])) continue;
-      const Option& op = opts[sc.option];
-      const auto names = op.ext.ParameterNames();
-      const int blk = std::upper_bound(pb.offset.begin(), pb.offset.end(), sc.terms[worst]) - pb.offset.begin() - 1;
-      const int pidx = std::min<int>(sc.terms[worst] - pb.offset[blk], names.size() - 1);
-      char nb[600];
-      std::snprintf(nb, sizeof nb,
-                    "%s: the data ask for a sign no joint can have (%s = %.3g +- %.2g without its bound at 0, "
-                    "likelihood ratio %.1f): held at 0 and not named; a counterbalance spring, masses in the robot "
-                    "file that are too large, or an effect the catalog lacks would do this",
-                    op.key.c_str(), names[pidx].c_str(), sc.estimate[worst], sc.sigma[worst], sc.gain);
-      rep.notes.push_back(nb);
-    }
-  }
+  NoteViolatedBounds(pb, opts, ident, fin, alpha_selection, o, &rep);
 
   // 4. The report.
   std::vector<Extension> named;
@@ -1895,31 +1925,10 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   result.extended = ToFit(pb, fin);
   result.extended_robot = ExtendedRobot(pb, fin, &rep.notes, named);
 
-  // Plots: the residual without each named finding along its direction, and the finding.
-  const auto Plot = [&](const std::string& label, const std::vector<int>& terms, const Extension& ext) {
-    RobotAuditResult::EffectPlot pl;
-    pl.effect = label;
-    pl.covariate = CovariateOf(ext, n, log.has_temperature);
-    Eigen::VectorXd th = fin.theta;
-    for (int p : terms) th[p] = pb.theta0[p];
-    Eigen::MatrixXd Rwithout;
-    Exact(pb, th, AllRows(pb), &Rwithout);
-    const Covariate* cv = nullptr;
-    for (const auto& c : cov)
-      if (c.name == pl.covariate) cv = &c;
-    for (int i = 0; i < N; ++i) {
-      const Vec3 d = (Rwithout.row(i).leftCols(3) - fin.R.row(i).leftCols(3)).transpose();
-      const double nd = d.norm();
-      const Vec3 u = nd > 0 ? Vec3(d / nd) : Vec3::UnitX();
-      pl.x.push_back(cv ? cv->v[i] : log.rows[i].time_s);
-      pl.residual_before.push_back(Rwithout.row(i).leftCols(3).dot(u.transpose()));
-      pl.effect_size.push_back(nd);
-    }
-    result.plots.push_back(pl);
-  };
   for (const Finding& f : sel.findings) {
     if (f.dropped || f.undecided || (geometry_named && IsSingle(f))) continue;
-    Plot(opts[f.option].key, IsWhole(f) ? ident.params : f.terms, opts[f.option].ext);
+    result.plots.push_back(EffectPlotOf(pb, log, cov, fin, opts[f.option].key, IsWhole(f) ? ident.params : f.terms,
+                                        opts[f.option].ext));
   }
   return result;
 }
@@ -1948,6 +1957,8 @@ void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& r
   });
 }
 std::string RunRobotAuditJob(const RobotAuditJob& job) {
+  RequireOutputsSpareInputs({{job.output_dir, "audit robot -o", true}, {job.json, "audit robot --json"}},
+                            {job.log, job.robot});
   if (!job.output_dir.empty()) RequireReplaceableFolder(job.output_dir, {"report.json"}, "audit robot", "audit robot -o");
   if (!job.json.empty()) RequireWritableFile(job.json, "audit robot --json");
   const RobotModel robot = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot);

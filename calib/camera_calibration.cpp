@@ -82,8 +82,12 @@ std::vector<cv::Point2f> CvImage(const BoardObservation& o) {
   return v;
 }
 
-// Intrinsics of one camera from OpenCV: a 4-coefficient fit first (robust for any
-// lens), then the model's full set starting from it.
+// Intrinsics of one camera from OpenCV: a 4-coefficient fit (robust for any lens);
+// the model's further coefficients start at zero and are left to the joint
+// least-squares refinement. A second, full-model cv::calibrateCamera is not run: on
+// few views its rational / thin-prism fit is ill-conditioned and its result then
+// depends on the heap layout (differences of 1e-10 that the refinement amplifies),
+// so the same data would not always give the same calibration.
 std::vector<double> InitIntrinsics(const std::vector<const BoardObservation*>& obs, int w, int h,
                                    const LensSupport& lens, int max_views) {
   std::vector<std::vector<cv::Point3f>> object;
@@ -99,17 +103,9 @@ std::vector<double> InitIntrinsics(const std::vector<const BoardObservation*>& o
   const cv::TermCriteria term(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-10);
   cv::calibrateCamera(object, image, cv::Size(w, h), K, D, rvecs, tvecs,
                       lens.num_distortions == 0 ? lens.cv_flags : cv::CALIB_FIX_K3, term);
-  if (lens.num_distortions > 4) {
-    D = D.reshape(1, 1);
-    cv::Mat D_full = cv::Mat::zeros(1, lens.num_distortions, CV_64F);
-    for (int i = 0; i < std::min<int>(4, D.cols); ++i) D_full.at<double>(0, i) = D.at<double>(0, i);
-    D = D_full;
-    cv::calibrateCamera(object, image, cv::Size(w, h), K, D, rvecs, tvecs,
-                        lens.cv_flags | cv::CALIB_USE_INTRINSIC_GUESS, term);
-  }
   std::vector<double> intr = {K.at<double>(0, 0), K.at<double>(1, 1), K.at<double>(0, 2), K.at<double>(1, 2)};
   D = D.reshape(1, 1);
-  for (int i = 0; i < lens.num_distortions; ++i) intr.push_back(i < D.cols ? D.at<double>(0, i) : 0.0);
+  for (int i = 0; i < lens.num_distortions; ++i) intr.push_back(i < 4 && i < D.cols ? D.at<double>(0, i) : 0.0);
   return intr;
 }
 

@@ -13,9 +13,20 @@
 #include "calib/mrcal_optimization_inputs.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 
 namespace mcms {
 namespace {
+
+// A camera is named by its image folder ("left/" names it left; cam<k> when the folder has
+// no name, e.g. ".").
+std::string CameraNameOfFolder(const std::filesystem::path& dir, size_t c) {
+  std::filesystem::path p = dir.lexically_normal();
+  if (!p.has_filename()) p = p.parent_path();
+  std::string name = p.filename().string();
+  if (name.empty() || name == ".") name = "cam" + std::to_string(c);
+  return name;
+}
 
 namespace fs = std::filesystem;
 
@@ -65,9 +76,7 @@ Detected DetectBoards(const RigCalibrationJob& a, const CalibrationBoard& board)
     if (images[c].empty())
       Throw("image folder ", dir.string(), " holds no images (.png, .jpg, .bmp, .tif, .pgm)");
     for (const auto& p : images[c]) stems.insert(p.stem().string());
-    std::string name = fs::path(dir).lexically_normal().filename().string();
-    if (name.empty() || name == ".") name = "cam" + std::to_string(c);
-    input.camera_names.push_back(name);
+    input.camera_names.push_back(CameraNameOfFolder(dir, c));
   }
   d.frame_names.assign(stems.begin(), stems.end());
   size_t total = 0;
@@ -215,7 +224,17 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
   if (!a.quiet) options.log = [](const std::string& s) { std::fprintf(stderr, "calib-rig: %s\n", s.c_str()); };
   std::string why;
   if (!options.IsValid(&why)) Throw("calib-rig options: ", why);
-  // Refuse an unusable output folder before detection, not after the solve.
+  // Refuse an unusable output folder before detection, not after the solve; and one whose
+  // rig.yaml would overwrite an input.
+  std::vector<fs::path> inputs = a.folders;
+  inputs.push_back(a.board);
+  std::vector<RunOutput> outputs{{a.output / "rig.yaml", "calib-rig -o"}};
+  for (size_t c = 0; c < a.folders.size(); ++c)
+    for (const std::string& file : {"residuals-" + CameraNameOfFolder(a.folders[c], c) + ".svg",
+                                    CameraNameOfFolder(a.folders[c], c) + ".cameramodel",
+                                    CameraNameOfFolder(a.folders[c], c) + ".yml"})
+      outputs.push_back({a.output / file, "calib-rig -o"});
+  RequireOutputsSpareInputs(outputs, inputs);
   RequireWritableFolder(a.output, "calib-rig -o");
 
   const Detected d = DetectBoards(a, board);

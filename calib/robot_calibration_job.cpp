@@ -8,6 +8,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "core/svg_plot.h"
+#include "core/output_folder.h"
 
 namespace mcms {
 
@@ -52,9 +53,14 @@ std::string ErrorStatsText(const ErrorStats& s) {
 
 std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   if (job.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml");
+  // Refuse outputs that are inputs, and unwritable outputs, before the solve, not after it.
+  RequireOutputsSpareInputs({{job.output, "calib-robot -o"},
+                             {job.report, "calib-robot --report"},
+                             {job.plot, "calib-robot --plot"},
+                             {job.plot.empty() ? std::filesystem::path() : JointPlotPath(job.plot), "calib-robot --plot"}},
+                            {job.measurements, job.robot});
   RobotModel robot = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot);
   if (job.tool_guess) robot.SetT_flange_tool(*job.tool_guess);
-  // Refuse unwritable outputs before the solve, not after it.
   RequireWritableFile(job.output, "-o");
   if (!job.report.empty()) RequireWritableFile(job.report, "--report");
   if (!job.plot.empty()) {

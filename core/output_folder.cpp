@@ -55,4 +55,62 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   }
 }
 
+namespace {
+
+namespace fs = std::filesystem;
+
+// The absolute, normal form of a path with its symlinks resolved as far as it exists.
+fs::path Resolved(const fs::path& p) {
+  std::error_code ec;
+  fs::path r = fs::weakly_canonical(fs::absolute(p, ec), ec);
+  if (ec) r = fs::absolute(p, ec).lexically_normal();
+  if (!r.has_filename() && r.has_parent_path()) r = r.parent_path();
+  return r;
+}
+
+// Whether `inner` is `outer` or lies inside it (both resolved).
+bool Within(const fs::path& inner, const fs::path& outer) {
+  auto i = inner.begin();
+  for (auto o = outer.begin(); o != outer.end(); ++o, ++i)
+    if (i == inner.end() || *i != *o) return false;
+  return true;
+}
+
+bool SameFile(const fs::path& a, const fs::path& b) {
+  std::error_code ec;
+  return fs::exists(a, ec) && fs::exists(b, ec) && fs::equivalent(a, b, ec) && !ec;
+}
+
+}  // namespace
+
+void RequireOutputsSpareInputs(const std::vector<RunOutput>& outputs, const std::vector<fs::path>& inputs) {
+  std::error_code ec;
+  for (const RunOutput& out : outputs) {
+    if (out.path.empty()) continue;
+    const fs::path o = Resolved(out.path);
+    for (const fs::path& in : inputs) {
+      if (in.empty() || !fs::exists(in, ec)) continue;
+      const fs::path i = Resolved(in);
+      const bool in_folder = fs::is_directory(in, ec);
+      const std::string named = "; it would overwrite an input of this run: choose another output";
+      if (!out.folder) {
+        if (SameFile(out.path, in) || o == i)
+          Throw(out.what, " ", out.path.string(), " is the input ", in.string(), named);
+        if (in_folder && Within(o, i) && fs::exists(out.path, ec) && !fs::is_directory(out.path, ec))
+          Throw(out.what, " ", out.path.string(), " is a file inside the input folder ", in.string(), named);
+        continue;
+      }
+      if (SameFile(out.path, in) || o == i)
+        Throw(out.what, " ", out.path.string(), " is the input ", in.string(),
+              "; the output folder would replace it: choose another output folder");
+      if (Within(i, o) && fs::exists(out.path, ec))
+        Throw(out.what, " ", out.path.string(), " holds the input ", in.string(),
+              "; writing the output folder would remove it: choose another output folder");
+      if (in_folder && Within(o, i) && fs::exists(out.path, ec))
+        Throw(out.what, " ", out.path.string(), " lies inside the input folder ", in.string(),
+              " and exists; replacing it would change what this run reads: choose another output folder");
+    }
+  }
+}
+
 }  // namespace mcms

@@ -22,4 +22,22 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what);
 
+// An output of a run, to be checked against the run's inputs before anything is written.
+struct RunOutput {
+  std::filesystem::path path;
+  std::string what;     // how the user named it, e.g. "fuse -o", "audit robot --json"
+  bool folder = false;  // a folder written (or replaced) as a whole
+};
+
+// Never lose a user's data: InputError naming the output and the input (and nothing
+// written) when an output would overwrite or remove an input of the same run:
+//  - an output file that is an input file (the same file by device and inode where it
+//    exists, so a symlink or another spelling of the path is caught) or an existing file
+//    inside an input folder;
+//  - an output folder (replaced as a whole) that is an input, holds one, or lies inside an
+//    input folder where it would replace what the run reads.
+// Empty output paths are skipped; inputs that do not exist are ignored (the reader names
+// them).
+void RequireOutputsSpareInputs(const std::vector<RunOutput>& outputs, const std::vector<std::filesystem::path>& inputs);
+
 }  // namespace mcms

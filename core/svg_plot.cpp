@@ -52,6 +52,28 @@ std::vector<double> LogTicks(double lo, double hi) {
 }
 }  // namespace
 
+namespace {
+
+// One legend entry: the series' marker (a dot or a line) and its label at (x, y).
+struct Entry {
+  double x, y;
+  const PlotSeries* s;
+};
+std::string LegendEntrySvg(double x, double y, const PlotSeries& s) {
+  char buf[320];
+  std::string o;
+  if (s.points)
+    std::snprintf(buf, sizeof(buf), "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/>", x + 14, y - 4, s.color.c_str());
+  else
+    std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='%s' stroke-width='2'/>", x + 2,
+                  y - 4, x + 26, y - 4, s.color.c_str());
+  o += buf;
+  std::snprintf(buf, sizeof(buf), "<text x='%.1f' y='%.1f'>", x + 32, y);
+  return o + buf + Escape(s.label) + "</text>\n";
+}
+
+}  // namespace
+
 std::string Plot::ToSvg(int W, int H) const {
   auto usable_y = [&](double v) { return std::isfinite(v) && (!log_y || v > 0); };
   double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
@@ -114,10 +136,6 @@ std::string Plot::ToSvg(int W, int H) const {
   }
   // The legend gets its own band under the title: rows of entries, wrapped to the width.
   const double L = 80, R = 24, B = 55;
-  struct Entry {
-    double x, y;
-    const PlotSeries* s;
-  };
   std::vector<Entry> entries;
   double lx = L, ly = 44;
   for (const auto& s : series) {
@@ -241,16 +259,7 @@ std::string Plot::ToSvg(int W, int H) const {
     }
   }
   o << "</g>\n";
-  for (const auto& e : entries) {
-    if (e.s->points)
-      std::snprintf(buf, sizeof(buf), "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/>", e.x + 14, e.y - 4, e.s->color.c_str());
-    else
-      std::snprintf(buf, sizeof(buf), "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='%s' stroke-width='2'/>", e.x + 2,
-                    e.y - 4, e.x + 26, e.y - 4, e.s->color.c_str());
-    o << buf;
-    std::snprintf(buf, sizeof(buf), "<text x='%.1f' y='%.1f'>", e.x + 32, e.y);
-    o << buf << Escape(e.s->label) << "</text>\n";
-  }
+  for (const auto& e : entries) o << LegendEntrySvg(e.x, e.y, *e.s);
   o << "</svg>\n";
   return o.str();
 }

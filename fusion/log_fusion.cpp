@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 
 namespace mcms {
 
@@ -155,6 +156,7 @@ void DropOutOfRangeTilts(const Inclinometer& inc, InclinometerLog* log, std::vec
 }  // namespace
 
 FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
+  RequireOutputsSpareInputs({{r.output, "fuse -o"}}, {r.tracker, r.robot, r.inclinometer, r.setup, r.windows});
   FuseFilesResult out;
   out.setup = ReadFusionSetup(r.setup);
   out.logs.tracker = ReadTrackerLog(r.tracker);

@@ -11,6 +11,7 @@
 #include "core/io.h"
 #include "core/random.h"
 #include "core/svg_plot.h"
+#include "core/output_folder.h"
 #include "fusion/log_fusion.h"
 #include "jobs/evaluation.h"
 #include "synthetic/lab_scenario.h"
@@ -151,6 +152,9 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   const LabScenario lab = MakeLabScenario(lo);
   const Scenario& sc = lab.vision;
   const fs::path& out = o.out;
+  std::error_code ec;
+  const bool model_file = std::filesystem::is_regular_file(o.camera_model.name, ec);
+  RequireOutputsSpareInputs({{out, "demo -o", true}}, {model_file ? fs::path(o.camera_model.name) : fs::path()});
   RequireWritableFolder(out, "demo -o");  // before minutes of simulation, not after
   const int threads = o.threads > 0 ? o.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   print(Format("mcms demo: the paper's lab experiment: %d points on a %.0f mm sphere, %.0f s dwell, %zu cameras at "

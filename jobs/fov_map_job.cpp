@@ -36,6 +36,8 @@ MeasuredReport AnalyseMeasuredAgainstRig(const MeasuredPoints& measured, const M
 void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
   if (a.output.empty()) Throw("fov-map: give an output folder with -o DIR");
   const fs::path out = a.output;
+  RequireOutputsSpareInputs({{out, "fov-map -o", true}, {a.json, "fov-map --json"}},
+                            {a.measured, a.lines, a.reference, a.scenario, a.rig, a.target});
   RequireWritableFolder(out, "fov-map -o");
   RequireReplaceableFolder(fs::absolute(out).lexically_normal(), kFovMapMarkers, "fov-map", "fov-map -o");
   if (!a.json.empty()) RequireWritableFile(a.json, "fov-map --json");

@@ -19,6 +19,7 @@
 #include "core/pose_math.h"
 #include "core/statistics.h"
 #include "core/svg_plot.h"
+#include "core/output_folder.h"
 
 namespace mcms {
 
@@ -558,18 +559,20 @@ const char* kScript = R"(window.addEventListener('load', function () {
 
 }  // namespace
 
-std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents* contents) {
-  std::string why;
-  if (!options.IsValid(&why)) Throw("mcms report: ", why);
-  const fs::path& dir = options.dir;
+// The folder a report is made of: it exists and is a folder.
+void RequireReportFolder(const fs::path& dir) {
   std::error_code ec;
   if (!fs::exists(dir, ec)) Throw("mcms report DIR: ", dir.string(), " does not exist; expected the output folder of an mcms command");
   if (!fs::is_directory(dir, ec))
     Throw("mcms report DIR: ", dir.string(), " is not a folder; expected the output folder of an mcms command");
+}
 
-  // The folder's files, in name order; subfolders are counted.
-  std::vector<File> files;
-  std::vector<std::pair<std::string, size_t>> folders;
+// The files of an output folder, in name order, and its subfolders with their file counts;
+// hidden files, temporaries of an atomic write and earlier HTML pages left out.
+void ListFolder(const fs::path& dir, std::vector<File>* files_out, std::vector<std::pair<std::string, size_t>>* folders_out) {
+  std::vector<File>& files = *files_out;
+  std::vector<std::pair<std::string, size_t>>& folders = *folders_out;
+  std::error_code ec;
   fs::directory_iterator it(dir, ec);
   if (ec) Throw("mcms report DIR: cannot read the folder ", dir.string(), ": ", ec.message());
   for (const auto& e : it) {
@@ -592,15 +595,25 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   std::sort(files.begin(), files.end(), [](const File& a, const File& b) { return a.name < b.name; });
   std::sort(folders.begin(), folders.end());
 
+}
+
+std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents* contents) {
+  std::string why;
+  if (!options.IsValid(&why)) Throw("mcms report: ", why);
+  const fs::path& dir = options.dir;
+  RequireReportFolder(dir);
+  std::error_code ec;
+  std::vector<File> files;  // the folder's files in name order, and its subfolders counted
+  std::vector<std::pair<std::string, size_t>> folders;
+  ListFolder(dir, &files, &folders);
   HtmlReportContents c;
   std::vector<const File*> svgs, csvs, reports, inputs, others;
   for (const auto& f : files) {
     const std::string ext = Lower(f.path.extension().string());
-    if (ext == ".svg") svgs.push_back(&f);
-    else if (ext == ".csv") csvs.push_back(&f);
-    else if (ext == ".txt" || ext == ".md" || ext == ".log") reports.push_back(&f);
-    else if (ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel") inputs.push_back(&f);
-    else others.push_back(&f);
+    (ext == ".svg" ? svgs : ext == ".csv" ? csvs : ext == ".txt" || ext == ".md" || ext == ".log" ? reports
+     : ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel"                   ? inputs
+                                                                                                    : others)
+        .push_back(&f);
   }
   if (svgs.empty() && csvs.empty() && reports.empty() && inputs.empty())
     Throw("mcms report DIR: ", dir.string(),
@@ -784,6 +797,13 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
 }
 
 HtmlReportContents WriteHtmlReport(const HtmlReportOptions& options, const fs::path& output) {
+  // The page reads every file of the folder but earlier pages: none may be the output.
+  std::vector<File> files;
+  std::vector<std::pair<std::string, size_t>> folders;
+  if (std::filesystem::is_directory(options.dir)) ListFolder(options.dir, &files, &folders);
+  std::vector<fs::path> inputs;
+  for (const File& f : files) inputs.push_back(f.path);
+  RequireOutputsSpareInputs({{output, "mcms report -o"}}, inputs);
   RequireWritableFile(output, "mcms report -o");
   HtmlReportContents c;
   const std::string page = BuildHtmlReport(options, &c);

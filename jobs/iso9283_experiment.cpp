@@ -3,6 +3,7 @@
 #include <numbers>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <cstdio>
 #include <set>
 
@@ -245,6 +246,64 @@ bool Iso9283ExperimentOptions::IsValid(std::string* why) const {
   return true;
 }
 
+namespace {
+
+// The path from `from` to `to` (rig frame) at the commanded orientation: the model's joints
+// at dense samples (overshooting both ends a little), run o.path_runs times with fresh
+// repeatability noise per sample; the attained tool positions per run.
+std::vector<std::vector<Vec3>> RunPath(
+    const Iso9283ExperimentOptions& o, const Kinematics& model, const Kinematics& truth, Eigen::VectorXd seed,
+    const Mat3& R_cmd, const Vec3& from, const Vec3& to,
+    const std::function<Eigen::VectorXd(const std::optional<Eigen::VectorXd>&, const std::string&, const Pose&)>& require,
+    Rng& crng) {
+  const int nj = model.robot.NumJoints();
+  const int samples = 4 * (o.path_points - 1) + 1;
+  std::vector<Eigen::VectorXd> q_path;
+  for (int s = -2; s <= samples + 1; ++s) {
+    const double u = (1 + 2 * kPathOvershoot) * s / (samples - 1) - kPathOvershoot;
+    const Pose T{R_cmd, (1 - u) * from + u * to};
+    seed = require(model.Ik(T, seed), "path point", T);
+    q_path.push_back(seed);
+  }
+  std::vector<std::vector<Vec3>> runs;
+  for (int r = 0; r < o.path_runs; ++r) {
+    std::vector<Vec3> run;
+    for (const auto& q : q_path) run.push_back(truth.Tool(q + JointNoise(crng, nj, o.repeatability_joint_sigma_rad)).t);
+    runs.push_back(run);
+  }
+  return runs;
+}
+
+// The true robot: every DH parameter off by a signed uniform draw within the options'
+// bounds, the tool and the base off, and an unmodelled periodic joint error (a gear).
+Kinematics TrueRobot(const Kinematics& nominal, const Iso9283ExperimentOptions& o, Rng& rng) {
+  const int nj = nominal.robot.NumJoints();
+  Kinematics truth = nominal;
+  std::vector<Joint> joints = nominal.robot.Joints();
+  for (Joint& j : joints) {
+    j.theta_offset += SignedUniform(rng, o.dh_angle_error_min_rad, o.dh_angle_error_max_rad);
+    j.d += SignedUniform(rng, o.dh_length_error_min_m, o.dh_length_error_max_m);
+    j.a += SignedUniform(rng, o.dh_length_error_min_m, o.dh_length_error_max_m);
+    j.alpha += SignedUniform(rng, o.dh_angle_error_min_rad, o.dh_angle_error_max_rad);
+  }
+  const Pose tool_error = RandomError(rng, o.tool_error_m, o.tool_error_rad);
+  const Pose base_error = RandomError(rng, o.base_error_m, o.base_error_rad);
+  const Pose& ft = nominal.robot.T_flange_tool();
+  truth.robot = RobotModel(nominal.robot.Name() + " (true)", nominal.robot.Convention(), joints,
+                           Pose{tool_error.R * ft.R, ft.t + tool_error.t});
+  truth.T_rig_base = Pose{base_error.R * nominal.T_rig_base.R, nominal.T_rig_base.t + base_error.t};
+  truth.gear_amplitude.resize(nj);
+  truth.gear_phase.resize(nj);
+  for (int j = 0; j < nj; ++j) {
+    truth.gear_amplitude[j] = o.unmodelled_joint_error_rad;
+    truth.gear_phase[j] = rng.Uniform(0, 2 * std::numbers::pi);
+  }
+  truth.gear_period = o.unmodelled_joint_error_period_rad;
+  return truth;
+}
+
+}  // namespace
+
 Iso9283Experiment RunIso9283Experiment(const Iso9283ExperimentOptions& o) {
   std::string why;
   if (!o.IsValid(&why)) Throw("iso9283 experiment options: ", why);
@@ -265,29 +324,7 @@ Iso9283Experiment RunIso9283Experiment(const Iso9283ExperimentOptions& o) {
       o.repeatability_joint_sigma_rad * o.repeatability_joint_sigma_rad * Eigen::MatrixXd::Identity(nj, nj);
 
   // The true robot.
-  Kinematics truth = nominal;
-  {
-    std::vector<Joint> joints = nominal.robot.Joints();
-    for (Joint& j : joints) {
-      j.theta_offset += SignedUniform(rng, o.dh_angle_error_min_rad, o.dh_angle_error_max_rad);
-      j.d += SignedUniform(rng, o.dh_length_error_min_m, o.dh_length_error_max_m);
-      j.a += SignedUniform(rng, o.dh_length_error_min_m, o.dh_length_error_max_m);
-      j.alpha += SignedUniform(rng, o.dh_angle_error_min_rad, o.dh_angle_error_max_rad);
-    }
-    const Pose tool_error = RandomError(rng, o.tool_error_m, o.tool_error_rad);
-    const Pose base_error = RandomError(rng, o.base_error_m, o.base_error_rad);
-    const Pose& ft = nominal.robot.T_flange_tool();
-    truth.robot = RobotModel(nominal.robot.Name() + " (true)", nominal.robot.Convention(), joints,
-                             Pose{tool_error.R * ft.R, ft.t + tool_error.t});
-    truth.T_rig_base = Pose{base_error.R * nominal.T_rig_base.R, nominal.T_rig_base.t + base_error.t};
-    truth.gear_amplitude.resize(nj);
-    truth.gear_phase.resize(nj);
-    for (int j = 0; j < nj; ++j) {
-      truth.gear_amplitude[j] = o.unmodelled_joint_error_rad;
-      truth.gear_phase[j] = rng.Uniform(0, 2 * std::numbers::pi);
-    }
-    truth.gear_period = o.unmodelled_joint_error_period_rad;
-  }
+  const Kinematics truth = TrueRobot(nominal, o, rng);
 
   // The ISO cube's poses, flange z down (the usual tool orientation).
   Mat3 R_down;
@@ -452,21 +489,8 @@ Iso9283Experiment RunIso9283Experiment(const Iso9283ExperimentOptions& o) {
       c.path_attained = ex.conditions[1].path_attained;
       c.path_note = "path run with the calibrated model, no correction (as after calibration)";
     } else {
-      const int samples = 4 * (o.path_points - 1) + 1;
-      std::vector<Eigen::VectorXd> q_path;
-      Eigen::VectorXd seed = q_cmd[1];
-      for (int s = -2; s <= samples + 1; ++s) {
-        const double u = (1 + 2 * kPathOvershoot) * s / (samples - 1) - kPathOvershoot;
-        const Pose T{R_cmd, (1 - u) * ex.commanded[1].t + u * ex.commanded[3].t};
-        seed = require(model.Ik(T, seed), "path point", T);
-        q_path.push_back(seed);
-      }
-      std::vector<std::vector<Vec3>> runs;
-      for (int r = 0; r < o.path_runs; ++r) {
-        std::vector<Vec3> run;
-        for (const auto& q : q_path) run.push_back(truth.Tool(q + JointNoise(crng, nj, o.repeatability_joint_sigma_rad)).t);
-        runs.push_back(run);
-      }
+      std::vector<std::vector<Vec3>> runs = RunPath(o, model, truth, q_cmd[1], R_cmd, ex.commanded[1].t,
+                                                    ex.commanded[3].t, require, crng);
       c.path = PathAccuracyRepeatability(ex.path_commanded, runs);
       c.path_attained = std::move(runs);
     }

@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "tracking/sequence.h"
 
 namespace mcms {
@@ -105,6 +106,8 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
     const fs::path t = dir / "truth" / "poses.csv";
     res.truth = fs::exists(t) ? t.string() : std::string();
   }
+  RequireOutputsSpareInputs({{res.output, in.output_what}},
+                            {res.images, rig_file, target_file, frames, fs::path(res.truth)});
   RequireWritableFile(res.output, in.output_what);  // before the sequence, not after it
 
   const CameraRig rig = CameraRig::Read(rig_file);

@@ -13,7 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
-#include "model/kinematics.h"
+#include "model/joint.h"
 
 namespace mcms {
 

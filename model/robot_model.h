@@ -19,56 +19,9 @@
 #include <Eigen/Core>
 
 #include "core/pose_math.h"
+#include "model/joint.h"
 
 namespace mcms {
-
-// Which DH convention the link transforms follow.
-//  kStandard (Denavit-Hartenberg 1955, as in Spong): link i is
-//      T_{i-1,i} = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i),
-//    joint i turns about the z axis of frame i-1.
-//  kModified (Craig 1986): link i is
-//      T_{i-1,i} = Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i),
-//    where (alpha_i, a_i) here are Craig's alpha_{i-1}, a_{i-1} stored with joint i;
-//    joint i turns about the z axis of frame i.
-// In both, the last link frame n is the flange.
-enum class DhConvention { kStandard, kModified };
-
-enum class JointType { kRevolute, kPrismatic };
-
-struct Joint {
-  std::string name;
-  JointType type = JointType::kRevolute;
-  // DH parameters of the link transform. The joint value q adds to theta_offset for a
-  // revolute joint (theta = q + theta_offset) and to d for a prismatic one (d = q + d).
-  double a = 0.0;             // m
-  double alpha = 0.0;         // rad
-  double d = 0.0;             // m
-  double theta_offset = 0.0;  // rad
-  // Limits on the joint value q (rad or m), lower <= q <= upper.
-  double lower = -std::numeric_limits<double>::infinity();
-  double upper = std::numeric_limits<double>::infinity();
-  // Standard deviation of the encoder reading of q (rad or m); 0 = noise-free.
-  double encoder_sigma = 0.0;
-  // Error motion of a revolute joint (ISO 230-7's "error motion of a rotary axis": how
-  // the moving link departs from a perfect rotation as a function of the angle): the
-  // small transform E(q) = [Exp(xi_rot(q)), xi_pos(q)] with
-  //     xi(q) = sum_h  sin(h q) error_motion_sin[h-1] + cos(h q) error_motion_cos[h-1],
-  // xi = [rx, ry, rz, x, y, z] (rad, m) in the joint's fixed axis frame (z = the joint
-  // axis, attached to the preceding link): rx, ry are tilt error motion, rz angular
-  // positioning error, x, y radial and z axial error motion. It is applied just before the
-  // joint's rotation: standard DH  E(q) Rz(theta) Tz(d) Tx(a) Rx(alpha),
-  //                  modified DH  Rx(alpha) Tx(a) E(q) Rz(theta) Tz(d).
-  // The constant (h = 0) part is not here: the DH table holds it. Both lists have the same
-  // length (the number of harmonics); empty = a perfect rotation. Not for prismatic joints.
-  std::vector<Vec6> error_motion_sin, error_motion_cos;
-  int Harmonics() const { return static_cast<int>(error_motion_sin.size()); }
-  // Mass of the link this joint moves (link i, whose DH frame is frame i) and its centre
-  // of mass in frame i (m), from CAD or a data sheet. NaN = not given: a robot gives a
-  // mass for every joint or for none (RobotModel::HasMasses). Used for the gravity torque
-  // that deflects compliant joints (model/extensions.h GravityTorque).
-  double mass_kg = std::numeric_limits<double>::quiet_NaN();
-  Vec3 com_m = Vec3::Zero();
-};
 
 // A mass carried at the flange (a tool, the target, a gripper): kg and its centre of mass
 // in the flange frame (m).

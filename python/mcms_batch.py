@@ -211,10 +211,30 @@ def truth_for(truth, path):
     return os.path.join(path, truth)
 
 
+def refuse_overwriting_inputs(a, recordings):
+    """BatchInputError naming both when an output of the batch (OUT/summary.csv, a recording's
+    OUT/<name>/poses.csv) is one of its inputs (the list file, a recording's files or truth):
+    the check of every mcms command (mcms.require_outputs_spare_inputs), before any work."""
+    import mcms
+
+    outputs = [(os.path.join(a.output, "summary.csv"), "batch -o", False)]
+    inputs = [a.source] if os.path.isfile(a.source) else []
+    for name, path in recordings:
+        outputs.append((os.path.join(a.output, name, "poses.csv"), "batch -o", False))
+        inputs += [os.path.join(path, f) for f in ("rig.yaml", "target.yaml", "frames.csv", "images")]
+        truth = truth_for(a.truth, os.path.abspath(path))
+        inputs.append(os.path.join(path, "truth", "poses.csv") if truth == "auto" else truth)
+    try:
+        mcms.require_outputs_spare_inputs([o for o in outputs], [i for i in inputs if i])
+    except mcms.InputError as e:
+        raise BatchInputError(str(e)) from None
+
+
 def run(a):
     recordings = find_recordings(a.source)
     if os.path.exists(a.output) and not os.path.isdir(a.output):
         raise BatchInputError(f"-o {a.output} exists and is not a folder; give a folder for the outputs")
+    refuse_overwriting_inputs(a, recordings)
     try:
         import dask
         from distributed import Client, KilledWorker, LocalCluster, wait

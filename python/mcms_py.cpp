@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "core/output_folder.h"
 #include "python/py_common.h"
 
 namespace mcms::python {
@@ -209,6 +210,19 @@ PYBIND11_MODULE(mcms, m) {
       "whose message names the argument or the file.";
   m.attr("__version__") = "0.1.0";
   py::register_exception<InputError>(m, "InputError", PyExc_ValueError);
+
+  m.def(
+      "require_outputs_spare_inputs",
+      [](const std::vector<std::tuple<std::string, std::string, bool>>& outputs, const std::vector<std::string>& inputs) {
+        std::vector<RunOutput> o;
+        for (const auto& [path, what, folder] : outputs) o.push_back({path, what, folder});
+        RequireOutputsSpareInputs(o, std::vector<std::filesystem::path>(inputs.begin(), inputs.end()));
+      },
+      py::arg("outputs"), py::arg("inputs"),
+      "Never lose a user's data: raises mcms.InputError naming both when an output would overwrite or remove an "
+      "input of the same run (the check of every mcms command). outputs: [(path, what, is_folder)] where what is "
+      "how the user named it (e.g. 'batch -o'); inputs: [path]. The same file is found by device and inode, so "
+      "symlinks and other spellings of a path are caught; inputs that do not exist are ignored.");
 
   m.def(
       "pose_from_rt",

@@ -218,7 +218,9 @@ py::dict Iso(const PoseCharacteristics& c) {
 
 }  // namespace
 
-void BindRobot(py::module_& m) {
+namespace {
+
+void BindRobotModel(py::module_& m) {
   py::class_<RobotModel>(m, "RobotModel", "A serial robot (DH parameters): FK, Jacobian, pose covariance, IK.")
       .def_static("default", &RobotModel::Default, "The KUKA KR 5 arc of the paper (embedded).")
       .def_static(
@@ -318,6 +320,9 @@ void BindRobot(py::module_& m) {
         return "<mcms.RobotModel " + r.Name() + ", " + std::to_string(r.NumJoints()) + " joints>";
       });
 
+}
+
+void BindRobotCalibration(py::module_& m) {
   m.def(
       "read_robot_measurements",
       [](const std::string& path) {
@@ -482,6 +487,9 @@ void BindRobot(py::module_& m) {
       },
       py::arg("commanded1"), py::arg("commanded2"), py::arg("attained1"), py::arg("attained2"),
       "ISO 9283 7.5 distance accuracy and repeatability (AD, RD).");
+}
+
+void BindFusion(py::module_& m) {
   m.def(
       "iso9283_path",
       [](py::handle commanded, py::handle attained) {
@@ -600,6 +608,14 @@ void BindRobot(py::module_& m) {
       "cov[, frame]}, robot {time_s, q (rad/m)}, inclinometer {time_s, reading_rad}. windows: (K, 2) "
       "[start_s, end_s) standstill intervals, or None for one row per camera frame. Returns a dict of arrays "
       "(frame, time_s, method, T_base_flange (N, 4, 4), cov (N, 6, 6), p_value, ...), MOIFA before KF at equal times.");
+}
+
+}  // namespace
+
+void BindRobot(py::module_& m) {
+  BindRobotModel(m);
+  BindRobotCalibration(m);
+  BindFusion(m);
 }
 
 }  // namespace mcms::python

@@ -294,7 +294,9 @@ std::optional<std::string> OptionalPath(py::handle h, const char* name) {
 
 }  // namespace
 
-void BindVision(py::module_& m) {
+namespace {
+
+void BindCameraModels(py::module_& m) {
   py::class_<CameraModel>(m, "CameraModel",
                           "A camera: mrcal lens model and intrinsics, image size, and its pose in the rig T_cam_rig.")
       .def(py::init([](const std::string& lensmodel, py::handle intrinsics, int width, int height,
@@ -481,6 +483,9 @@ void BindVision(py::module_& m) {
       "Matches unlabeled image points (per camera an (N, 2) array or None) across the rig and triangulates "
       "them. Returns a list of dicts as triangulate's; observations are (camera, index) pairs.");
 
+}
+
+void BindTracker(py::module_& m) {
   py::class_<Target>(m, "Target", "The five-ball target: ball centres (m, target frame) and radius.")
       .def(py::init([](py::handle balls, double ball_radius_m, const std::string& name) {
              Target t;
@@ -631,6 +636,9 @@ void BindVision(py::module_& m) {
       .def_property_readonly("rig", &Tracker::rig)
       .def_property_readonly("target", &Tracker::target);
 
+}
+
+void BindTrackingResults(py::module_& m) {
   m.def(
       "estimate_sequence_noise",
       [](const CameraRig& rig, const std::string& images_dir, std::optional<std::string> frames_csv,
@@ -713,6 +721,9 @@ void BindVision(py::module_& m) {
       [](const std::string& path, const std::vector<FrameResult>& results) { WritePoseCsv(path, results); },
       py::arg("path"), py::arg("results"), "The pose CSV of `mcms track` (read by `mcms fuse` and mcms.fuse).");
 
+}
+
+void BindCameraAuditAndFieldOfView(py::module_& m) {
   m.def(
       "audit_cameras",
       [](const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results, double false_alarm) {
@@ -814,6 +825,9 @@ void BindVision(py::module_& m) {
       "arrays per grid point (reshape with 'shape' = (nz, ny, nx)), the summary text, and with output_dir the "
       "map.csv and figures of the CLI.");
 
+}
+
+void BindFieldOfViewGridAndJobs(py::module_& m) {
   m.def(
       "predict_fov_points",
       [](const CameraRig& rig, const Target& target, py::handle positions, py::handle R_rig_target, int threads) {
@@ -953,6 +967,16 @@ void BindVision(py::module_& m) {
       "frame, ok or degraded). Returns a dict: frames, ok, degraded, lost, evaluated, position_rms_m, "
       "position_max_m, rotation_rms_rad, rotation_max_rad, predicted_position_rms_m, predicted_rotation_rms_rad, "
       "mean_nees, nees_band (95 %), nees_consistent, description (lines). NaN when no frame has a pose.");
+}
+
+}  // namespace
+
+void BindVision(py::module_& m) {
+  BindCameraModels(m);
+  BindTracker(m);
+  BindTrackingResults(m);
+  BindCameraAuditAndFieldOfView(m);
+  BindFieldOfViewGridAndJobs(m);
 }
 
 }  // namespace mcms::python

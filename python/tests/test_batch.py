@@ -154,6 +154,54 @@ class Batch(unittest.TestCase):
             self.assertEqual(rows["gone"]["status"], "failed")
             self.assertIn(os.path.join(d, "gone") + ": does not exist", rows["gone"]["message"])
 
+    def test_an_output_that_is_an_input_is_refused(self):
+        # Issue 28: the same file by device and inode (directly, another spelling, a symlink).
+        rec = os.path.join(self.root, "rec_a")
+        frames = os.path.join(rec, "frames.csv")
+        with open(frames, "rb") as f:
+            before = f.read()
+        with tempfile.TemporaryDirectory() as d:
+            link = os.path.join(d, "alias.csv")
+            os.symlink(frames, link)
+            for spelling in (frames, os.path.join(rec, "images", "..", "frames.csv"), link):
+                with self.assertRaisesRegex(mcms.InputError, r"is the input .*frames\.csv"):
+                    mcms.track_recording(rec, output=spelling)
+                with open(frames, "rb") as f:
+                    self.assertEqual(f.read(), before)
+                self.assertTrue(os.path.islink(link))
+            with self.assertRaisesRegex(mcms.InputError, "x -o .*holds the input"):
+                mcms.require_outputs_spare_inputs([(rec, "x -o", True)], [frames])
+            mcms.require_outputs_spare_inputs([(os.path.join(d, "new.csv"), "x -o", False)], [frames, "/no/such/file"])
+
+    @unittest.skipIf(distributed is None, "skipped: python3-distributed not installed")
+    def test_batch_output_that_is_an_input_is_refused(self):
+        with tempfile.TemporaryDirectory() as d:
+            # Each recording's truth named poses.csv beside it, and -o the recordings' folder:
+            # OUT/<name>/poses.csv would overwrite the truth.
+            recs = os.path.join(d, "recs")
+            shutil.copytree(os.path.join(self.root, "rec_a"), os.path.join(recs, "rec_a"))
+            truth = os.path.join(recs, "rec_a", "poses.csv")
+            shutil.copy(os.path.join(recs, "rec_a", "truth", "poses.csv"), truth)
+            with open(truth, "rb") as f:
+                before = f.read()
+            r = self.batch(recs, "-o", recs, "--truth", "poses.csv")
+            self.assertEqual(r.returncode, 2, r.stderr)
+            self.assertIn("is the input " + truth, r.stderr)
+            with open(truth, "rb") as f:
+                self.assertEqual(f.read(), before)
+            self.assertFalse(os.path.exists(os.path.join(recs, "summary.csv")))
+            # A list file named summary.csv in the output folder.
+            out = os.path.join(d, "out")
+            os.makedirs(out)
+            listing = os.path.join(out, "summary.csv")
+            with open(listing, "w") as f:
+                f.write(os.path.join(recs, "rec_a") + "\n")
+            r = self.batch(listing, "-o", out)
+            self.assertEqual(r.returncode, 2, r.stderr)
+            self.assertIn("is the input " + listing, r.stderr)
+            with open(listing) as f:
+                self.assertEqual(f.read(), os.path.join(recs, "rec_a") + "\n")
+
     @unittest.skipIf(distributed is None, "skipped: python3-distributed not installed")
     def test_bad_input(self):
         with tempfile.TemporaryDirectory() as d:
