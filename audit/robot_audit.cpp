@@ -17,13 +17,13 @@
 #include <ceres/dynamic_autodiff_cost_function.h>
 #include <ceres/rotation.h>
 
+#include "audit/model_selection.h"
 #include "calib/robot_calibration.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/output_folder.h"
 #include "core/random.h"
 #include "core/svg_plot.h"
-#include "audit/model_selection.h"
 
 namespace mcms {
 namespace {
@@ -34,8 +34,10 @@ namespace {
 std::string LineOf(const RobotLog& log, size_t i) {
   std::ostringstream o;
   o << log.source.string();
-  if (log.rows[i].line > 0) o << " line " << log.rows[i].line;
-  else o << " row " << i + 1;
+  if (log.rows[i].line > 0)
+    o << " line " << log.rows[i].line;
+  else
+    o << " row " << i + 1;
   return o.str();
 }
 
@@ -44,8 +46,9 @@ std::string LineOf(const RobotLog& log, size_t i) {
 void CheckRobotLog(const RobotLog& log, const RobotModel& robot) {
   const std::string src = log.source.empty() ? std::string("robot log") : log.source.string();
   if (static_cast<int>(log.rows.size()) < kMinRobotLogRows)
-    Throw(src, ": ", log.rows.size(), log.rows.size() == 1 ? " measurement" : " measurements", "; the audit needs at least ",
-          kMinRobotLogRows, " (the registration alone has 9 parameters; repeated poses over time show the noise)");
+    Throw(src, ": ", log.rows.size(), log.rows.size() == 1 ? " measurement" : " measurements",
+          "; the audit needs at least ", kMinRobotLogRows,
+          " (the registration alone has 9 parameters; repeated poses over time show the noise)");
   const bool six = log.rows.front().R_meas_tool.has_value();
   for (size_t i = 0; i < log.rows.size(); ++i) {
     const RobotLogRow& r = log.rows[i];
@@ -179,16 +182,16 @@ struct Problem {
   double payload = 0.0, payload_factor = 1.0;
   std::vector<RowData> rows;
   std::vector<Extension> blocks;
-  std::vector<int> offset;          // first parameter of each block
+  std::vector<int> offset;  // first parameter of each block
   int P = 0;
-  std::vector<double> lower;        // per parameter: -inf, or a physical bound
-  int geometry = -1;                // the geometry block
-  int warmup = -1;                  // parameter index of the warm-up growth; -1 = none
-  Eigen::VectorXd theta0;           // the linearisation point (the nominal fit)
-  std::vector<Eigen::MatrixXd> J;   // per residual component a: N x P at theta0
-  Eigen::MatrixXd u;                // N x m: residual change per unit uniform link growth
-  int K = 0;                        // folds: contiguous blocks of time
-  std::vector<int> fold_begin;      // K + 1 boundaries
+  std::vector<double> lower;                    // per parameter: -inf, or a physical bound
+  int geometry = -1;                            // the geometry block
+  int warmup = -1;                              // parameter index of the warm-up growth; -1 = none
+  Eigen::VectorXd theta0;                       // the linearisation point (the nominal fit)
+  std::vector<Eigen::MatrixXd> J;               // per residual component a: N x P at theta0
+  Eigen::MatrixXd u;                            // N x m: residual change per unit uniform link growth
+  int K = 0;                                    // folds: contiguous blocks of time
+  std::vector<int> fold_begin;                  // K + 1 boundaries
   std::vector<std::vector<Eigen::MatrixXd>> G;  // [fold][a * m + b] = J_a^T J_b over the fold
   std::vector<Eigen::MatrixXd> Gall;
   int NumBase() const { return 6 + ts; }
@@ -247,8 +250,12 @@ struct RowSet {
     return c;
   }
 };
-RowSet AllRows(const Problem& pb) { return RowSet{{{0, pb.N}}, -1, false}; }
-RowSet TestRows(const Problem& pb, int f) { return RowSet{{{pb.fold_begin[f], pb.fold_begin[f + 1]}}, f, false}; }
+RowSet AllRows(const Problem& pb) {
+  return RowSet{{{0, pb.N}}, -1, false};
+}
+RowSet TestRows(const Problem& pb, int f) {
+  return RowSet{{{pb.fold_begin[f], pb.fold_begin[f + 1]}}, f, false};
+}
 RowSet TrainRows(const Problem& pb, int f) {
   RowSet s{{}, f, true};
   if (pb.fold_begin[f] > 0) s.ranges.push_back({0, pb.fold_begin[f]});
@@ -276,7 +283,8 @@ void UniformGrowth(Problem* pb) {
   for (int k = 0; k < pb->n; ++k) {
     const Joint& j = pb->robot->Joints()[k];
     for (int a = 0; a < pb->m; ++a)
-      pb->u.col(a) += pb->J[a].col(g0 + kDhParamsPerJoint * k + 1) * j.d + pb->J[a].col(g0 + kDhParamsPerJoint * k + 2) * j.a;
+      pb->u.col(a) +=
+          pb->J[a].col(g0 + kDhParamsPerJoint * k + 1) * j.d + pb->J[a].col(g0 + kDhParamsPerJoint * k + 2) * j.a;
   }
 }
 Eigen::MatrixXd WarmupColumn(const Problem& pb, double tau) {
@@ -438,13 +446,13 @@ Eigen::VectorXd BoundedStep(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, 
 
 struct FitResult {
   Eigen::VectorXd theta;
-  std::vector<int> free;        // requested free parameters (base, tool, the model's terms)
-  std::vector<char> at_bound;   // per free parameter: held at its physical bound
-  Eigen::MatrixXd noise;        // m x m
-  Eigen::MatrixXd R;            // N x m residuals (predicted - measured) of the fitted rows
-  Eigen::VectorXd row_ll;       // N
+  std::vector<int> free;       // requested free parameters (base, tool, the model's terms)
+  std::vector<char> at_bound;  // per free parameter: held at its physical bound
+  Eigen::MatrixXd noise;       // m x m
+  Eigen::MatrixXd R;           // N x m residuals (predicted - measured) of the fitted rows
+  Eigen::VectorXd row_ll;      // N
   double loglik = -kInf;
-  Eigen::MatrixXd cov;          // covariance of `free` (0 for those at a bound)
+  Eigen::MatrixXd cov;  // covariance of `free` (0 for those at a bound)
 };
 
 // Column values of parameter j at rows [b, e) for component a: the Jacobian, or the
@@ -452,10 +460,10 @@ struct FitResult {
 struct Columns {
   const Problem& pb;
   const std::vector<int>& F;
-  std::vector<int> stat;       // positions in F of static columns
-  std::vector<int> stat_idx;   // their parameter indices
-  int dyn = -1;                // position in F of the warm-up growth
-  Eigen::MatrixXd c;           // N x m warm-up column
+  std::vector<int> stat;      // positions in F of static columns
+  std::vector<int> stat_idx;  // their parameter indices
+  int dyn = -1;               // position in F of the warm-up growth
+  Eigen::MatrixXd c;          // N x m warm-up column
   Columns(const Problem& p, const std::vector<int>& f, const Eigen::VectorXd& th) : pb(p), F(f) {
     for (size_t k = 0; k < F.size(); ++k) {
       if (F[k] == pb.warmup) {
@@ -666,14 +674,20 @@ std::vector<int> Union(std::vector<int> a, const std::vector<int>& b) {
 // The covariate an effect depends on, for plots.
 std::string CovariateOf(const Extension& e, int n, bool has_temperature) {
   switch (e.effect) {
-    case Effect::kGravityCompliance: return "joint " + std::to_string(e.index + 1) + " gravity torque";
-    case Effect::kBacklash: return "joint " + std::to_string(e.index + 1) + " move direction";
-    case Effect::kThermalDrift: return e.variant == 1 && has_temperature ? "temperature" : "time";
+    case Effect::kGravityCompliance:
+      return "joint " + std::to_string(e.index + 1) + " gravity torque";
+    case Effect::kBacklash:
+      return "joint " + std::to_string(e.index + 1) + " move direction";
+    case Effect::kThermalDrift:
+      return e.variant == 1 && has_temperature ? "temperature" : "time";
     case Effect::kGeometry:
-    case Effect::kClockOffset: return "time";
+    case Effect::kClockOffset:
+      return "time";
     case Effect::kLinkLength:
-    case Effect::kLinkTwist: return "joint " + std::to_string(std::min(e.index + 2, n)) + " angle";
-    default: return "joint " + std::to_string(e.index + 1) + " angle";
+    case Effect::kLinkTwist:
+      return "joint " + std::to_string(std::min(e.index + 2, n)) + " angle";
+    default:
+      return "joint " + std::to_string(e.index + 1) + " angle";
   }
 }
 
@@ -782,8 +796,9 @@ double TestResiduals(const RobotLog& log, const Problem& s, const FitResult& nom
     const double p = FisherSurvival(F, d1, d2);
     tests.push_back({"lack of fit against repeated poses (F, " + std::to_string(G) + " poses)", F, p, false});
   } else {
-    rep->notes.push_back("no repeated poses (or too few): the noise is estimated from the residuals with the model, "
-                         "so the nominal model's chi-square cannot be tested on its own");
+    rep->notes.push_back(
+        "no repeated poses (or too few): the noise is estimated from the residuals with the model, "
+        "so the nominal model's chi-square cannot be tested on its own");
   }
   // Lag-1 autocorrelation in time and trends against every covariate, per component.
   const char* comp[6] = {"x", "y", "z", "rx", "ry", "rz"};
@@ -819,20 +834,18 @@ double TestResiduals(const RobotLog& log, const Problem& s, const FitResult& nom
   return lack_of_fit;
 }
 
-
-
 // ---------------------------------------------------------------------------------
 // The problem's rows, the layout of every candidate's parameters, the nominal fit
 
 // A candidate of a greedy step: the terms of theta it frees, and what it names.
 struct Option {
-  std::string key;          // unique label: "joint_offset at joint 3", "error_motion at joint 2 (rx)"
-  Extension ext;            // the catalog effect and where it acts
-  std::vector<int> terms;   // parameter indices it frees
+  std::string key;         // unique label: "joint_offset at joint 3", "error_motion at joint 2 (rx)"
+  Extension ext;           // the catalog effect and where it acts
+  std::vector<int> terms;  // parameter indices it frees
   // Preference in ties (model_selection rule 5): 0 a single physical cause, 1 the whole
   // geometry (broad), 2 error motion (a flexible harmonic family).
   int tier = 0;
-  bool geometric = false;   // a DH term (or all of them)
+  bool geometric = false;  // a DH term (or all of them)
 };
 
 bool Wanted(const RobotAuditOptions& o, Effect e) {
@@ -844,7 +857,9 @@ bool GeometryWanted(const RobotAuditOptions& o) {
   return false;
 }
 // A single geometric kind is offered when asked for by name, or with the whole geometry.
-bool GeometricKindWanted(const RobotAuditOptions& o, Effect e) { return Wanted(o, e) || Wanted(o, Effect::kGeometry); }
+bool GeometricKindWanted(const RobotAuditOptions& o, Effect e) {
+  return Wanted(o, e) || Wanted(o, Effect::kGeometry);
+}
 
 // Rows with their covariates, the starting registration and tool, the folds.
 Problem MakeProblem(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& o) {
@@ -957,9 +972,12 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
     notes->push_back("backlash not tested: no joint moves both ways in the log");
   if (Wanted(o, Effect::kThermalDrift)) {
     const double span = log.rows.back().time_s - log.rows.front().time_s;
-    if (!log.has_time) notes->push_back("thermal_drift in time not tested: the log has no time column");
-    else if (span > 0) B.push_back({Effect::kThermalDrift, -1, 0});
-    else notes->push_back("thermal_drift in time not tested: the log has no time span");
+    if (!log.has_time)
+      notes->push_back("thermal_drift in time not tested: the log has no time column");
+    else if (span > 0)
+      B.push_back({Effect::kThermalDrift, -1, 0});
+    else
+      notes->push_back("thermal_drift in time not tested: the log has no time span");
     if (log.has_temperature) B.push_back({Effect::kThermalDrift, -1, 1});
   }
   bool moving = false;
@@ -1093,8 +1111,8 @@ Eigen::MatrixXd FitNominal(Problem* pb) {
 // (calib-robot's analysis: base and tool first, then the joints from the base out), and
 // the reason for each that is held.
 struct Identifiable {
-  std::vector<int> params;                                  // geometry parameters of theta
-  std::vector<std::pair<std::string, std::string>> held;    // name, reason
+  std::vector<int> params;                                // geometry parameters of theta
+  std::vector<std::pair<std::string, std::string>> held;  // name, reason
 };
 
 std::string DhName(const RobotModel& robot, int j, int term) {
@@ -1128,8 +1146,10 @@ Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& n
   Identifiable id;
   for (int k = 0; k < ng; ++k) {
     const CalibrationParameter& p = params[nb + k];
-    if (p.fixed) id.held.push_back({p.name, p.reason});
-    else id.params.push_back(g0 + k);
+    if (p.fixed)
+      id.held.push_back({p.name, p.reason});
+    else
+      id.params.push_back(g0 + k);
   }
   return id;
 }
@@ -1167,9 +1187,7 @@ std::vector<Screened> Screen(const Problem& pb, const FitResult& cur, const std:
   const Eigen::VectorXd g = cols.Gradient(all, W, cur.R);
   const int nf = cur.free.size();
   const Eigen::MatrixXd HffInv = InverseScaled(H.topLeftCorner(nf, nf));
-  const auto Pos = [&](int param) {
-    return static_cast<int>(std::find(FC.begin(), FC.end(), param) - FC.begin());
-  };
+  const auto Pos = [&](int param) { return static_cast<int>(std::find(FC.begin(), FC.end(), param) - FC.begin()); };
   for (int oi : open) {
     std::vector<int> pos;
     for (int t : opts[oi].terms)
@@ -1322,10 +1340,10 @@ struct SelectionResult {
 // an effect that only explains what some DH parameter would is not named (it would soak
 // up a geometric error). At most `max_singles` single geometric terms are named; beyond
 // them, only the whole geometry.
-SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts,
-                             const std::vector<int>& geometry_terms, const FitResult& start,
-                             const RobotAuditOptions& o, double alpha, std::set<std::string>* not_identifiable,
-                             std::vector<std::string>* notes, const std::function<void(const std::string&)>& say) {
+SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts, const std::vector<int>& geometry_terms,
+                             const FitResult& start, const RobotAuditOptions& o, double alpha,
+                             std::set<std::string>* not_identifiable, std::vector<std::string>* notes,
+                             const std::function<void(const std::string&)>& say) {
   SelectionResult res;
   res.cur = start;
   const double logN = std::log(static_cast<double>(pb.N));
@@ -1519,8 +1537,7 @@ RobotAuditFit ToFit(const Problem& pb, const FitResult& f) {
   for (size_t k = 0; k < pb.blocks.size(); ++k) {
     const int np = pb.blocks[k].NumParameters();
     bool any = false;
-    for (int j = 0; j < np; ++j)
-      any |= std::find(f.free.begin(), f.free.end(), pb.offset[k] + j) != f.free.end();
+    for (int j = 0; j < np; ++j) any |= std::find(f.free.begin(), f.free.end(), pb.offset[k] + j) != f.free.end();
     if (!any) continue;
     r.extensions.push_back(pb.blocks[k]);
     std::vector<double> p(np), s(np);
@@ -1598,8 +1615,7 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
   };
   std::vector<Cand> cands;
   for (int k = 0; k < 4000; ++k) {
-    Eigen::VectorXd q = k % 2 ? log.rows[static_cast<int>(rng.Uniform() * pb.N) % pb.N].q
-                              : Eigen::VectorXd::Zero(pb.n);
+    Eigen::VectorXd q = k % 2 ? log.rows[static_cast<int>(rng.Uniform() * pb.N) % pb.N].q : Eigen::VectorXd::Zero(pb.n);
     const int redraw = k % 2 ? 1 + static_cast<int>(rng.Uniform() * 2) : pb.n;
     for (int r = 0; r < redraw; ++r) {
       const int j = k % 2 ? static_cast<int>(rng.Uniform() * pb.n) % pb.n : r;
@@ -1646,7 +1662,8 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
 // A physical bound the data push against (a negative compliance or backlash wanted on top
 // of the final model and the whole geometry): said in a note, not named.
 void NoteViolatedBounds(const Problem& pb, const std::vector<Option>& opts, const Identifiable& ident,
-                        const FitResult& fin, double alpha_selection, const RobotAuditOptions& o, AuditReport* rep_out) {
+                        const FitResult& fin, double alpha_selection, const RobotAuditOptions& o,
+                        AuditReport* rep_out) {
   AuditReport& rep = *rep_out;
   const bool has_geometry = Union(fin.free, ident.params).size() == fin.free.size();
   const FitResult base = has_geometry ? fin : FitProfiled(pb, Union(fin.free, ident.params), fin.theta, fin.noise);
@@ -1710,11 +1727,67 @@ RobotAuditResult::EffectPlot EffectPlotOf(const Problem& pb, const RobotLog& log
 
 }  // namespace
 
-// Measured positions in another unit than metres (millimetres under x_m headers, say) or a
-// robot description of another size: the scale of the best similarity between the tool
-// positions the robot's model gives for the logged joints and the measured ones is far
-// from 1 (no DH error scales a robot by a fifth). Refused with the likely unit named,
-// before any fit (the audit of such a log would only measure the wrong unit).
+std::string Num4(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+// A mistyped row: a measured position far outside where the others lie (a coordinate of
+// 1e308, one row in millimetres). Robust: distances from the componentwise median,
+// against their median; a row beyond 100 times that (and 10 m) is named.
+void CheckOutlyingRow(const RobotLog& log) {
+  const int N = log.rows.size();
+  Vec3 med;
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> c(N);
+    for (int i = 0; i < N; ++i) c[i] = log.rows[i].p_meas[k];
+    std::nth_element(c.begin(), c.begin() + N / 2, c.end());
+    med[k] = c[N / 2];
+  }
+  std::vector<double> d(N);
+  for (int i = 0; i < N; ++i) d[i] = (log.rows[i].p_meas - med).norm();
+  std::vector<double> sorted = d;
+  std::nth_element(sorted.begin(), sorted.begin() + N / 2, sorted.end());
+  const double typical = sorted[N / 2];
+  for (int i = 0; i < N; ++i)
+    if (d[i] > std::max(100.0 * typical, 10.0))
+      Throw(LineOf(log, i), ": the measured position (", Num4(log.rows[i].p_meas.x()), ", ",
+            Num4(log.rows[i].p_meas.y()), ", ", Num4(log.rows[i].p_meas.z()), ") m lies ",
+            std::isfinite(d[i]) ? Num4(d[i]) + " m" : std::string("absurdly far"),
+            " from the log's median position, where the other rows lie within about ", Num4(typical),
+            " m: a mistyped row, or another unit than metres?");
+}
+
+// The same measurement twice (identical joints and position to the last digit, which two
+// real measurements never are) would count it twice and halve its variance.
+void CheckDuplicateRows(const RobotLog& log) {
+  std::vector<size_t> order(log.rows.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  const auto key = [&](size_t i) {
+    const RobotLogRow& r = log.rows[i];
+    std::vector<double> k(r.q.data(), r.q.data() + r.q.size());
+    k.insert(k.end(), {r.p_meas.x(), r.p_meas.y(), r.p_meas.z()});
+    return k;
+  };
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key(a) < key(b); });
+  size_t a = 0, b = order.size();  // the duplicate pair whose later row comes first
+  for (size_t k = 1; k < order.size(); ++k)
+    if (key(order[k - 1]) == key(order[k]) && std::max(order[k - 1], order[k]) < b)
+      a = std::min(order[k - 1], order[k]), b = std::max(order[k - 1], order[k]);
+  if (b < order.size()) {
+    Throw(LineOf(log, b), " repeats ", LineOf(log, a).substr(log.source.string().size() + 1),
+          " exactly (the same joints and measured position): a duplicated row would count one measurement "
+          "twice; remove the duplicates (repeated visits of a pose measure a new position each time)");
+  }
+}
+
+// Measured positions in another unit than metres (millimetres under x_m headers, say), a
+// robot description of another size, swapped axes, or joints that do not move the tool:
+// the best similarity between the tool positions the robot's model gives for the logged
+// joints and the measured ones has a scale far from 1 (no DH error scales a robot by a
+// fifth) or needs a reflection. Refused with the likely cause named, before any fit (the
+// audit of such a log would only measure the wrong unit or axis).
 void CheckScale(const RobotModel& robot, const RobotLog& log) {
   const int N = log.rows.size();
   Eigen::Matrix3Xd src(3, N), dst(3, N);
@@ -1723,22 +1796,42 @@ void CheckScale(const RobotModel& robot, const RobotLog& log) {
     dst.col(i) = log.rows[i].p_meas;
   }
   const Eigen::Matrix3Xd a = src.colwise() - src.rowwise().mean(), b = dst.colwise() - dst.rowwise().mean();
-  const double var_src = a.squaredNorm() / N;
-  if (!(var_src > 1e-8)) return;  // the tool barely moves: nothing to compare
+  const double var_src = a.squaredNorm() / N, var_dst = b.squaredNorm() / N;
+  const std::string src_name = log.source.empty() ? std::string("robot log") : log.source.string();
+  if (!(var_src > 1e-8)) {
+    if (var_dst > 1e-6)
+      Throw(src_name,
+            ": the logged joints put the tool at the same place in every row (within 0.1 mm), but the "
+            "measured positions spread over ",
+            Num4(std::sqrt(var_dst)),
+            " m (RMS): are the joint columns filled, "
+            "and in the unit their headers give?");
+    Throw(src_name,
+          ": neither the logged joints nor the measured positions move (every row measures the same "
+          "place): the audit needs measurements spread over the workspace");
+  }
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(b * a.transpose() / N, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Vector3d d(1, 1, 1);
-  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) d[2] = -1;
+  const bool mirrored = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0;
+  if (mirrored) d[2] = -1;
   const double scale = svd.singularValues().dot(d) / var_src;
+  const double scale_any = svd.singularValues().sum() / var_src;  // rotation or reflection
   if (scale > 0.8 && scale < 1.25) return;
-  const std::string src_name = log.source.empty() ? std::string("robot log") : log.source.string();
+  if (mirrored && scale_any > 0.8 && scale_any < 1.25)
+    Throw(src_name, ": the measured positions are a mirror image of where robot '", robot.Name(),
+          "' puts its tool at the logged joints (a rotation fits them only at scale ", Num4(scale),
+          ", a reflection at ", Num4(scale_any),
+          "): two of the x_m, y_m, z_m columns swapped, or one axis's sign flipped?");
   std::string unit;
-  if (std::abs(std::log10(scale) - 3.0) < 0.05) unit = " (millimetres under x_m, y_m, z_m headers?)";
-  else if (std::abs(std::log10(scale) - 2.0) < 0.05) unit = " (centimetres?)";
-  else if (std::abs(scale / 39.37 - 1.0) < 0.05) unit = " (inches?)";
-  else if (std::abs(std::log10(scale) + 3.0) < 0.05) unit = " (kilometres?)";
-  char b2[96];
-  std::snprintf(b2, sizeof b2, "%.4g", scale);
-  Throw(src_name, ": the measured positions are ", b2, " times as far apart as robot '", robot.Name(),
+  if (std::abs(std::log10(scale) - 3.0) < 0.05)
+    unit = " (millimetres under x_m, y_m, z_m headers?)";
+  else if (std::abs(std::log10(scale) - 2.0) < 0.05)
+    unit = " (centimetres?)";
+  else if (std::abs(scale / 39.37 - 1.0) < 0.05)
+    unit = " (inches?)";
+  else if (std::abs(std::log10(scale) + 3.0) < 0.05)
+    unit = " (kilometres?)";
+  Throw(src_name, ": the measured positions are ", Num4(scale), " times as far apart as robot '", robot.Name(),
         "' puts its tool at the logged joints", unit,
         "; give the positions in metres, and the robot description the log was measured with (--robot)");
 }
@@ -1747,7 +1840,14 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   std::string why;
   if (!o.IsValid(&why)) Throw("robot audit options: ", why);
   CheckRobotLog(log, robot);
+  CheckDuplicateRows(log);
+  CheckOutlyingRow(log);
   CheckScale(robot, log);
+  const int max_folds = std::max(RobotAuditOptions{}.folds, static_cast<int>(log.rows.size()) / 4);
+  if (o.folds > max_folds)
+    Throw("--folds ", o.folds, ": ", log.source.empty() ? std::string("the robot log") : log.source.string(), " has ",
+          log.rows.size(), " measurements, enough for at most ", max_folds,
+          " folds of the time-blocked cross-validation (each needs at least 4 measurements)");
   const auto say = [&](const std::string& s) {
     if (o.progress) o.progress(s);
   };
@@ -1775,8 +1875,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   rep.nominal_n = static_cast<long>(N) * pb.m;
   const std::vector<Covariate> cov = Covariates(robot, log, pb);
   const double alpha_tests = o.false_alarm / 2.0;
-  const double lof = TestResiduals(log, pb, nominal, cov, alpha_tests, pb.NumBase(),
-                                   JitterTolerance(robot, o.repeat_tolerance), &rep);
+  const double lof =
+      TestResiduals(log, pb, nominal, cov, alpha_tests, pb.NumBase(), JitterTolerance(robot, o.repeat_tolerance), &rep);
   rep.nominal_chi2_per_dof = std::isfinite(lof) ? lof : 1.0;
 
   // 2. Greedy selection over the catalog: the DH parameters these poses identify one by
@@ -1786,8 +1886,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   const Identifiable ident = GeometryIdentifiability(pb, nominal.noise, o.identifiability_tolerance);
   std::vector<Option> opts;
   for (const Option& op : geo_opts)
-    if (std::find(ident.params.begin(), ident.params.end(), op.terms.front()) != ident.params.end())
-      opts.push_back(op);
+    if (std::find(ident.params.begin(), ident.params.end(), op.terms.front()) != ident.params.end()) opts.push_back(op);
   if (Wanted(o, Effect::kGeometry) && ident.params.size() > 1) {
     Option g{"geometry at DH table", pb.blocks[pb.geometry], ident.params, 1, true};
     opts.push_back(g);
@@ -1795,8 +1894,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   opts.insert(opts.end(), other_opts.begin(), other_opts.end());
   const double alpha_selection = o.false_alarm / 2.0;
   const std::vector<int> geometry_terms = GeometryWanted(o) ? ident.params : std::vector<int>{};
-  SelectionResult sel = RunSelection(pb, opts, geometry_terms, nominal, o, alpha_selection, &not_identifiable,
-                                     &rep.notes, say);
+  SelectionResult sel =
+      RunSelection(pb, opts, geometry_terms, nominal, o, alpha_selection, &not_identifiable, &rep.notes, say);
   const auto IsWhole = [&](const Finding& f) { return opts[f.option].geometric && opts[f.option].tier == 1; };
   const auto IsSingle = [&](const Finding& f) { return opts[f.option].geometric && opts[f.option].tier == 0; };
 
@@ -1927,8 +2026,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
 
   for (const Finding& f : sel.findings) {
     if (f.dropped || f.undecided || (geometry_named && IsSingle(f))) continue;
-    result.plots.push_back(EffectPlotOf(pb, log, cov, fin, opts[f.option].key, IsWhole(f) ? ident.params : f.terms,
-                                        opts[f.option].ext));
+    result.plots.push_back(
+        EffectPlotOf(pb, log, cov, fin, opts[f.option].key, IsWhole(f) ? ident.params : f.terms, opts[f.option].ext));
   }
   return result;
 }
@@ -1959,7 +2058,8 @@ void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& r
 std::string RunRobotAuditJob(const RobotAuditJob& job) {
   RequireOutputsSpareInputs({{job.output_dir, "audit robot -o", true}, {job.json, "audit robot --json"}},
                             {job.log, job.robot});
-  if (!job.output_dir.empty()) RequireReplaceableFolder(job.output_dir, {"report.json"}, "audit robot", "audit robot -o");
+  if (!job.output_dir.empty())
+    RequireReplaceableFolder(job.output_dir, {"report.json"}, "audit robot", "audit robot -o");
   if (!job.json.empty()) RequireWritableFile(job.json, "audit robot --json");
   const RobotModel robot = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot);
   const RobotLog log = ReadRobotLog(job.log, robot);
@@ -1969,7 +2069,8 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
        << (log.six_dof() ? "6-D" : "3-D") << "), robot '" << robot.Name() << "'\n";
   const Eigen::MatrixXd& S = r.nominal.noise;
   char buf[256];
-  std::snprintf(buf, sizeof buf, "nominal model: position residual RMS %.4f mm; noise sigma x y z %.4f %.4f %.4f mm (fitted)\n",
+  std::snprintf(buf, sizeof buf,
+                "nominal model: position residual RMS %.4f mm; noise sigma x y z %.4f %.4f %.4f mm (fitted)\n",
                 PositionRms(r.nominal.residuals) * 1e3, std::sqrt(S(0, 0)) * 1e3, std::sqrt(S(1, 1)) * 1e3,
                 std::sqrt(S(2, 2)) * 1e3);
   text << buf;
@@ -1979,7 +2080,8 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
   text << buf;
   for (const auto& np : r.next_poses)
     if (!np.poses.empty()) {
-      std::snprintf(buf, sizeof buf, "to tell [%s] from [%s]: measure the %zu poses of next_poses.csv (-o); the best "
+      std::snprintf(buf, sizeof buf,
+                    "to tell [%s] from [%s]: measure the %zu poses of next_poses.csv (-o); the best "
                     "separates them by %.1f sigma of the noise\n",
                     np.a.c_str(), np.b.c_str(), np.poses.size(), np.poses.front().separation_sigma);
       text << buf;

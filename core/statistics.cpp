@@ -65,10 +65,10 @@ double FisherSurvival(double x, double d1, double d2) {
 
 double TwoSidedNormalP(double z) { return std::erfc(std::abs(z) / std::sqrt(2.0)); }
 
-Vec6 PoseError(const Pose& estimate, const Pose& truth) { return BoxMinus(estimate, truth); }
+Vec6 PoseErrorVector(const Pose& estimate, const Pose& truth) { return BoxMinus(estimate, truth); }
 
 double PoseNees(const Pose& estimate, const Pose& truth, const Mat6& cov) {
-  const Vec6 e = PoseError(estimate, truth);
+  const Vec6 e = PoseErrorVector(estimate, truth);
   return e.dot(cov.ldlt().solve(e));
 }
 

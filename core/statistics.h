@@ -31,7 +31,7 @@ double TwoSidedNormalP(double z);
 // The error of an estimated pose against the truth in the project's [dtheta; dp] layout
 // (docs/conventions.md): BoxMinus(estimate, truth), and its NEES e^T cov^-1 e, which is
 // chi-square(6) when cov is the estimate's honest covariance.
-Vec6 PoseError(const Pose& estimate, const Pose& truth);
+Vec6 PoseErrorVector(const Pose& estimate, const Pose& truth);
 double PoseNees(const Pose& estimate, const Pose& truth, const Mat6& cov);
 
 }  // namespace mcms

@@ -1,8 +1,8 @@
 #include "fusion/log_fusion.h"
 
-#include <numbers>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 
 #include "core/error.h"
 #include "core/io.h"
@@ -36,8 +36,8 @@ std::string Exact(double v) {
 void WriteYamlPose(std::ostream& o, const char* name, const Pose& T) {
   const Eigen::Quaterniond q = T.Quaternion();
   o << name << ":\n  translation_m: [" << Exact(T.t.x()) << ", " << Exact(T.t.y()) << ", " << Exact(T.t.z())
-    << "]\n  quaternion_wxyz: [" << Exact(q.w()) << ", " << Exact(q.x()) << ", " << Exact(q.y()) << ", "
-    << Exact(q.z()) << "]\n";
+    << "]\n  quaternion_wxyz: [" << Exact(q.w()) << ", " << Exact(q.x()) << ", " << Exact(q.y()) << ", " << Exact(q.z())
+    << "]\n";
 }
 
 }  // namespace
@@ -143,9 +143,11 @@ void DropOutOfRangeTilts(const Inclinometer& inc, InclinometerLog* log, std::vec
       continue;
     }
     char buf[256];
-    std::snprintf(buf, sizeof(buf), "%s line %d: tilt_%c %.4g deg is beyond the inclinometer's range of %.4g deg "
+    std::snprintf(buf, sizeof(buf),
+                  "%s line %d: tilt_%c %.4g deg is beyond the inclinometer's range of %.4g deg "
                   "(setup range_deg); reading not used",
-                  log->source.string().c_str(), s.line, axis == 0 ? 'x' : 'y', s.reading[axis] / kDeg, inc.range / kDeg);
+                  log->source.string().c_str(), s.line, axis == 0 ? 'x' : 'y', s.reading[axis] / kDeg,
+                  inc.range / kDeg);
     dropped->push_back(buf);
   }
   if (kept.empty() && !log->samples.empty())
@@ -171,7 +173,14 @@ FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
   so.moifa = r.moifa;
   so.kalman = r.kalman;
   so.windows = out.windows;
-  out.rows = FuseStream(out.logs, out.setup, so);
+  try {
+    out.rows = FuseStream(out.logs, out.setup, so);
+  } catch (const InputError& e) {
+    // The windows' own errors name the file they came from.
+    if (!r.windows.empty() && std::string(e.what()).rfind("fusion window", 0) == 0)
+      Throw(r.windows.string(), ": ", e.what());
+    throw;
+  }
   if (!r.output.empty()) WriteFusedPoseCsv(r.output, out.rows);
   return out;
 }
@@ -191,9 +200,9 @@ void WriteFusedPoseCsv(const std::filesystem::path& path, const std::vector<Fuse
     for (const FusedSample& s : samples) {
       const auto q = s.T_base_flange.Quaternion();
       const Vec3& t = s.T_base_flange.t;
-      o << s.frame << "," << num(s.time_s) << "," << ToString(s.method) << "," << num(t.x()) << "," << num(t.y())
-        << "," << num(t.z()) << "," << num(q.w()) << "," << num(q.x()) << "," << num(q.y()) << "," << num(q.z())
-        << "," << Joined(s.sensors) << "," << s.dof << "," << num(s.p_value) << "," << Joined(s.flagged) << ","
+      o << s.frame << "," << num(s.time_s) << "," << ToString(s.method) << "," << num(t.x()) << "," << num(t.y()) << ","
+        << num(t.z()) << "," << num(q.w()) << "," << num(q.x()) << "," << num(q.y()) << "," << num(q.z()) << ","
+        << Joined(s.sensors) << "," << s.dof << "," << num(s.p_value) << "," << Joined(s.flagged) << ","
         << Joined(s.excluded) << "," << Quoted(s.fault);
       for (int r = 0; r < 6; ++r)
         for (int c = 0; c < 6; ++c) o << "," << num(s.covariance(r, c));

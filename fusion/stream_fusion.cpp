@@ -1,10 +1,10 @@
 #include "fusion/stream_fusion.h"
 
-#include <numbers>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numbers>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -74,7 +74,9 @@ std::optional<TiltReading> MeanTilt(const InclinometerLog& log, double lo, doubl
   return r;
 }
 
-std::string Joined(const std::string& a, const std::string& b) { return a.empty() ? b : b.empty() ? a : a + "; " + b; }
+std::string Joined(const std::string& a, const std::string& b) {
+  return a.empty() ? b : b.empty() ? a : a + "; " + b;
+}
 
 FusedSample MoifaSample(int frame, double time_s, const EpochFusion& e) {
   FusedSample r;
@@ -148,10 +150,7 @@ PoseKalmanOptions GatedOptions(const FusionSetup& setup, double updates_per_row)
 class KalmanRun {
  public:
   KalmanRun(const SensorLogs& logs, const FusionSetup& setup, double robot_accuracy_scale, double updates_per_row)
-      : logs_(logs),
-        setup_(setup),
-        kf_(GatedOptions(setup, updates_per_row)),
-        accuracy_scale_(robot_accuracy_scale) {}
+      : logs_(logs), setup_(setup), kf_(GatedOptions(setup, updates_per_row)), accuracy_scale_(robot_accuracy_scale) {}
 
   void Process(const Event& e) {
     const int k = static_cast<int>(e.kind);
@@ -238,9 +237,8 @@ class KalmanRun {
       const double gate = ChiSquareQuantile(kf_.Options().nis_gate_probability, x.dof);
       r.fault = Joined(r.fault, std::string(ToString(kind)) + ": " + std::to_string(x.count) + " of " +
                                     std::to_string(x.count + x.accepted) + " update" +
-                                    (x.count + x.accepted == 1 ? "" : "s") + " rejected (NIS up to " +
-                                    Num(x.max_nis) + " > gate " + Num(gate) + " on " + std::to_string(x.dof) +
-                                    " dof)");
+                                    (x.count + x.accepted == 1 ? "" : "s") + " rejected (NIS up to " + Num(x.max_nis) +
+                                    " > gate " + Num(gate) + " on " + std::to_string(x.dof) + " dof)");
     }
     if (range_.count > 0) {
       if (std::find(r.excluded.begin(), r.excluded.end(), "inclinometer") == r.excluded.end())
@@ -313,9 +311,41 @@ class KalmanRun {
   std::vector<std::string> restart_culprits_;
 };
 
+// The time span of every log together: its first and last sample.
+std::pair<double, double> LogsSpan(const SensorLogs& logs) {
+  double a = logs.tracker.samples.front().time_s, b = logs.tracker.samples.back().time_s;
+  if (logs.robot)
+    a = std::min(a, logs.robot->samples.front().time_s), b = std::max(b, logs.robot->samples.back().time_s);
+  if (logs.inclinometer)
+    a = std::min(a, logs.inclinometer->samples.front().time_s),
+    b = std::max(b, logs.inclinometer->samples.back().time_s);
+  return {a, b};
+}
+
 void CheckInputs(const SensorLogs& logs, const std::vector<FusionWindow>& windows) {
   CheckTimeOverlap(logs);
   CheckWindows(windows);
+  // A window that holds no sample of any log is a window for other logs (or in other
+  // units): it must not quietly vanish from the output.
+  const auto [a, b] = LogsSpan(logs);
+  const auto holds = [](const auto& samples, const FusionWindow& w) {
+    const auto it = std::lower_bound(samples.begin(), samples.end(), w.start_s,
+                                     [](const auto& s, double t) { return s.time_s < t; });
+    return it != samples.end() && it->time_s < w.end_s;
+  };
+  for (size_t i = 0; i < windows.size(); ++i) {
+    const FusionWindow& w = windows[i];
+    if (!holds(logs.tracker.samples, w) && !(logs.robot && holds(logs.robot->samples, w)) &&
+        !(logs.inclinometer && holds(logs.inclinometer->samples, w)))
+      Throw("fusion window ", i, " [", w.start_s, ", ", w.end_s, ") s holds no sample of any log: the logs span ", a,
+            " to ", b, " s (check the windows' clock and units)");
+  }
+}
+
+// The time a window's pose is reported for: its end, or the last sample of the logs if
+// the window reaches beyond them (a window to 1e308 s is not a prediction to 1e308 s).
+double WindowReportTime(const SensorLogs& logs, const FusionWindow& w) {
+  return std::min(w.end_s, LogsSpan(logs).second);
 }
 
 }  // namespace
@@ -332,7 +362,9 @@ const char* ToString(StreamSensor k) {
   return "?";
 }
 
-const char* ToString(FusionMethod m) { return m == FusionMethod::kMoifa ? "moifa" : "kf"; }
+const char* ToString(FusionMethod m) {
+  return m == FusionMethod::kMoifa ? "moifa" : "kf";
+}
 
 void CheckTimeOverlap(const SensorLogs& logs) {
   if (!logs.robot && !logs.inclinometer)
@@ -363,8 +395,8 @@ void CheckWindows(const std::vector<FusionWindow>& windows) {
     if (!std::isfinite(w.start_s) || !std::isfinite(w.end_s) || !(w.end_s > w.start_s))
       Throw("fusion window ", i, ": expected finite start_s < end_s, got [", w.start_s, ", ", w.end_s, ")");
     if (i > 0 && w.start_s < windows[i - 1].end_s)
-      Throw("fusion window ", i, " [", w.start_s, ", ", w.end_s, ") starts before window ", i - 1,
-            " ends (", windows[i - 1].end_s, " s); windows must be in time order and must not overlap");
+      Throw("fusion window ", i, " [", w.start_s, ", ", w.end_s, ") starts before window ", i - 1, " ends (",
+            windows[i - 1].end_s, " s); windows must be in time order and must not overlap");
   }
 }
 
@@ -378,7 +410,8 @@ PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& 
   const PoseWithCovariance out = RobotFlangePose(setup.robot, q, encoder_scale * setup.robot.EncoderCovariance(),
                                                  accuracy_scale * setup.robot_accuracy_covariance);
   if (out.covariance.llt().info() != Eigen::Success || !(out.covariance.diagonal().minCoeff() > 0))
-    Throw("robot '", setup.robot.Name(), "': its pose covariance is singular; give encoder sigmas in the robot file or ",
+    Throw("robot '", setup.robot.Name(),
+          "': its pose covariance is singular; give encoder sigmas in the robot file or ",
           "robot_accuracy in the setup file ", setup.source.string());
   return out;
 }
@@ -460,8 +493,8 @@ EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::opti
     const SensorConsistency& c = e.consistency.sensors[i];
     return "NIS " + Num(c.nis) + " on " + std::to_string(c.dof) + " dof against the others (p " + Num(c.p_value) + ")";
   };
-  const std::string failed = "consistency test failed (p " + Num(e.consistency.p_value) + " < " +
-                             Num(options.significance) + ")";
+  const std::string failed =
+      "consistency test failed (p " + Num(e.consistency.p_value) + " < " + Num(options.significance) + ")";
   if (chosen.size() == 1) {
     const Suspect& s = *chosen.front();
     const std::string name = e.measurements[s.index].name;
@@ -482,7 +515,8 @@ EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::opti
       names += (names.empty() ? "" : " or ") + e.measurements[s->index].name;
     }
     e.fused.covariance = U;
-    e.fault = failed + ": " + names + " may be wrong (leaving out either makes the rest agree); kept all and "
+    e.fault = failed + ": " + names +
+              " may be wrong (leaving out either makes the rest agree); kept all and "
               "widened the covariance to cover each";
     return e;
   }
@@ -539,7 +573,8 @@ std::vector<FusedSample> FuseMoifa(const SensorLogs& logs, const FusionSetup& se
       if (m.camera) poses.push_back(PoseMeasurement::FromCovariance("camera", m.camera->T, m.camera->covariance));
       if (m.robot) poses.push_back(PoseMeasurement::FromCovariance("robot", m.robot->T, m.robot->covariance));
       if (poses.empty()) continue;
-      out.push_back(MoifaSample(static_cast<int>(w), windows[w].end_s, FuseEpoch(poses, m.inclinometer, copt, setup.exclude_faults)));
+      out.push_back(MoifaSample(static_cast<int>(w), WindowReportTime(logs, windows[w]),
+                                FuseEpoch(poses, m.inclinometer, copt, setup.exclude_faults)));
       RangeRejects rejects;
       rejects.count = m.inclinometer_beyond_range;
       rejects.worst_rad = m.inclinometer_worst_rad;
@@ -608,8 +643,9 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
     for (size_t k = e0; k < e1; ++k)
       if (k != first && events[k].t >= events[first].t) run.Process(events[k]);
     e0 = e1;
-    const auto pred = run.Filter().Predict(std::max(run.Filter().Time(), t1));
-    out.push_back(run.Report(static_cast<int>(w), t1, pred.T, pred.covariance));
+    const double t_report = WindowReportTime(logs, windows[w]);
+    const auto pred = run.Filter().Predict(std::max(run.Filter().Time(), t_report));
+    out.push_back(run.Report(static_cast<int>(w), t_report, pred.T, pred.covariance));
   }
   return out;
 }

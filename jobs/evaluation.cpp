@@ -20,7 +20,7 @@ FramePoseError PoseErrorAccumulator::Add(const FrameResult& f, const Pose& truth
   if (f.status == FrameStatus::kLost) ++s_.lost;
   FramePoseError fe;
   if (!f.T_rig_target) return fe;
-  const Vec6 e = PoseError(*f.T_rig_target, truth);
+  const Vec6 e = PoseErrorVector(*f.T_rig_target, truth);
   fe.e = e;
   ++s_.evaluated;
   fe.position_m = e.tail<3>().norm();

@@ -317,7 +317,7 @@ std::string AddTruthColumns(Table& t, const Table& truth) {
     const auto est = pose_of(t, r, ec);
     const auto tr = f ? truth_by_frame.find(std::llround(*f)) : truth_by_frame.end();
     if (est && tr != truth_by_frame.end()) {
-      const Vec6 e = PoseError(*est, tr->second);
+      const Vec6 e = PoseErrorVector(*est, tr->second);
       ++matched;
       sum_sq_mm += 1e6 * e.tail<3>().squaredNorm();
       for (int a = 0; a < 3; ++a) cells[a] = Num(1e3 * e[3 + a]);

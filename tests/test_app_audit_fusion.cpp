@@ -8,8 +8,8 @@
 //    parameter within 3 of its sigmas, positive held-out gain;
 //  - clean controls: the inclinometer audit on many clean seeds (library calls), the
 //    observed false-alarm rate against the designed one.
-#include <numbers>
 #include <gtest/gtest.h>
+#include <numbers>
 
 #include <nlohmann/json.hpp>
 
@@ -17,9 +17,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "audit/fusion_log_audit.h"
 #include "audit/inclinometer_audit.h"
 #include "core/random.h"
-#include "audit/fusion_log_audit.h"
 #include "fusion/sensor_logs.h"
 #include "tests/cli_runner.h"
 #include "tests/fuse_logs.h"
@@ -77,10 +77,10 @@ TEST(AppAuditFusion, TheDemosLogsAreGeometryAndNothingElse) {
   const fs::path d = test::ScratchDir("audit_fusion_demo");
   const test::CliRun demo = test::Mcms(d, "demo --points 16 --no-iso9283 -q -o demo");
   ASSERT_EQ(demo.code, 0) << demo.err;
-  const test::CliRun run = test::Mcms(
-      d / "demo",
-      "audit fusion -q --tracker tracker_poses.csv --robot robot_joints.csv --setup fusion_setup.yaml "
-      "--inclinometer inclinometer.csv --json ../audit.json");
+  const test::CliRun run =
+      test::Mcms(d / "demo",
+                 "audit fusion -q --tracker tracker_poses.csv --robot robot_joints.csv --setup fusion_setup.yaml "
+                 "--inclinometer inclinometer.csv --json ../audit.json");
   ASSERT_EQ(run.code, 0) << run.out << run.err;
   std::printf("%s", run.out.c_str());
   const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "audit.json"));
@@ -281,9 +281,32 @@ TEST(AppAuditFusion, CleanLogsThroughTheCommandAtTheDesignedRate) {
       std::printf("seed %d:\n%s", seed, run.out.c_str());
     }
   }
-  std::printf("clean fusion logs through `mcms audit fusion --inclinometer`: %d of %d not clean (designed 0.01)\n", alarms,
-              seeds);
+  std::printf("clean fusion logs through `mcms audit fusion --inclinometer`: %d of %d not clean (designed 0.01)\n",
+              alarms, seeds);
   EXPECT_LE(alarms, 5);
+}
+
+// Issue 29: one tracker x_m of 1e308 gave a Ceres error dump, then "no effect found".
+TEST(BadInput, AMistypedTrackerRowIsNamed) {
+  const fs::path d = test::ScratchDir("audit_fusion_bad_row");
+  test::LogOptions o = test::AuditLogOptions(6);
+  o.with_incl = false;
+  test::Logs l = test::MovingLogs(o);
+  std::string& line = l.files["poses.csv"][5];
+  std::vector<std::string> c;
+  std::stringstream ls(line);
+  std::string cell;
+  while (std::getline(ls, cell, ',')) c.push_back(cell);
+  c.at(4) = "1e308";
+  line.clear();
+  for (size_t i = 0; i < c.size(); ++i) line.append(i ? "," : "").append(c[i]);
+  test::Write(d, l);
+  const test::CliRun run = test::Mcms(d, kAudit);
+  EXPECT_EQ(run.code, 2) << run.err;
+  EXPECT_NE(run.err.find("poses.csv line 6"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("absurdly far"), std::string::npos) << run.err;
+  EXPECT_EQ(run.err.find("Ceres"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(d / "a.json"));
 }
 
 }  // namespace

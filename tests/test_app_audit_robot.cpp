@@ -2,13 +2,14 @@
 // the JSON names the effect; bad logs (one row, time going backwards, joints beyond the
 // limits, a NaN temperature, a different joint count) get an error naming the file and
 // the problem, a non-zero exit and no output.
-#include <numbers>
 #include <gtest/gtest.h>
+#include <numbers>
 
 #include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
 
@@ -25,7 +26,9 @@ namespace fs = std::filesystem;
 using test::CliRun;
 
 // Runs `mcms ARGS` in `cwd`.
-CliRun Mcms(const std::string& args, const fs::path& cwd) { return test::Mcms(cwd, args); }
+CliRun Mcms(const std::string& args, const fs::path& cwd) {
+  return test::Mcms(cwd, args);
+}
 
 // A CSV log of the default robot: 30 poses x 4 passes over 2 h, a hidden joint 3 offset
 // of `offset_deg`, anisotropic noise, a temperature column.
@@ -59,7 +62,6 @@ std::string LogCsv(double offset_deg, uint64_t seed) {
   return o.str();
 }
 
-
 TEST(AppAuditRobot, NamesAHiddenJointOffsetInACsvLog) {
   const fs::path d = test::ScratchDir("audit_robot_e2e");
   test::WriteText(d / "log.csv", LogCsv(0.006, 3));
@@ -90,7 +92,8 @@ void ExpectRefused(const std::string& name, const std::string& csv, const std::v
   test::WriteText(d / "log.csv", csv);
   const CliRun r = Mcms("audit robot -q log.csv --json audit.json -o out", d);
   EXPECT_NE(r.code, 0) << name;
-  for (const auto& w : words) EXPECT_NE(r.err.find(w), std::string::npos) << name << ": '" << w << "' not in: " << r.err;
+  for (const auto& w : words)
+    EXPECT_NE(r.err.find(w), std::string::npos) << name << ": '" << w << "' not in: " << r.err;
   EXPECT_FALSE(fs::exists(d / "audit.json")) << name;
   EXPECT_FALSE(fs::exists(d / "out")) << name;
 }
@@ -151,6 +154,63 @@ TEST(AppAuditRobot, RefusesBadLogs) {
   for (int i = 0; i < 20; ++i) seven += std::to_string(i) + ",0,0,0.5,0,0,0,0,1,2,3\n";
   ExpectRefused("seven_joints", seven, {"log.csv", "7 joint columns", "6 joints", "--robot"});
   ExpectRefused("no_joints", "time_s,x_m,y_m,z_m\n0,1,2,3\n", {"log.csv", "q1_rad"});
+}
+
+// The CSV with `f` applied to the cells of every data row.
+std::string MapRows(const std::string& csv, const std::function<void(std::vector<std::string>&)>& f) {
+  std::istringstream in(csv);
+  std::ostringstream out;
+  std::string line;
+  std::getline(in, line);
+  out << line << "\n";
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::stringstream ls(line);
+    std::string cell;
+    while (std::getline(ls, cell, ',')) c.push_back(cell);
+    f(c);
+    for (size_t i = 0; i < c.size(); ++i) out << (i ? "," : "") << c[i];
+    out << "\n";
+  }
+  return out.str();
+}
+
+// Issue 29: logs whose residual tests all fail for a reason in the input (a mistyped row,
+// duplicated rows, swapped axes, empty joint columns, absurd folds) are refused before any
+// fit, the likely cause and the row named, nothing written.
+TEST(BadInput, RobotLogsWhoseMisfitHasACauseInTheInput) {
+  const std::string good = LogCsv(0.0, 11);
+  ExpectRefused("mistyped_row", Edit(good, 6, 7, "1e308"), {"log.csv line 7", "absurdly far", "mistyped row"});
+  ExpectRefused("one_row_in_mm", Edit(good, 9, 8, "650"), {"log.csv line 10", "mistyped row", "another unit"});
+  std::string doubled;
+  {
+    std::istringstream in(good);
+    std::string line;
+    std::getline(in, line);
+    doubled.append(line).append("\n");
+    while (std::getline(in, line)) doubled.append(line).append("\n").append(line).append("\n");
+  }
+  ExpectRefused("every_row_twice", doubled, {"log.csv line 3 repeats line 2 exactly", "duplicate"});
+  std::string same = good.substr(0, good.find('\n') + 1);
+  const std::string first = good.substr(same.size(), good.find('\n', same.size()) + 1 - same.size());
+  for (int i = 0; i < 100; ++i) same += first;
+  ExpectRefused("hundred_identical_rows", same, {"log.csv line 3 repeats line 2 exactly"});
+  ExpectRefused("x_y_swapped", MapRows(good, [](std::vector<std::string>& c) { std::swap(c[7], c[8]); }),
+                {"log.csv", "mirror image", "swapped"});
+  ExpectRefused("joints_all_zero",
+                MapRows(good,
+                        [](std::vector<std::string>& c) {
+                          for (int j = 1; j <= 6; ++j) c[j].assign(1, '0');
+                        }),
+                {"log.csv", "same place in every row", "joint columns"});
+  // --folds beyond what the rows allow (audit lens refuses the equivalent).
+  const fs::path d = test::ScratchDir("audit_robot_bad_folds");
+  test::WriteText(d / "log.csv", good);
+  const CliRun r = Mcms("audit robot -q log.csv --folds 100000 --json audit.json", d);
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("--folds 100000"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("log.csv has 120 measurements, enough for at most 30 folds"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d / "audit.json"));
 }
 
 }  // namespace

@@ -10,11 +10,11 @@
 #include <map>
 #include <sstream>
 
+#include "core/io.h"
 #include "model/inclinometer.h"
 #include "model/robot_model.h"
-#include "core/io.h"
-#include "tests/fuse_logs.h"
 #include "tests/cli_runner.h"
+#include "tests/fuse_logs.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -42,11 +42,14 @@ void SetCell(Lines& lines, int line, int col, const std::string& v) {
   lines[line - 1] = out;
 }
 
-const std::string kArgs = "fuse --quiet --tracker poses.csv --robot joints.csv --inclinometer incl.csv --setup "
-                          "setup.yaml -o fused.csv";
+const std::string kArgs =
+    "fuse --quiet --tracker poses.csv --robot joints.csv --inclinometer incl.csv --setup "
+    "setup.yaml -o fused.csv";
 
 // Runs mcms in `dir` (relative file names, so messages name them as given).
-CliRun Fuse(const fs::path& dir, const std::string& args = kArgs) { return test::Mcms(dir, args); }
+CliRun Fuse(const fs::path& dir, const std::string& args = kArgs) {
+  return test::Mcms(dir, args);
+}
 
 // Writes the logs into a fresh folder, runs the CLI and expects a refusal whose one line
 // contains every needle, and no output.
@@ -69,8 +72,8 @@ TEST(AppFuse, HelpDocumentsTheFormats) {
   const std::string cmd = std::string(MCMS_CLI) + " fuse --help > " + (d / "help.txt").string();
   ASSERT_EQ(std::system(cmd.c_str()), 0);
   const std::string help = ReadTextFile(d / "help.txt");
-  for (const char* s : {"time_s,q1_rad", "tilt_x_rad", "T_base_rig", "T_flange_target", "robot_accuracy",
-                        "cov_<a>_<b>", "moifa|kf", "flagged"})
+  for (const char* s : {"time_s,q1_rad", "tilt_x_rad", "T_base_rig", "T_flange_target", "robot_accuracy", "cov_<a>_<b>",
+                        "moifa|kf", "flagged"})
     EXPECT_NE(help.find(s), std::string::npos) << s;
 }
 
@@ -164,7 +167,8 @@ TEST(AppFuse, TheDemosLogsReproduceItsFusion) {
   // Per frame (no windows) the same logs fuse too, one MOIFA and one KF row per tracked frame.
   const std::string per_frame = "cd " + demo.string() + " && " + std::string(MCMS_CLI) +
                                 " fuse -q --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer "
-                                "inclinometer.csv --setup fusion_setup.yaml -o " + (d / "frames.csv").string();
+                                "inclinometer.csv --setup fusion_setup.yaml -o " +
+                                (d / "frames.csv").string();
   ASSERT_EQ(std::system(per_frame.c_str()), 0);
   EXPECT_GT(ReadCsv(d / "frames.csv").rows.size(), t.rows.size());
 }
@@ -213,7 +217,8 @@ TEST(AppFuse, BadTrackerLogsAreRefused) {
   }
   {
     Logs l = clean;
-    for (size_t i = 1; i < l.files["poses.csv"].size(); ++i) SetCell(l.files["poses.csv"], static_cast<int>(i) + 1, 2, "lost");
+    for (size_t i = 1; i < l.files["poses.csv"].size(); ++i)
+      SetCell(l.files["poses.csv"], static_cast<int>(i) + 1, 2, "lost");
     ExpectRefused("tracker_all_lost", l, {"poses.csv line 21", "every row has status lost"});
   }
 }
@@ -223,8 +228,9 @@ TEST(AppFuse, BadRobotLogsAreRefused) {
   {
     Logs l = clean;
     for (auto& s : l.files["joints.csv"]) s = s.substr(0, s.rfind(','));
-    ExpectRefused("robot_count", l, {"joints.csv line 1: found 5 joint columns",
-                                     "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad", "6 joints"});
+    ExpectRefused(
+        "robot_count", l,
+        {"joints.csv line 1: found 5 joint columns", "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad", "6 joints"});
   }
   {
     Logs l = clean;
@@ -257,7 +263,8 @@ TEST(AppFuse, BadRobotLogsAreRefused) {
       std::string& s = l.files["joints.csv"][i];
       s = N(std::stod(s.substr(0, s.find(','))) + 100.0) + s.substr(s.find(','));
     }
-    ExpectRefused("robot_no_overlap", l, {"no time overlap", "poses.csv covers [0.2, 2.1] s", "joints.csv covers [100, 102.2] s"});
+    ExpectRefused("robot_no_overlap", l,
+                  {"no time overlap", "poses.csv covers [0.2, 2.1] s", "joints.csv covers [100, 102.2] s"});
   }
 }
 
@@ -308,6 +315,33 @@ TEST(AppFuse, BadInclinometerLogsAndSetupsAreRefused) {
     Logs l = clean;
     ExpectRefused("no_second_sensor", l, {"--robot and/or --inclinometer"},
                   "fuse --tracker poses.csv --setup setup.yaml -o fused.csv");
+  }
+}
+
+// Issue 29: fusion windows from -1e308 to 1e308 s gave a KF row of -4e294 and NaN
+// quaternions (the filter predicted to the window's end); windows wholly outside the logs
+// gave a header-only CSV and "0 rows". Now a window reaching beyond the logs reports at
+// their last sample (finite numbers), and one that holds no sample is refused, named.
+TEST(BadInput, FusionWindowsBeyondOrOutsideTheLogs) {
+  const Logs clean = CleanLogs();
+  {
+    Logs l = clean;
+    l.files["w.csv"] = {"start_s,end_s", "1e6,2e6"};
+    ExpectRefused("windows_outside", l, {"w.csv", "window 0", "holds no sample of any log", "the logs span"},
+                  kArgs + " --windows w.csv");
+  }
+  {
+    const fs::path d = test::ScratchDir("app_fuse_windows_absurd");
+    Logs l = clean;
+    l.files["w.csv"] = {"start_s,end_s", "-1e308,1e308"};
+    Write(d, l);
+    const CliRun r = Fuse(d, kArgs + " --windows w.csv");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const std::string csv = test::ReadAll(d / "fused.csv");
+    EXPECT_EQ(csv.find("nan"), std::string::npos) << csv;
+    EXPECT_EQ(csv.find("e+29"), std::string::npos) << csv;
+    EXPECT_EQ(csv.find("e+30"), std::string::npos) << csv;
+    EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << "a header, a moifa and a kf row: " << csv;
   }
 }
 
