@@ -339,13 +339,13 @@ void CheckInputs(const SensorLogs& logs, const std::vector<FusionWindow>& window
         !(logs.inclinometer && holds(logs.inclinometer->samples, w)))
       Throw("fusion window ", i, " [", w.start_s, ", ", w.end_s, ") s holds no sample of any log: the logs span ", a,
             " to ", b, " s (check the windows' clock and units)");
+    // A window reaching beyond the logs by more than their whole span is on another clock
+    // or in other units (the filter would predict to its end, 1e308 s say).
+    const double span = b - a;
+    if (w.start_s < a - span || w.end_s > b + span)
+      Throw("fusion window ", i, " [", w.start_s, ", ", w.end_s, ") s reaches far beyond the logs: the logs span ", a,
+            " to ", b, " s (check the windows' clock and units)");
   }
-}
-
-// The time a window's pose is reported for: its end, or the last sample of the logs if
-// the window reaches beyond them (a window to 1e308 s is not a prediction to 1e308 s).
-double WindowReportTime(const SensorLogs& logs, const FusionWindow& w) {
-  return std::min(w.end_s, LogsSpan(logs).second);
 }
 
 }  // namespace
@@ -573,7 +573,7 @@ std::vector<FusedSample> FuseMoifa(const SensorLogs& logs, const FusionSetup& se
       if (m.camera) poses.push_back(PoseMeasurement::FromCovariance("camera", m.camera->T, m.camera->covariance));
       if (m.robot) poses.push_back(PoseMeasurement::FromCovariance("robot", m.robot->T, m.robot->covariance));
       if (poses.empty()) continue;
-      out.push_back(MoifaSample(static_cast<int>(w), WindowReportTime(logs, windows[w]),
+      out.push_back(MoifaSample(static_cast<int>(w), windows[w].end_s,
                                 FuseEpoch(poses, m.inclinometer, copt, setup.exclude_faults)));
       RangeRejects rejects;
       rejects.count = m.inclinometer_beyond_range;
@@ -643,9 +643,8 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
     for (size_t k = e0; k < e1; ++k)
       if (k != first && events[k].t >= events[first].t) run.Process(events[k]);
     e0 = e1;
-    const double t_report = WindowReportTime(logs, windows[w]);
-    const auto pred = run.Filter().Predict(std::max(run.Filter().Time(), t_report));
-    out.push_back(run.Report(static_cast<int>(w), t_report, pred.T, pred.covariance));
+    const auto pred = run.Filter().Predict(std::max(run.Filter().Time(), t1));
+    out.push_back(run.Report(static_cast<int>(w), t1, pred.T, pred.covariance));
   }
   return out;
 }

@@ -51,8 +51,11 @@ def is_recording(path):
     return os.path.isdir(os.path.join(path, "images")) or os.path.isfile(os.path.join(path, "rig.yaml"))
 
 
-def find_recordings(source):
-    """[(name, path)] of the recordings named by a folder or a list file, in order; names unique."""
+def find_recordings(source, skipped=None):
+    """[(name, path)] of the recordings named by a folder or a list file, in order; names unique.
+
+    The entries of a folder that are not recordings are appended to `skipped` as
+    (entry, why), so that the caller can say so (nothing is skipped without a word)."""
     if not os.path.exists(source):
         raise BatchInputError(f"{source}: no such folder or list file (give a folder of recordings or a text file "
                               "with one recording folder per line)")
@@ -65,12 +68,14 @@ def find_recordings(source):
             p = os.path.join(source, entry)
             if os.path.isdir(p) and is_recording(p):
                 paths.append(p)
+            elif skipped is not None:
+                skipped.append((entry, "a folder without images/ or rig.yaml" if os.path.isdir(p) else "not a folder"))
         if not paths:
             raise BatchInputError(f"{source} holds no recording (a sub-folder with images/ or rig.yaml)")
     else:
         base = os.path.dirname(os.path.abspath(source))
         try:
-            with open(source, encoding="utf-8") as f:
+            with open(source, encoding="utf-8-sig") as f:  # a UTF-8 BOM is not part of the first name
                 lines = f.read().splitlines()
         except (OSError, UnicodeDecodeError) as e:
             raise BatchInputError(f"list file {source}: cannot be read ({e})") from None
@@ -231,7 +236,11 @@ def refuse_overwriting_inputs(a, recordings):
 
 
 def run(a):
-    recordings = find_recordings(a.source)
+    skipped = []
+    recordings = find_recordings(a.source, skipped)
+    if skipped:
+        print(f"batch: skipped {len(skipped)} {'entry' if len(skipped) == 1 else 'entries'} of {a.source} that "
+              "are not recordings: " + ", ".join(f"{e} ({why})" for e, why in skipped), file=sys.stderr)
     if os.path.exists(a.output) and not os.path.isdir(a.output):
         raise BatchInputError(f"-o {a.output} exists and is not a folder; give a folder for the outputs")
     refuse_overwriting_inputs(a, recordings)

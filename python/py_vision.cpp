@@ -4,11 +4,11 @@
 #include <limits>
 #include <opencv2/core.hpp>
 
-#include "python/py_common.h"
+#include "audit/camera_audit.h"
 #include "fusion/sensor_logs.h"
 #include "jobs/fov_map.h"
 #include "jobs/track_recording.h"
-#include "audit/camera_audit.h"
+#include "python/py_common.h"
 #include "tracking/fov_prediction.h"
 #include "tracking/noise_estimate.h"
 #include "tracking/sequence.h"
@@ -22,6 +22,13 @@ namespace mcms::python {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// A frame number from Python: an int >= 0 (a negative one is named, not pybind's
+// "incompatible function arguments").
+size_t FrameIndex(long long frame) {
+  if (frame < 0) Throw("argument 'frame': expected a frame number >= 0, got ", frame);
+  return static_cast<size_t>(frame);
+}
 
 std::string Lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
@@ -142,8 +149,7 @@ std::vector<std::optional<std::vector<ImagePoint>>> GetImagePoints(const CameraR
       Numbers C = GetNumbers((*covs)[c], cname, {{static_cast<py::ssize_t>(v.size()), 2, 2}});
       for (size_t i = 0; i < v.size(); ++i) {
         Mat2 S = Eigen::Map<const Eigen::Matrix<double, 2, 2, Eigen::RowMajor>>(C.data() + 4 * i);
-        if (std::abs(S(0, 1) - S(1, 0)) > 1e-12 * S.cwiseAbs().maxCoeff() || !(S(0, 0) > 0) ||
-            !(S.determinant() > 0))
+        if (std::abs(S(0, 1) - S(1, 0)) > 1e-12 * S.cwiseAbs().maxCoeff() || !(S(0, 0) > 0) || !(S.determinant() > 0))
           Throw("argument '", cname, "': covariance ", i, " is not symmetric positive definite");
         v[i].cov = S;
       }
@@ -299,14 +305,14 @@ namespace {
 void BindCameraModels(py::module_& m) {
   py::class_<CameraModel>(m, "CameraModel",
                           "A camera: mrcal lens model and intrinsics, image size, and its pose in the rig T_cam_rig.")
-      .def(py::init([](const std::string& lensmodel, py::handle intrinsics, int width, int height,
-                       py::handle T_cam_rig) {
-             Eigen::VectorXd in = GetVector(intrinsics, "intrinsics");
-             if (width <= 0 || height <= 0)
-               Throw("arguments 'width', 'height': expected a positive image size, got ", width, "x", height);
-             const Pose T = T_cam_rig.is_none() ? Pose::Identity() : GetPose(T_cam_rig, "T_cam_rig");
-             return CameraModel(lensmodel, std::vector<double>(in.data(), in.data() + in.size()), width, height, T);
-           }),
+      .def(py::init(
+               [](const std::string& lensmodel, py::handle intrinsics, int width, int height, py::handle T_cam_rig) {
+                 Eigen::VectorXd in = GetVector(intrinsics, "intrinsics");
+                 if (width <= 0 || height <= 0)
+                   Throw("arguments 'width', 'height': expected a positive image size, got ", width, "x", height);
+                 const Pose T = T_cam_rig.is_none() ? Pose::Identity() : GetPose(T_cam_rig, "T_cam_rig");
+                 return CameraModel(lensmodel, std::vector<double>(in.data(), in.data() + in.size()), width, height, T);
+               }),
            py::arg("lensmodel"), py::arg("intrinsics"), py::arg("width"), py::arg("height"),
            py::arg("T_cam_rig") = py::none())
       .def_static(
@@ -362,8 +368,7 @@ void BindCameraModels(py::module_& m) {
              r.cameras = std::move(cameras);
              if (names) {
                if (names->size() != r.cameras.size())
-                 Throw("argument 'names': expected one name per camera (", r.cameras.size(), "), got ",
-                       names->size());
+                 Throw("argument 'names': expected one name per camera (", r.cameras.size(), "), got ", names->size());
                r.names = *names;
              } else {
                for (size_t i = 0; i < r.cameras.size(); ++i) r.names.push_back("cam" + std::to_string(i));
@@ -482,7 +487,6 @@ void BindCameraModels(py::module_& m) {
       py::arg("sphere_radius_m") = 0.0, py::arg("gate_px") = 3.0, py::arg("min_views") = 2,
       "Matches unlabeled image points (per camera an (N, 2) array or None) across the rig and triangulates "
       "them. Returns a list of dicts as triangulate's; observations are (camera, index) pairs.");
-
 }
 
 void BindTracker(py::module_& m) {
@@ -502,15 +506,16 @@ void BindTracker(py::module_& m) {
           "read", [](const std::string& path) { return Target::Read(path); }, py::arg("path"))
       .def(
           "write", [](const Target& t, const std::string& path) { t.Write(path); }, py::arg("path"))
-      .def(py::pickle([](const Target& t) { return py::make_tuple(Vec3sToArray(t.balls_target), t.ball_radius, t.name); },
-                      [](py::tuple p) {
-                        if (p.size() != 3) throw std::runtime_error("mcms.Target: bad pickle");
-                        Target t;
-                        t.balls_target = GetPoints3(p[0], "balls");
-                        t.ball_radius = p[1].cast<double>();
-                        t.name = p[2].cast<std::string>();
-                        return t;
-                      }))
+      .def(py::pickle(
+          [](const Target& t) { return py::make_tuple(Vec3sToArray(t.balls_target), t.ball_radius, t.name); },
+          [](py::tuple p) {
+            if (p.size() != 3) throw std::runtime_error("mcms.Target: bad pickle");
+            Target t;
+            t.balls_target = GetPoints3(p[0], "balls");
+            t.ball_radius = p[1].cast<double>();
+            t.name = p[2].cast<std::string>();
+            return t;
+          }))
       .def_readonly("name", &Target::name)
       .def_readonly("ball_radius_m", &Target::ball_radius)
       .def_property_readonly("balls", [](const Target& t) { return Vec3sToArray(t.balls_target); });
@@ -521,8 +526,9 @@ void BindTracker(py::module_& m) {
       .def_property_readonly("status", [](const FrameResult& r) { return std::string(ToString(r.status)); })
       .def_readonly("reason", &FrameResult::reason)
       .def_property_readonly("T_rig_target", [](const FrameResult& r) { return OptionalPose(r.T_rig_target); })
-      .def_property_readonly("cov", [](const FrameResult& r) { return Mat6(r.cov); },
-                             "6x6 covariance of T_rig_target, [dtheta; dp], rig frame, SI.")
+      .def_property_readonly(
+          "cov", [](const FrameResult& r) { return Mat6(r.cov); },
+          "6x6 covariance of T_rig_target, [dtheta; dp], rig frame, SI.")
       .def_readonly("points_triangulated", &FrameResult::points_triangulated)
       .def_readonly("balls_identified", &FrameResult::balls_identified)
       .def_readonly("cameras_used", &FrameResult::cameras_used)
@@ -552,11 +558,12 @@ void BindTracker(py::module_& m) {
                (r.reason.empty() ? "" : " (" + r.reason + ")") + ">";
       });
 
-  py::class_<Tracker>(m, "Tracker",
-                      "Sequence tracker of the five-ball target. Options as keywords: polarity, threshold_dn, "
-                      "read_noise_dn, gain_e_per_dn, camera_gain_e_per_dn, min_margin, max_fit_rms_m, "
-                      "association_gate_px, max_chi2_per_dof, max_prediction_age_s, gate_px, predicted_windows (detect in "
-                      "windows around the predicted ball images; see mcms track --predicted-windows), full_scan_every.")
+  py::class_<Tracker>(
+      m, "Tracker",
+      "Sequence tracker of the five-ball target. Options as keywords: polarity, threshold_dn, "
+      "read_noise_dn, gain_e_per_dn, camera_gain_e_per_dn, min_margin, max_fit_rms_m, "
+      "association_gate_px, max_chi2_per_dof, max_prediction_age_s, gate_px, predicted_windows (detect in "
+      "windows around the predicted ball images; see mcms track --predicted-windows), full_scan_every.")
       .def(py::init([](const CameraRig& rig, std::optional<Target> target, py::kwargs kw) {
              return Tracker(rig, target ? *target : Target::Default(), GetTrackerOptions(kw));
            }),
@@ -567,7 +574,8 @@ void BindTracker(py::module_& m) {
                              "camera images detected whole so far with predicted_windows=True")
       .def(
           "process_frame",
-          [](Tracker& t, py::handle images, size_t frame, double time_s) {
+          [](Tracker& t, py::handle images, long long frame_number, double time_s) {
+            const size_t frame = FrameIndex(frame_number);
             const CameraRig& rig = t.rig();
             if (!py::isinstance<py::sequence>(images) || py::isinstance<py::str>(images))
               Throw("argument 'images': expected a list with one 2-D uint8/uint16 array (or None) per camera");
@@ -586,12 +594,15 @@ void BindTracker(py::module_& m) {
               }
               const bool u8 = a.dtype().is(py::dtype::of<uint8_t>()), u16 = a.dtype().is(py::dtype::of<uint16_t>());
               if (!u8 && !u16)
-                Throw("argument '", name, "': expected dtype uint8 or uint16, got ", py::str(a.dtype()).cast<std::string>());
+                Throw("argument '", name, "': expected dtype uint8 or uint16, got ",
+                      py::str(a.dtype()).cast<std::string>());
               const auto& cam = rig.cameras[c];
               if (a.ndim() != 2 || a.shape(0) != cam.Height() || a.shape(1) != cam.Width())
                 Throw("argument '", name, "': expected a grey image of shape (", cam.Height(), ", ", cam.Width(),
                       ") for camera ", rig.names[c], ", got ndim ", a.ndim(),
-                      a.ndim() >= 2 ? " shape (" + std::to_string(a.shape(0)) + ", " + std::to_string(a.shape(1)) + ", ...)" : "");
+                      a.ndim() >= 2
+                          ? " shape (" + std::to_string(a.shape(0)) + ", " + std::to_string(a.shape(1)) + ", ...)"
+                          : "");
               keep[c] = a;
               mats[c] = cv::Mat(static_cast<int>(a.shape(0)), static_cast<int>(a.shape(1)), u8 ? CV_8UC1 : CV_16UC1,
                                 const_cast<void*>(a.data()));
@@ -605,7 +616,9 @@ void BindTracker(py::module_& m) {
           "image (uint8/uint16, shape (height, width)) or None. Frames in time order (the tracker predicts).")
       .def(
           "process_points",
-          [](Tracker& t, py::handle points, size_t frame, double time_s, py::handle covariances, double sigma_px) {
+          [](Tracker& t, py::handle points, long long frame_number, double time_s, py::handle covariances,
+             double sigma_px) {
+            const size_t frame = FrameIndex(frame_number);
             const auto pts = GetImagePoints(t.rig(), points, covariances, sigma_px);
             std::vector<std::string> problems(t.rig().size());
             for (size_t c = 0; c < pts.size(); ++c)
@@ -635,7 +648,6 @@ void BindTracker(py::module_& m) {
           "track`; returns the FrameResult of every frame.")
       .def_property_readonly("rig", &Tracker::rig)
       .def_property_readonly("target", &Tracker::target);
-
 }
 
 void BindTrackingResults(py::module_& m) {
@@ -720,7 +732,6 @@ void BindTrackingResults(py::module_& m) {
       "write_pose_csv",
       [](const std::string& path, const std::vector<FrameResult>& results) { WritePoseCsv(path, results); },
       py::arg("path"), py::arg("results"), "The pose CSV of `mcms track` (read by `mcms fuse` and mcms.fuse).");
-
 }
 
 void BindCameraAuditAndFieldOfView(py::module_& m) {
@@ -824,7 +835,6 @@ void BindCameraAuditAndFieldOfView(py::module_& m) {
       "The field-of-view map of `mcms fov-map` over grid 'x0:x1:nx,y0:y1:ny,z0:z1:nz' (m, rig frame; x fastest): "
       "arrays per grid point (reshape with 'shape' = (nz, ny, nx)), the summary text, and with output_dir the "
       "map.csv and figures of the CLI.");
-
 }
 
 void BindFieldOfViewGridAndJobs(py::module_& m) {

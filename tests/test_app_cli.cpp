@@ -3,12 +3,12 @@
 // exit and no half-written output.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <sstream>
-#include <unistd.h>
 
 #include "core/io.h"
 #include "tests/cli_runner.h"
@@ -22,7 +22,9 @@ namespace fs = std::filesystem;
 using test::CliRun;
 
 // Runs `mcms ARGS` in `scratch`.
-CliRun Mcms(const std::string& args, const fs::path& scratch) { return test::Mcms(scratch, args); }
+CliRun Mcms(const std::string& args, const fs::path& scratch) {
+  return test::Mcms(scratch, args);
+}
 
 // One small rendered recording shared by the tests of this process (copied before each
 // is spoiled); ctest runs every test in its own process, possibly in parallel.
@@ -168,9 +170,7 @@ TEST(Cli, BadRigTargetAndTimesAreRefused) {
 TEST(Cli, UnusableOutputIsRefusedBeforeTheWork) {
   const fs::path d = Copy("outputs");
   const fs::path file = d / "a_file";
-  {
-    std::ofstream(file) << "keep\n";
-  }
+  { std::ofstream(file) << "keep\n"; }
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"track --quiet " + d.string() + " -o " + d.string(), "track -o"},
       {"render -o " + file.string(), "render -o"},
@@ -189,6 +189,24 @@ TEST(Cli, UnusableOutputIsRefusedBeforeTheWork) {
   std::string text;
   std::getline(in, text);
   EXPECT_EQ(text, "keep");
+}
+
+// Issue 29: `mcms audit imu` said "A subcommand is required"; an unknown command or mode
+// is named with the choices, exit 2.
+TEST(BadInput, UnknownCommandOrModeIsNamedWithTheChoices) {
+  const fs::path d = test::ScratchDir("cli_unknown_mode");
+  const CliRun mode = Mcms("audit imu", d);
+  EXPECT_EQ(mode.code, 2);
+  EXPECT_NE(mode.err.find("unknown mode 'imu' of `mcms audit`"), std::string::npos) << mode.err;
+  for (const char* m : {"cameras", "robot", "fusion", "lens"}) EXPECT_NE(mode.err.find(m), std::string::npos) << m;
+  const CliRun command = Mcms("audti robot log.csv", d);
+  EXPECT_EQ(command.code, 2);
+  EXPECT_NE(command.err.find("unknown command 'audti' of `mcms`"), std::string::npos) << command.err;
+  EXPECT_NE(command.err.find("audit"), std::string::npos) << command.err;
+  // Known commands with a bad option are still CLI11's to report (and not "unknown mode").
+  const CliRun option = Mcms("audit robot --no-such-option log.csv", d);
+  EXPECT_NE(option.code, 0);
+  EXPECT_EQ(option.err.find("unknown mode"), std::string::npos) << option.err;
 }
 
 }  // namespace

@@ -12,9 +12,12 @@ namespace mcms {
 
 const char* ToString(FrameStatus s) {
   switch (s) {
-    case FrameStatus::kOk: return "ok";
-    case FrameStatus::kDegraded: return "degraded";
-    case FrameStatus::kLost: return "lost";
+    case FrameStatus::kOk:
+      return "ok";
+    case FrameStatus::kDegraded:
+      return "degraded";
+    case FrameStatus::kLost:
+      return "lost";
   }
   return "?";
 }
@@ -40,7 +43,8 @@ Tracker::Tracker(CameraRig rig, Target target, TrackerOptions options)
       Throw("tracker options: camera_gain_e_per_dn has ", options_.camera_gain_e_per_dn.size(),
             " entries, the rig has ", rig_.size(), " cameras");
     for (double g : options_.camera_gain_e_per_dn)
-      if (!(std::isfinite(g) && g >= 0)) Throw("tracker options: camera_gain_e_per_dn must be finite and >= 0, got ", g);
+      if (!(std::isfinite(g) && g >= 0))
+        Throw("tracker options: camera_gain_e_per_dn must be finite and >= 0, got ", g);
   }
   options_.matching.triangulation.sphere_radius_m = target_.ball_radius;
 }
@@ -93,8 +97,9 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPoints(const 
   return pts;
 }
 
-std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredicted(
-    double time_s, const std::vector<cv::Mat>& images, std::vector<std::string>* problems) {
+std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredicted(double time_s,
+                                                                                   const std::vector<cv::Mat>& images,
+                                                                                   std::vector<std::string>* problems) {
   const std::optional<Pose> predicted = Predict(time_s);
   if (!predicted || ++frames_since_full_scan_ >= static_cast<size_t>(options_.full_scan_every)) {
     frames_since_full_scan_ = 0;
@@ -143,9 +148,10 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredict
       // (occlusion, a ball near a window's edge, a wrong prediction) the whole image.
       bool complete = true;
       for (const auto& [q, tolerance] : expected)
-        complete = complete && std::any_of(v.begin(), v.end(), [&, &q = q, &tolerance = tolerance](const ImagePoint& ip) {
-                     return (ip.q - q).norm() < tolerance;
-                   });
+        complete =
+            complete && std::any_of(v.begin(), v.end(), [&, &q = q, &tolerance = tolerance](const ImagePoint& ip) {
+              return (ip.q - q).norm() < tolerance;
+            });
       if (complete) {
         ++window_detections_;
         pts[c] = std::move(v);
@@ -158,11 +164,21 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredict
   return pts;
 }
 
+void Tracker::CheckTime(size_t frame, double time_s) {
+  if (!std::isfinite(time_s)) Throw("frame ", frame, ": time_s ", time_s, " is not a finite number of seconds");
+  if (last_time_s_ && time_s < *last_time_s_)
+    Throw("frame ", frame, ": time_s ", time_s, " is before the previous frame's ", *last_time_s_,
+          " s; give frames in time order (the tracker predicts each frame from the ones before)");
+  last_time_s_ = time_s;
+}
+
 FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
                                   const std::vector<std::string>& problems) {
+  CheckTime(frame, time_s);
   std::vector<std::string> why(problems);
-  const auto pts = options_.predicted_windows ? DetectPointsPredicted(time_s, images, &why) : DetectPoints(images, &why);
-  return ProcessPoints(frame, time_s, pts, why);
+  const auto pts =
+      options_.predicted_windows ? DetectPointsPredicted(time_s, images, &why) : DetectPoints(images, &why);
+  return Track(frame, time_s, pts, why);
 }
 
 namespace {
@@ -250,6 +266,12 @@ void Tracker::DescribeRejections(const std::vector<std::vector<ImagePoint>>& pts
 FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
                                    const std::vector<std::optional<std::vector<ImagePoint>>>& in,
                                    const std::vector<std::string>& problems) {
+  CheckTime(frame, time_s);
+  return Track(frame, time_s, in, problems);
+}
+
+FrameResult Tracker::Track(size_t frame, double time_s, const std::vector<std::optional<std::vector<ImagePoint>>>& in,
+                           const std::vector<std::string>& problems) {
   FrameResult res;
   res.frame = frame;
   res.time_s = time_s;
@@ -326,8 +348,7 @@ FrameResult Tracker::ProcessPoints(size_t frame, double time_s,
         const CameraModel& cam = rig_.cameras[c];
         const Vec3 p_cam = cam.T_cam_rig() * (T * target_.balls_target[b]);
         if (!cam.Sees(p_cam)) continue;
-        const Vec2 q = SphereImageCentroid(cam, p_cam, target_.ball_radius,
-                                                options_.refinement.bias_outline_points);
+        const Vec2 q = SphereImageCentroid(cam, p_cam, target_.ball_radius, options_.refinement.bias_outline_points);
         const int best = ClaimNearest(pts[c], q, gate, &used[c]);
         if (best >= 0) out->push_back({c, b, pts[c][best].q, pts[c][best].cov});
       }

@@ -53,9 +53,9 @@ struct FrameResult {
   size_t frame = 0;
   double time_s = 0;
   FrameStatus status = FrameStatus::kLost;
-  std::string reason;                  // empty when ok
-  std::optional<Pose> T_rig_target;    // absent when lost
-  Mat6 cov = Mat6::Zero();             // [dtheta; dp], rig frame, SI units
+  std::string reason;                // empty when ok
+  std::optional<Pose> T_rig_target;  // absent when lost
+  Mat6 cov = Mat6::Zero();           // [dtheta; dp], rig frame, SI units
   int points_triangulated = 0;
   int balls_identified = 0;
   int cameras_used = 0;
@@ -63,9 +63,9 @@ struct FrameResult {
   double identification_margin = 0;
   double rms_px = 0;
   double chi2_per_dof = 0;
-  std::vector<TriangulatedPoint> points;            // all triangulated points of the frame
-  std::vector<int> point_of_ball;                   // identification (-1 = not found)
-  std::vector<BallObservation> ball_observations;   // the 2-D observations the pose was fitted to
+  std::vector<TriangulatedPoint> points;              // all triangulated points of the frame
+  std::vector<int> point_of_ball;                     // identification (-1 = not found)
+  std::vector<BallObservation> ball_observations;     // the 2-D observations the pose was fitted to
   std::vector<std::vector<ImagePoint>> image_points;  // every detected blob, per camera
 };
 
@@ -116,6 +116,11 @@ class Tracker {
   TrackerOptions options_;
   // Last two good poses for the constant-velocity prediction.
   std::vector<std::pair<double, Pose>> history_;
+  // The previous frame's time: frames come in time order (InputError otherwise).
+  std::optional<double> last_time_s_;
+  void CheckTime(size_t frame, double time_s);
+  FrameResult Track(size_t frame, double time_s, const std::vector<std::optional<std::vector<ImagePoint>>>& points,
+                    const std::vector<std::string>& problems);
   size_t whole_detections_ = 0, window_detections_ = 0, frames_since_full_scan_ = 0;
   std::vector<std::vector<char>> last_observed_;  // [camera][ball]: kept by the last accepted pose
   // An image of camera c that can be detected; otherwise the reason in problems[c].

@@ -45,6 +45,8 @@ class Batch(unittest.TestCase):
         # First in order: Dask may already have handed the next recording to its worker.
         shutil.copytree(os.path.join(cls.root, "rec_b"), os.path.join(cls.root, "rec_0_dies"))
         os.makedirs(os.path.join(cls.root, "not_a_recording"))  # skipped: no images/, no rig.yaml
+        with open(os.path.join(cls.root, "notes.txt"), "w") as f:  # skipped: a stray file
+            f.write("not a recording\n")
 
     @classmethod
     def tearDownClass(cls):
@@ -121,6 +123,10 @@ class Batch(unittest.TestCase):
             # The table on stdout, progress on stderr.
             self.assertIn("3 of 5 recordings tracked, 2 failed", r.stdout)
             self.assertIn("rec_0_dies: FAILED", r.stderr)
+            # Issue 29: what is not a recording is skipped with a word, not silently.
+            self.assertIn("skipped 2 entries", r.stderr)
+            self.assertIn("not_a_recording (a folder without images/ or rig.yaml)", r.stderr)
+            self.assertIn("notes.txt (not a folder)", r.stderr)
             # The same recording tracked alone gives the same figures (the cluster changes nothing).
             alone = mcms.track_recording(os.path.join(self.root, "rec_c"), output=os.path.join(d, "c.csv"),
                                          truth="auto")
@@ -153,6 +159,20 @@ class Batch(unittest.TestCase):
                 self.assertEqual(rows[name]["err_pos_rms_mm"], "")  # --truth none
             self.assertEqual(rows["gone"]["status"], "failed")
             self.assertIn(os.path.join(d, "gone") + ": does not exist", rows["gone"]["message"])
+
+    def test_list_file_with_a_utf8_bom(self):
+        # Issue 29: the BOM became part of the first folder's name.
+        import mcms_batch
+
+        with tempfile.TemporaryDirectory() as d:
+            listing = os.path.join(d, "list.txt")
+            with open(listing, "w", encoding="utf-8-sig") as f:
+                f.write(os.path.join(self.root, "rec_a") + "\n" + os.path.join(self.root, "rec_b") + "\n")
+            with open(listing, "rb") as f:
+                self.assertEqual(f.read(3), b"\xef\xbb\xbf")
+            found = mcms_batch.find_recordings(listing)
+            self.assertEqual(found, [("rec_a", os.path.join(self.root, "rec_a")),
+                                     ("rec_b", os.path.join(self.root, "rec_b"))])
 
     def test_an_output_that_is_an_input_is_refused(self):
         # Issue 28: the same file by device and inode (directly, another spelling, a symlink).

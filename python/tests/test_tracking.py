@@ -198,6 +198,23 @@ class Tracker(unittest.TestCase):
         with self.assertRaisesRegex(mcms.InputError, r"unknown tracker option 'nope'"):
             mcms.Tracker(self.rig, self.target, nope=1)
 
+    def test_bad_frame_number_and_time_are_named(self):
+        # Issue 29: time_s NaN, infinite or going backwards was tracked; frame=-5 gave pybind's
+        # "incompatible function arguments" with the arrays printed.
+        tracker = mcms.Tracker(self.rig, self.target)
+        none = [None] * len(self.rig.cameras)
+        with self.assertRaisesRegex(mcms.InputError, r"argument 'frame': expected a frame number >= 0, got -5"):
+            tracker.process_frame(none, frame=-5, time_s=0.0)
+        for bad in (float("nan"), float("inf")):
+            with self.assertRaisesRegex(mcms.InputError, r"frame 3: time_s .* is not a finite number"):
+                tracker.process_frame(none, frame=3, time_s=bad)
+        tracker.process_frame(none, frame=4, time_s=2.0)
+        tracker.process_frame(none, frame=5, time_s=2.0)  # the same time twice is fine
+        with self.assertRaisesRegex(mcms.InputError, r"frame 6: time_s 1.5 is before the previous frame's 2 s"):
+            tracker.process_frame(none, frame=6, time_s=1.5)
+        with self.assertRaisesRegex(mcms.InputError, r"frame 7: time_s 1 is before"):
+            tracker.process_points(none, frame=7, time_s=1.0)
+
     def test_audit_names_a_moved_camera(self):
         # Camera 1's observations come from a camera turned by 3 mrad; the rig does not know.
         moved = [mcms.CameraModel(c.lensmodel, c.intrinsics, c.width, c.height, c.T_cam_rig) for c in self.rig.cameras]
