@@ -81,7 +81,10 @@ void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
   if (!a.measured.empty()) {
     measured = ReadMeasuredPoints(a.measured, a.measured_repeats);
     if (!a.reference.empty()) ApplyReference(&*measured, a.reference);
-    if (!a.lines.empty()) lines = ReadMeasuredLines(a.lines);
+    if (!a.lines.empty()) {
+      lines = ReadMeasuredLines(a.lines);
+      CheckLinesAgainstPoints(*lines, *measured);
+    }
   }
 
   std::fprintf(out_text, "mcms fov-map: %zu cameras, target '%s' (%zu balls, radius %.1f mm), grid %s (%zu points), %d threads\n",
