@@ -13,6 +13,9 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
 #include "audit/repeatability.h"
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"
@@ -211,6 +214,35 @@ TEST(AttackLensFov, DemoOutputFolderThatCannotBeCreated) {
   const CliRun f = ExpectRefused(d, "fov-map --quiet --grid=0:0:1,0:0:1,1:1:1 -o /proc/mcms-attack-y",
                                  {"fov-map -o", "/proc/mcms-attack-y"});
   EXPECT_FALSE(Has(f.err, "internal error")) << f.err;
+}
+
+// 9. audit cameras on unreadable frames (a colour PNG cut in half, which only libpng would
+// decode, and garbage bytes): each frame named with its file and reason, no libpng noise.
+TEST(AttackLensFov, AuditCamerasNamesUnreadableFramesWithoutLibpngNoise) {
+  const fs::path d = test::ScratchDir("attack_audit_png");
+  const CliRun render = test::Mcms(d, "render --frames 12 --quiet --threads 2 -o rec");
+  ASSERT_EQ(render.code, 0) << render.err;
+  const fs::path colour = d / "rec" / "images" / "cam1" / "000002.png";
+  const cv::Mat grey = cv::imread(colour.string(), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(grey.empty());
+  cv::Mat rgb;
+  cv::merge(std::vector<cv::Mat>{grey, grey, grey}, rgb);
+  ASSERT_TRUE(cv::imwrite(colour.string(), rgb));
+  const std::string whole = test::ReadAll(colour);
+  test::WriteText(colour, whole.substr(0, whole.size() / 2));
+  std::string garbage;
+  for (int i = 0; i < 5000; ++i) garbage += static_cast<char>((i * 7919 + 13) % 251);
+  const fs::path junk = d / "rec" / "images" / "cam2" / "000003.png";
+  test::WriteText(junk, garbage);
+  const auto before = Snapshot(d);
+  const CliRun r = test::Mcms(d, "audit cameras rec -q");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_FALSE(Has(r.err, "libpng")) << r.err;
+  EXPECT_TRUE(Has(r.out, "frame 2 degraded: camera cam1: cannot decode rec/images/cam1/000002.png: truncated PNG"))
+      << r.out;
+  EXPECT_TRUE(Has(r.out, "frame 3 degraded: camera cam2: cannot decode rec/images/cam2/000003.png: not a PNG"))
+      << r.out;
+  EXPECT_EQ(Snapshot(d), before);
 }
 
 }  // namespace
