@@ -116,7 +116,7 @@ TEST(AttackLensFov, CameramodelWithUtf8BomIsRead) {
   EXPECT_FALSE(Has(r.err, "is not a .cameramodel")) << r.err;
 }
 
-// Raw repeats of a 3 x 3 grid (0.5 x 0.4 m) 1.5 m below the rig: point,repeat,x_m,y_m,z_m.
+// Raw repeats of a 3 x 3 grid (0.5 x 0.4 m) in the default rig's working volume: point,repeat,x_m,y_m,z_m.
 std::string RawRows(int repeats = 5) {
   std::string s;
   int id = 0;
@@ -126,7 +126,7 @@ std::string RawRows(int repeats = 5) {
       for (int k = 1; k <= repeats; ++k) {
         char b[160];
         std::snprintf(b, sizeof b, "%d,%d,%.6f,%.6f,%.6f\n", id, k, 0.5 * i + 1e-4 * ((k * 3 + id) % 5),
-                      0.4 * j + 1e-4 * ((k * 7 + id) % 4), 1.5 + 1e-4 * ((k + 2 * id) % 3));
+                      0.4 * j + 1e-4 * ((k * 7 + id) % 4), 0.5 + 1e-4 * ((k + 2 * id) % 3));
         s += b;
       }
     }
@@ -180,6 +180,10 @@ TEST(AttackLensFov, FovMapRefusesImplausiblePositionsAndSigmas) {
                   "128,1.058,0.242\n");
   ExpectRefused(d, "fov-map --quiet --measured far.csv --json fit.json -o out",
                 {"far.csv line 47, column 'x_m': 100 m", "outside the rig's field of view", "within +-10 m"});
+  // Within 10 m but where no camera of the (default) rig looks.
+  test::WriteText(d / "side.csv", header + RawRows() + "10,1,6,0,0.5\n10,2,6.001,0.001,0.501\n");
+  ExpectRefused(d, "fov-map --quiet --measured side.csv --json fit.json -o out",
+                {"side.csv: point 10 at (6.0005, 0.0005, 0.5005) m", "outside the rig's field of view", "needs 2"});
   ExpectRefused(d, "fov-map --quiet --measured huge.csv -o out", {"huge.csv line 47, column 'y_m'", "1e+308 m"});
   ExpectRefused(d, "fov-map --quiet --measured sigma.csv --json fit.json -o out",
                 {"sigma.csv line 2, column 'sigma_y_mm'", "1e+308 mm", "expected 0 to 1000 mm"});
