@@ -1261,6 +1261,8 @@ Json Table2Json(const Table2Prediction& t, bool per_line) {
 }  // namespace
 
 void WriteMeasuredJson(const MeasuredReport& R, const fs::path& path) {
+  // A new top-level key must also join the keys ReadCameraErrorModel accepts
+  // (synthetic/camera_error_model.cpp), which refuses other commands' JSON by them.
   Json j;
   j["source"] = R.measured.source.string();
   j["layout"] = R.layout_text;
