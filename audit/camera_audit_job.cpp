@@ -101,6 +101,20 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
   const auto results = TrackImageSequence(
       seq, tracker, [&](size_t d, size_t) { progress.Update(d); }, a.tracker.threads);
   progress.Finish();
+  // Frames whose image files could not be read: named with the file and the reason (they
+  // are degraded or lost and the audit goes on without those images).
+  {
+    const std::string images = (dir / "images").string();
+    size_t named = 0, more = 0;
+    for (const auto& r : results) {
+      if (r.status == FrameStatus::kOk || r.reason.find(images) == std::string::npos) continue;
+      if (named++ < 20)
+        print("frame " + std::to_string(r.frame) + " " + ToString(r.status) + ": " + r.reason + "\n");
+      else
+        ++more;
+    }
+    if (more > 0) print("... and " + std::to_string(more) + " more frames with unreadable images\n");
+  }
   print(CheckPoseResiduals(results).Describe() + "\n");
   const CameraAuditResult audit = AuditCameraModel(rig, target, results, a.audit, [&](const std::string& line) {
     if (!a.quiet) std::fprintf(stderr, "audit: %s\n", line.c_str());

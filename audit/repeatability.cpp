@@ -37,6 +37,30 @@ double NonNegative(const CsvTable& t, size_t row, int col) {
   return v;
 }
 
+// A measured standard deviation (mm) of Table 1: beyond 1 m no photogrammetry rig's
+// repeatability is plausible (and the variance fit overflows near 1e154 mm).
+constexpr double kMaxSigmaMm = 1000;
+// A measured position (m, rig frame): a rig sees a few metres; a point beyond 10 m is
+// outside any camera rig's field of view (a wrong unit or a broken row).
+constexpr double kMaxPositionM = 10;
+
+double SigmaCell(const CsvTable& t, size_t row, int col) {
+  const double v = NonNegative(t, row, col);
+  if (v > kMaxSigmaMm)
+    Throw(t.source.string(), " line ", t.line_of_row[row], ", column '", t.header[col], "': ", v,
+          " mm is not a plausible standard deviation of repeated measurements; expected 0 to ", kMaxSigmaMm, " mm");
+  return v;
+}
+
+double PositionCell(const CsvTable& t, size_t row, int col) {
+  const double v = t.Number(row, col);
+  if (std::abs(v) > kMaxPositionM)
+    Throw(t.source.string(), " line ", t.line_of_row[row], ", column '", t.header[col], "': ", v,
+          " m is outside the rig's field of view; expected a position in the rig frame within +-", kMaxPositionM,
+          " m (metres, not millimetres)");
+  return v;
+}
+
 int IntegerCell(const CsvTable& t, size_t row, int col) {
   const double v = t.Number(row, col);
   if (v != std::floor(v) || std::abs(v) > 1e9)
@@ -92,12 +116,12 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
       p.id = Cell(t, r, ci);
       if (p.id.empty()) Throw(path.string(), " line ", t.line_of_row[r], ", column 'point': empty point label");
       if (!seen.insert(p.id).second) Throw(path.string(), " line ", t.line_of_row[r], ": point ", p.id, " appears twice");
-      const Vec3 s(NonNegative(t, r, cx), NonNegative(t, r, cy), NonNegative(t, r, cz));
+      const Vec3 s(SigmaCell(t, r, cx), SigmaCell(t, r, cy), SigmaCell(t, r, cz));
       if (!(s.minCoeff() > 0))
         Throw(path.string(), " line ", t.line_of_row[r], ": point ", p.id,
               " has a zero standard deviation; a sample of repeats never gives exactly zero");
       if (cd >= 0) {
-        const double d = NonNegative(t, r, cd);
+        const double d = SigmaCell(t, r, cd);
         if (std::abs(d - s.norm()) > 0.01 * s.norm() + 0.002)
           Throw(path.string(), " line ", t.line_of_row[r], ", column 'sigma_d_mm': ", d, " is not sqrt(sx^2 + sy^2 + sz^2) = ",
                 s.norm(), " of the same row");
@@ -124,7 +148,7 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
       if (id.empty()) Throw(path.string(), " line ", t.line_of_row[r], ", column 'point': empty point label");
       if (!repeats.insert({id, Cell(t, r, cr)}).second)
         Throw(path.string(), " line ", t.line_of_row[r], ": point ", id, " repeat ", Cell(t, r, cr), " appears twice");
-      const Vec3 x(t.Number(r, cx), t.Number(r, cy), t.Number(r, cz));
+      const Vec3 x(PositionCell(t, r, cx), PositionCell(t, r, cy), PositionCell(t, r, cz));
       if (!samples.count(id)) order.push_back(id);
       samples[id].push_back(x);
       if (cp >= 0) {
@@ -154,6 +178,27 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
       p.variance = var;
       p.mean_rig = mean;
       m.points.push_back(p);
+    }
+    // The structure: a point's rows are repeated measurements of one position, so its
+    // repeats lie close together and the points apart. Repeats spread wider than the
+    // points' means are the columns mislabelled (point and repeat swapped): every "point"
+    // then mixes all positions and the fit would blame a noise floor of decimetres.
+    if (m.points.size() >= 2) {
+      std::vector<double> within;
+      Vec3 centre = Vec3::Zero();
+      for (const auto& p : m.points) within.push_back(std::sqrt(p.variance.sum())), centre += *p.mean_rig;
+      centre /= static_cast<double>(m.points.size());
+      double between = 0;
+      for (const auto& p : m.points) between += (*p.mean_rig - centre).squaredNorm();
+      between = std::sqrt(between / static_cast<double>(m.points.size()));
+      std::nth_element(within.begin(), within.begin() + static_cast<long>(within.size() / 2), within.end());
+      const double median_within = within[within.size() / 2];
+      if (median_within > between)
+        Throw(path.string(), ": columns '", t.header[ci], "' and '", t.header[cr],
+              "' do not hold what their headers say (swapped?): the repeats of a point spread ", 1e3 * median_within,
+              " mm (median) while the ", m.points.size(), " points' means lie within ", 1e3 * between,
+              " mm of each other; expected each point's rows to be repeated measurements of one position "
+              "(point,repeat,x_m,y_m,z_m)");
     }
   }
   CheckPlanes(m);
@@ -217,6 +262,38 @@ MeasuredLines ReadMeasuredLines(const fs::path& path) {
     out.lines.push_back(l);
   }
   return out;
+}
+
+void CheckLinesAgainstPoints(const MeasuredLines& lines, const MeasuredPoints& points) {
+  std::set<int> planes;
+  std::set<std::string> ids;
+  for (const auto& p : points.points) planes.insert(p.plane), ids.insert(p.id);
+  const auto list = [](const auto& set, size_t max) {
+    std::ostringstream o;
+    size_t n = 0;
+    for (const auto& x : set) {
+      if (n++ == max) {
+        o << ", ...";
+        break;
+      }
+      o << (n > 1 ? ", " : "") << x;
+    }
+    return o.str();
+  };
+  const bool planed = !planes.count(0);
+  for (const auto& l : lines.lines) {
+    if (!l.from.empty()) {
+      for (const std::string& end : {l.from, l.to})
+        if (!ids.count(end))
+          Throw(lines.source.string(), ": line ", l.id, " of plane ", l.plane, " joins ", l.from, " and ", l.to,
+                "; point ", end, " is not among the measured points of ", points.source.string(), " (they are ",
+                list(ids, 20), "); expected lines between measured points");
+    }
+    if (planed && !planes.count(l.plane))
+      Throw(lines.source.string(), ": line ", l.id, " is on plane ", l.plane, ", which the measurements ",
+            points.source.string(), " lack (they have plane", planes.size() > 1 ? "s " : " ", list(planes, 20),
+            "); expected lines of the measured planes");
+  }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1184,6 +1261,8 @@ Json Table2Json(const Table2Prediction& t, bool per_line) {
 }  // namespace
 
 void WriteMeasuredJson(const MeasuredReport& R, const fs::path& path) {
+  // A new top-level key must also join the keys ReadCameraErrorModel accepts
+  // (synthetic/camera_error_model.cpp), which refuses other commands' JSON by them.
   Json j;
   j["source"] = R.measured.source.string();
   j["layout"] = R.layout_text;

@@ -85,6 +85,10 @@ struct MeasuredLines {
 // Table 2 (plane,line,d_laser_mm,d_camera_mm[,delta_mm][,from,to]). InputError as above,
 // and when delta_mm disagrees with d_laser_mm - d_camera_mm.
 MeasuredLines ReadMeasuredLines(const std::filesystem::path& path);
+// InputError naming the lines file, the line and what the measurements hold when a line
+// joins a point that was not measured (columns from,to) or lies on a plane the measured
+// points lack (when they name planes).
+void CheckLinesAgainstPoints(const MeasuredLines& lines, const MeasuredPoints& points);
 
 // ---- The noise-model fit (independent of files, for tests) ----
 

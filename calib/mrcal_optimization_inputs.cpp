@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "vision/camera_model.h"
 
 namespace mcms {
 namespace mrcal_io {
@@ -491,6 +492,9 @@ MrcalOptimizationInputsData ReadMrcalOptimizationInputs(const std::filesystem::p
   } catch (const std::exception& e) {
     Throw(where, e.what());
   }
+  // Not a .cameramodel at all, or its own lens model or intrinsics broken: named before
+  // the optimization_inputs are looked for.
+  CameraModel::CheckCameramodelText(text, path);
   MrcalOptimizationInputsData d;
   try {
     const size_t key = text.find("'optimization_inputs'");

@@ -252,9 +252,7 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
   // Everything is computed; only now write the outputs (each atomically): plots first,
   // then the models, rig.yaml last, so a failure part-way leaves no rig.yaml.
   const fs::path out = a.output;
-  std::error_code ec;
-  fs::create_directories(out, ec);
-  if (ec) Throw("calib-rig -o ", out.string(), ": cannot create the output folder: ", ec.message());
+  CreateOutputFolder(out, "calib-rig -o");
   for (size_t c = 0; c < r.rig.size(); ++c)
     WriteResidualPlot(r, static_cast<int>(c), out / ("residuals-" + r.rig.names[c] + ".svg"));
   for (size_t c = 0; c < r.rig.size(); ++c) {

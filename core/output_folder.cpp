@@ -20,6 +20,15 @@ void RequireReplaceableFolder(const std::filesystem::path& folder, const std::ve
         "remove it");
 }
 
+void CreateOutputFolder(const std::filesystem::path& folder, const std::string& what) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec || !fs::is_directory(folder, ec))
+    Throw(what, ": cannot create the output folder ", folder.string(), ": ",
+          ec ? ec.message() : std::string("it exists and is not a folder"), " (nothing was written)");
+}
+
 void WriteFolderAtomically(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                            const std::string& kind, const std::string& what,
                            const std::function<void(const std::filesystem::path&)>& write) {
@@ -33,8 +42,15 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   const fs::path tmp = out.parent_path() / (stem + ".partial-" + pid);
   std::error_code ec;
   fs::remove_all(tmp, ec);
+  {
+    std::error_code mk;
+    fs::create_directories(tmp, mk);
+    if (mk) {
+      fs::remove_all(tmp, ec);
+      Throw(what, ": cannot create the output folder ", out.string(), ": ", mk.message(), " (nothing was written)");
+    }
+  }
   try {
-    fs::create_directories(tmp);
     write(tmp);
     RequireReplaceableFolder(out, marker_files, kind, what);
     if (fs::exists(out)) {

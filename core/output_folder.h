@@ -22,6 +22,11 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what);
 
+// Creates an output folder (and its parents). InputError naming `what` (e.g. "demo -o")
+// and the folder, with the system's reason, instead of a filesystem_error, when it cannot
+// be created (a path in /proc, a read-only file system, a file in the way).
+void CreateOutputFolder(const std::filesystem::path& folder, const std::string& what);
+
 // An output of a run, to be checked against the run's inputs before anything is written.
 struct RunOutput {
   std::filesystem::path path;

@@ -161,7 +161,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
                "%.1f Hz (%zu frames), robot at %.0f Hz, inclinometer every %.0f ms, %d threads -> %s\n",
                lo.points, 1e3 * lo.sphere_radius_m, lo.dwell_s, sc.rig.size(), lo.camera_rate_hz, sc.NumFrames(),
                lo.robot_rate_hz, 1e3 * lo.inclinometer.period, threads, out.string().c_str()));
-  fs::create_directories(out);
+  CreateOutputFolder(out, "demo -o");
   // What the cameras see: the truth moved by each visit's rigid error (synthetic/
   // camera_error_model.h). The truth (sc) is what is scored against.
   const CameraErrorModel& model = o.camera_model;

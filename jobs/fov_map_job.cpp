@@ -80,8 +80,22 @@ void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
   std::optional<MeasuredLines> lines;
   if (!a.measured.empty()) {
     measured = ReadMeasuredPoints(a.measured, a.measured_repeats);
+    // Raw repeats give positions: each must lie where the rig measures (seen by 2 cameras).
+    for (const MeasuredPoint& p : measured->points) {
+      if (!p.mean_rig) continue;
+      int seen = 0;
+      for (const CameraModel& cam : sc.rig.cameras) seen += cam.Sees(cam.T_cam_rig() * *p.mean_rig) ? 1 : 0;
+      if (seen < 2)
+        Throw(a.measured.string(), ": point ", p.id, " at (", p.mean_rig->x(), ", ", p.mean_rig->y(), ", ",
+              p.mean_rig->z(), ") m (mean of its repeats) is outside the rig's field of view: ", seen, " of ",
+              sc.rig.size(),
+              " cameras see it, a measured point needs 2; expected positions in the rig frame, in metres");
+    }
     if (!a.reference.empty()) ApplyReference(&*measured, a.reference);
-    if (!a.lines.empty()) lines = ReadMeasuredLines(a.lines);
+    if (!a.lines.empty()) {
+      lines = ReadMeasuredLines(a.lines);
+      CheckLinesAgainstPoints(*lines, *measured);
+    }
   }
 
   std::fprintf(out_text, "mcms fov-map: %zu cameras, target '%s' (%zu balls, radius %.1f mm), grid %s (%zu points), %d threads\n",

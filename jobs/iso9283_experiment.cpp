@@ -11,12 +11,13 @@
 #include <Eigen/QR>
 
 #include "calib/robot_calibration.h"
-#include "model/robot_model.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "core/random.h"
 #include "core/svg_plot.h"
 #include "fusion/stream_fusion.h"
+#include "model/robot_model.h"
 #include "synthetic/lab_scenario.h"
 #include "synthetic/scenario.h"
 #include "tracking/pose_refinement.h"
@@ -639,7 +640,7 @@ void WriteIso9283ExperimentSvg(const std::filesystem::path& ap_path, const std::
 }
 
 void WriteIso9283Measurements(const std::filesystem::path& dir, const std::string& prefix, const Iso9283Experiment& e) {
-  std::filesystem::create_directories(dir);
+  CreateOutputFolder(dir, "iso9283 --write-measurements");
   for (int k = 0; k < static_cast<int>(e.conditions.size()); ++k) {
     WriteIso9283AttainedCsv(dir / (prefix + "attained_" + std::to_string(k + 1) + ".csv"), e, k);
     WriteIso9283PathCsv(dir / (prefix + "path_" + std::to_string(k + 1) + ".csv"), e, k);

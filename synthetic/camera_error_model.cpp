@@ -58,8 +58,15 @@ bool CameraErrorModel::IsValid(std::string* why) const {
   if (!(pixel_noise_scale >= 1) || !std::isfinite(pixel_noise_scale))
     return fail("pixel_noise_scale must be a finite number >= 1 (the rendered images already carry the nominal noise), got " +
                 std::to_string(pixel_noise_scale));
+  if (pixel_noise_scale > kMaxPixelNoiseScale)
+    return fail("pixel_noise_scale " + std::to_string(pixel_noise_scale) + " is beyond the plausible 1 to " +
+                std::to_string(static_cast<int>(kMaxPixelNoiseScale)));
   if (!(floor_m >= 0) || !std::isfinite(floor_m)) return fail("floor_m must be a finite number >= 0");
+  if (floor_m > kMaxVisitSigmaM)
+    return fail("floor_m " + std::to_string(floor_m) + " m is beyond the plausible 0 to 0.1 m");
   if (!anisotropy_m.allFinite()) return fail("anisotropy_m must be finite");
+  if (anisotropy_m.cwiseAbs().maxCoeff() > kMaxVisitSigmaM)
+    return fail("anisotropy_m is beyond the plausible 0 to 0.1 m per axis");
   return true;
 }
 
@@ -79,7 +86,8 @@ CameraErrorModel PaperCameraErrorModel() {
 
 namespace {
 
-double Parameter(const YAML::Node& effect, const std::string& effect_name, const std::string& key, const std::string& file) {
+double Parameter(const YAML::Node& effect, const std::string& effect_name, const std::string& key,
+                 const std::string& file, double lo, double hi, const char* unit) {
   const YAML::Node p = effect["parameters"];
   if (!p || !p.IsMap() || !p[key])
     Throw("--camera-model ", file, ": effect \"", effect_name, "\" has no parameters.", key,
@@ -93,6 +101,11 @@ double Parameter(const YAML::Node& effect, const std::string& effect_name, const
   if (!std::isfinite(v) || v < 0)
     Throw("--camera-model ", file, ": effect \"", effect_name, "\" parameters.", key, " = ", v,
           ", expected a finite number >= 0");
+  if (v < lo || v > hi)
+    Throw("--camera-model ", file, ": effect \"", effect_name, "\" parameters.", key, " = ", v, unit,
+          " is not plausible; expected ", lo, " to ", hi, unit,
+          " (a per-visit error beyond 0.1 m moves the target out of the rig's view; a pixel noise beyond ",
+          kMaxPixelNoiseScale, " times the nominal drowns the balls)");
   return v;
 }
 
@@ -111,6 +124,33 @@ CameraErrorModel ReadCameraErrorModel(const std::string& spec) {
   } catch (const YAML::Exception& e) {
     Throw("--camera-model ", spec, ": not valid JSON (", e.what(), ")");
   }
+  // The keys `mcms fov-map --measured --json` writes; another command's JSON (an audit
+  // report with "mode", ...) is not a camera model even when it holds an "effects" list.
+  static const std::vector<std::string> kKeys = {"source",
+                                                 "layout",
+                                                 "effects",
+                                                 "heldout_loglik_gain",
+                                                 "heldout_loglik_gain_vs_isotropic",
+                                                 "loglik",
+                                                 "outlier_points",
+                                                 "layout_sensitivity",
+                                                 "lab_prediction",
+                                                 "table2_prediction",
+                                                 "table2_alternatives"};
+  if (root.IsMap())
+    for (const auto& kv : root) {
+      const std::string key = kv.first.IsScalar() ? kv.first.Scalar() : std::string("(not a name)");
+      if (std::find(kKeys.begin(), kKeys.end(), key) == kKeys.end()) {
+        std::string expected;
+        for (const auto& k : kKeys) expected += (expected.empty() ? "" : ", ") + k;
+        Throw("--camera-model ", spec, ": key \"", key.substr(0, 60), "\" is not one of the JSON that `mcms fov-map ",
+              "--measured --json` writes (",
+              root["mode"] && root["mode"].IsScalar()
+                  ? "this looks like the report of `mcms audit " + root["mode"].Scalar() + "`; "
+                  : std::string(),
+              "expected the keys ", expected, ", with \"effects\" a list of {name, parameters})");
+      }
+    }
   const YAML::Node effects = root.IsMap() ? root["effects"] : YAML::Node();
   if (!effects || !effects.IsSequence())
     Throw("--camera-model ", spec,
@@ -122,11 +162,16 @@ CameraErrorModel ReadCameraErrorModel(const std::string& spec) {
     if (!e.IsMap() || !e["name"] || !e["name"].IsScalar())
       Throw("--camera-model ", spec, ": an entry of \"effects\" has no \"name\"");
     const std::string n = e["name"].as<std::string>();
-    if (n == "pixel_noise_scale") m.pixel_noise_scale = Parameter(e, n, "scale", spec);
-    else if (n == "noise_floor") m.floor_m = Parameter(e, n, "floor_m", spec);
-    else if (n == "anisotropy_x") m.anisotropy_m.x() = Parameter(e, n, "sigma_x_m", spec);
-    else if (n == "anisotropy_y") m.anisotropy_m.y() = Parameter(e, n, "sigma_y_m", spec);
-    else if (n == "anisotropy_z") m.anisotropy_m.z() = Parameter(e, n, "sigma_z_m", spec);
+    if (n == "pixel_noise_scale")
+      m.pixel_noise_scale = Parameter(e, n, "scale", spec, 0, kMaxPixelNoiseScale, "");
+    else if (n == "noise_floor")
+      m.floor_m = Parameter(e, n, "floor_m", spec, 0, kMaxVisitSigmaM, " m");
+    else if (n == "anisotropy_x")
+      m.anisotropy_m.x() = Parameter(e, n, "sigma_x_m", spec, 0, kMaxVisitSigmaM, " m");
+    else if (n == "anisotropy_y")
+      m.anisotropy_m.y() = Parameter(e, n, "sigma_y_m", spec, 0, kMaxVisitSigmaM, " m");
+    else if (n == "anisotropy_z")
+      m.anisotropy_m.z() = Parameter(e, n, "sigma_z_m", spec, 0, kMaxVisitSigmaM, " m");
     else if (n == "misidentification") continue;  // not simulated (see the header)
     else
       Throw("--camera-model ", spec, ": unknown effect \"", n,

@@ -46,6 +46,11 @@ namespace mcms {
 // A draw from N(0, C), C symmetric positive semi-definite ([dtheta; dp]).
 Vec6 DrawNormal(const Mat6& C, Rng* rng);
 
+// Plausible bounds of a camera error model (read from a file or built): a per-visit error
+// (floor, anisotropy) beyond 0.1 m moves the target out of the rig's view; a pixel noise
+// beyond 100 times the nominal drowns the balls in any image.
+inline constexpr double kMaxVisitSigmaM = 0.1, kMaxPixelNoiseScale = 100;
+
 struct CameraErrorModel {
   std::string name = "ideal";  // ideal, paper, or the file it was read from
   std::string source = "the forward model's nominal camera (pixel noise scale 1, no floor)";

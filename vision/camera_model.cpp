@@ -137,10 +137,86 @@ bool CameraModel::Sees(const Vec3& p_cam, double margin) const {
          q.y() <= height_ - 0.5 - margin;
 }
 
+namespace {
+// The text without a leading UTF-8 byte order mark (written by some editors).
+std::string WithoutBom(std::string text) {
+  if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) text.erase(0, 3);
+  return text;
+}
+
+constexpr const char* kCameramodelFormat =
+    "expected mrcal's Python-literal format: '#' comment lines, then a dict {'lensmodel': 'LENSMODEL_...', "
+    "'intrinsics': [...], 'extrinsics': [...], 'imagersize': [w, h]}";
+
+// The value text after a top-level key 'key' (or "key") and its colon; npos when absent.
+size_t ValueOf(const std::string& text, const std::string& key) {
+  for (const char q : {'\'', '"'}) {
+    const std::string k = std::string(1, q) + key + q;
+    size_t at = text.find(k);
+    while (at != std::string::npos) {
+      const size_t colon = text.find_first_not_of(" \t\r\n", at + k.size());
+      if (colon != std::string::npos && text[colon] == ':') return colon + 1;
+      at = text.find(k, at + 1);
+    }
+  }
+  return std::string::npos;
+}
+}  // namespace
+
+void CameraModel::CheckCameramodelText(const std::string& raw, const fs::path& path) {
+  const std::string text = WithoutBom(raw);
+  size_t at = 0;
+  while (true) {
+    at = text.find_first_not_of(" \t\r\n", at);
+    if (at == std::string::npos || text[at] != '#') break;
+    at = text.find('\n', at);
+  }
+  if (at == std::string::npos || text[at] != '{')
+    Throw(path.string(), " is not a .cameramodel (", kCameramodelFormat, "); it ",
+          at == std::string::npos ? std::string("holds no dict (empty or only comments)")
+                                  : std::string("does not start with '{'"));
+  const size_t lm = ValueOf(text, "lensmodel");
+  if (lm != std::string::npos) {
+    const size_t q = text.find_first_not_of(" \t\r\n", lm);
+    const size_t e = q == std::string::npos ? q : text.find(text[q], q + 1);
+    if (q == std::string::npos || (text[q] != '\'' && text[q] != '"') || e == std::string::npos)
+      Throw(path.string(), ": field 'lensmodel' is not a quoted name (", kCameramodelFormat, ")");
+    const std::string name = text.substr(q + 1, e - q - 1);
+    mrcal_lensmodel_t lens;
+    if (!mrcal_lensmodel_from_name(&lens, name.c_str()) || !mrcal_lensmodel_type_is_valid(lens.type))
+      Throw(path.string(), ": field 'lensmodel' is '", name.substr(0, 80),
+            "'; expected an mrcal lens model name such as LENSMODEL_PINHOLE, LENSMODEL_OPENCV8 or "
+            "LENSMODEL_SPLINED_STEREOGRAPHIC_order=3_Nx=16_Ny=12_fov_x_deg=100");
+  }
+  const size_t in = ValueOf(text, "intrinsics");
+  if (in != std::string::npos) {
+    const size_t open = text.find_first_not_of(" \t\r\n", in);
+    const size_t close = open == std::string::npos ? open : text.find(']', open);
+    if (open == std::string::npos || text[open] != '[' || close == std::string::npos)
+      Throw(path.string(), ": field 'intrinsics' is not a list [fx, fy, cx, cy, ...] of numbers");
+    static const char* const kCore[4] = {"fx", "fy", "cx", "cy"};
+    std::stringstream list(text.substr(open + 1, close - open - 1));
+    std::string cell;
+    for (size_t i = 0; std::getline(list, cell, ','); ++i) {
+      const size_t b = cell.find_first_not_of(" \t\r\n");
+      if (b == std::string::npos) continue;  // the trailing comma mrcal writes
+      const size_t e = cell.find_last_not_of(" \t\r\n");
+      const std::string v = cell.substr(b, e - b + 1);
+      char* end = nullptr;
+      const double x = std::strtod(v.c_str(), &end);
+      const std::string name = i < 4 ? std::string(kCore[i]) : "intrinsics[" + std::to_string(i) + "]";
+      if (end == v.c_str() || *end != 0 || !std::isfinite(x))
+        Throw(path.string(), ": field 'intrinsics', ", name, " is '", v.substr(0, 40), "'; expected a finite number");
+    }
+  }
+}
+
 CameraModel CameraModel::ReadCameramodel(const fs::path& path) {
   if (!fs::exists(path)) Throw("camera model file ", path.string(), " does not exist");
-  mrcal_cameramodel_t* m = mrcal_read_cameramodel_file(path.c_str());
-  if (!m) Throw("cannot parse mrcal camera model ", path.string(), ": expected a .cameramodel file as written by mrcal");
+  const std::string text = WithoutBom(ReadTextFile(path));
+  CheckCameramodelText(text, path);
+  mrcal_cameramodel_t* m = mrcal_read_cameramodel_string(text.data(), static_cast<int>(text.size()));
+  if (!m) Throw("cannot parse mrcal camera model ", path.string(), ": ", kCameramodelFormat);
   std::unique_ptr<mrcal_cameramodel_t, void (*)(mrcal_cameramodel_t*)> guard(
       m, [](mrcal_cameramodel_t* p) { mrcal_free_cameramodel(&p); });
   char name[256];
@@ -277,7 +353,7 @@ int ReadImageSide(const YAML::Node& root, const char* field, const fs::path& pat
 
 CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   if (!fs::exists(path)) Throw("camera file ", path.string(), " does not exist");
-  std::string text = ReadTextFile(path);
+  std::string text = WithoutBom(ReadTextFile(path));
   // OpenCV writes "%YAML:1.0" (and older files "%YAML 1.0") as the first line; the colon
   // form is not YAML, so that one line is blanked (line numbers stay right).
   const auto first = text.find_first_not_of(" \t\r\n");
@@ -348,7 +424,7 @@ void CameraModel::WriteOpenCvYaml(const fs::path& path) const {
 }
 
 CameraModel CameraModel::Read(const fs::path& path) {
-  const std::string text = ReadTextFile(path);
+  const std::string text = WithoutBom(ReadTextFile(path));
   const auto first = text.find_first_not_of(" \t\r\n");
   if (first != std::string::npos && (text[first] == '{' || text[first] == '#')) return ReadCameramodel(path);
   return ReadOpenCvYaml(path);

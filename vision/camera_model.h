@@ -53,7 +53,13 @@ class CameraModel {
 
   // mrcal .cameramodel files (read and written by libmrcal itself, so Debian's mrcal
   // tools read what we write). InputError naming the file on failure.
+  // A UTF-8 byte order mark before the text is skipped.
   static CameraModel ReadCameramodel(const std::filesystem::path& path);
+  // The checks of a .cameramodel's text that need no complete model (the lens audit reads
+  // files whose extrinsics mrcal's parser would refuse): after an optional UTF-8 BOM and
+  // '#' comment lines, a Python dict '{...}'; its 'lensmodel' an mrcal lens model name and
+  // its 'intrinsics' finite numbers. InputError naming `path` and the field otherwise.
+  static void CheckCameramodelText(const std::string& text, const std::filesystem::path& path);
   void WriteCameramodel(const std::filesystem::path& path) const;
 
   // OpenCV FileStorage YAML: camera_matrix, distortion_coefficients (0, 4, 5, 8 or

@@ -407,8 +407,10 @@ bool DecodePng(std::vector<unsigned char>* bytes_in, const std::string& name, do
                     interlace, " (0, 0 and 0 or 1 expected)");
       if (double(width) * double(height) > max_pixels)
         return fail("IHDR says ", width, "x", height, ", more than ", max_pixels, " pixels; not decoded");
+      // Other types go to the general reader (cv::imread), but only once the walk below
+      // found every chunk whole with its CRC: libpng would print its own errors on stderr
+      // ("libpng error: Read Error") naming neither the file nor the frame.
       handled = color_type == 0 && (bit_depth == 8 || bit_depth == 16) && interlace == 0;
-      if (!handled) return true;  // the general reader's case
     } else if (is_idat) {
       if (idat_done) return fail("IDAT chunk at byte ", pos, " after other chunks that followed the first IDATs");
       // Moved down over the chunk headers before it: bytes [8, idat_end) hold the stream.
@@ -430,6 +432,7 @@ bool DecodePng(std::vector<unsigned char>* bytes_in, const std::string& name, do
     pos += 12 + static_cast<size_t>(length);
   }
   if (idat_chunks == 0) return fail("no IDAT chunk (no image data)");
+  if (!handled) return true;  // the general reader's case (see IHDR above)
 
   // One inflate of the whole stream into exactly the size the header gives: a stream that
   // would inflate to more is refused when it gets there (nothing beyond is allocated), one

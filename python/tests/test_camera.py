@@ -205,3 +205,20 @@ class Rig(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class CameramodelWithBom(unittest.TestCase):
+    """Issue 29: a UTF-8 byte order mark before a .cameramodel is skipped by the reader."""
+
+    def test_bom_is_skipped(self):
+        text = ("{'lensmodel': 'LENSMODEL_OPENCV4', 'intrinsics': [534, 531, 322, 245, -0.28, 0.09, 0.001, -0.0005], "
+                "'extrinsics': [0, 0, 0, 0, 0, 0], 'imagersize': [640, 480]}\n")
+        with tempfile.TemporaryDirectory() as d:
+            plain, bom = os.path.join(d, "plain.cameramodel"), os.path.join(d, "bom.cameramodel")
+            with open(plain, "w") as f:
+                f.write(text)
+            with open(bom, "wb") as f:
+                f.write(b"\xef\xbb\xbf" + text.encode())
+            a, b = mcms.CameraModel.read(plain), mcms.CameraModel.read(bom)
+            self.assertEqual(b.lensmodel, a.lensmodel)
+            np.testing.assert_array_equal(b.intrinsics, a.intrinsics)
