@@ -15,7 +15,7 @@ McmsCommand demo_command([](CLI::App& app) {
   auto args = std::make_shared<DemoOptions>();
   auto out = std::make_shared<std::string>("mcms-demo");
   auto no_iso = std::make_shared<bool>(false);
-  auto html = std::make_shared<bool>(false);
+  auto html = std::make_shared<bool>(true);
   auto camera_model = std::make_shared<std::string>("ideal");
   CLI::App* cmd = app.add_subcommand(
       "demo",
@@ -40,7 +40,9 @@ McmsCommand demo_command([](CLI::App& app) {
                   "FILE, the JSON of `mcms fov-map --measured --json FILE`");
   cmd->add_flag("--save-images", args->save_images, "also write the rendered recording (PNG, ~0.6 MB per image)");
   cmd->add_flag("--no-iso9283", *no_iso, "skip the ISO 9283 experiment");
-  cmd->add_flag("--html", *html, "also write OUT/report.html, the run's self-contained HTML report (as `mcms report OUT`)");
+  cmd->add_flag("--html,!--no-html", *html,
+                "write OUT/report.html, the run's self-contained HTML report (as `mcms report OUT`; the default), "
+                "or not (--no-html)");
   cmd->add_option("--threads", args->threads, "render threads (default: the hardware's)")->check(CLI::Range(1, 1024));
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args, out, no_iso, html, camera_model] {
@@ -54,7 +56,8 @@ McmsCommand demo_command([](CLI::App& app) {
                           if (*html) {
                             const auto page = std::filesystem::path(*out) / "report.html";
                             const HtmlReportContents c = WriteHtmlReport({*out}, page);
-                            std::printf("wrote %s: %zu figures, %zu tables\n", page.string().c_str(), c.figures, c.tables);
+                            std::printf("report: %s (%zu figures, %zu tables; open it in a browser)\n", page.string().c_str(),
+                                        c.figures, c.tables);
                           }
                           return 0;
                         }));

@@ -1,6 +1,9 @@
 #include "audit/fusion_log_audit.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <vector>
 
 #include "core/error.h"
@@ -8,6 +11,49 @@
 #include "core/output_folder.h"
 
 namespace mcms {
+
+namespace {
+
+// Readings in radians under _deg headers (or degrees under _rad): the readings against the
+// tilts the tracker measured (each reading paired with the tracked frame nearest in time,
+// within 0.5 s) have a slope of 1/57.3 (or 57.3) instead of 1. Refused with the unit named
+// before any fit: the audit of such a log would only find a misfit of hundreds of sigma.
+void CheckTiltUnits(const Inclinometer& incl, const std::vector<OrientationReference>& reference,
+                    const InclinometerLog& log) {
+  std::vector<Vec2> p, r;
+  for (const InclinometerSample& s : log.samples) {
+    const auto it = std::lower_bound(reference.begin(), reference.end(), s.time_s,
+                                     [](const OrientationReference& o, double t) { return o.time_s < t; });
+    const OrientationReference* best = nullptr;
+    if (it != reference.end()) best = &*it;
+    if (it != reference.begin() && (!best || s.time_s - std::prev(it)->time_s < best->time_s - s.time_s))
+      best = &*std::prev(it);
+    if (!best || std::abs(best->time_s - s.time_s) > 0.5) continue;
+    p.push_back(incl.Tilt(best->R_base_flange));
+    r.push_back(s.reading);
+  }
+  if (p.size() < 10) return;
+  Vec2 pm = Vec2::Zero(), rm = Vec2::Zero();
+  for (size_t i = 0; i < p.size(); ++i) pm += p[i] / p.size(), rm += r[i] / r.size();
+  double sxx = 0, sxy = 0;
+  for (size_t i = 0; i < p.size(); ++i) sxx += (p[i] - pm).squaredNorm(), sxy += (p[i] - pm).dot(r[i] - rm);
+  if (!(sxx > 1e-6 * p.size())) return;  // the tilt varies by less than 1 mrad: nothing to compare
+  const double slope = sxy / sxx, k = 180.0 / std::numbers::pi;
+  char b[64];
+  std::snprintf(b, sizeof b, "%.4g", slope);
+  if (std::abs(slope * k - 1.0) < 0.1)
+    Throw(log.source.string(), ": the inclinometer's readings are ", b,
+          " times the tilts the tracker measured, "
+          "1/57.3: readings in radians under _deg headers? (give tilt_x_deg, tilt_y_deg in degrees, or "
+          "tilt_x_rad, tilt_y_rad in radians)");
+  if (std::abs(slope / k - 1.0) < 0.1)
+    Throw(log.source.string(), ": the inclinometer's readings are ", b,
+          " times the tilts the tracker measured, "
+          "57.3: readings in degrees under _rad headers? (give tilt_x_rad, tilt_y_rad in radians, or "
+          "tilt_x_deg, tilt_y_deg in degrees)");
+}
+
+}  // namespace
 
 InclinometerAuditResult AuditInclinometerLogs(const FusionSetup& setup, const TrackerLog& tracker,
                                               const InclinometerLog& inclinometer, const JointLog* motion,
@@ -26,6 +72,7 @@ InclinometerAuditResult AuditInclinometerLogs(const FusionSetup& setup, const Tr
   std::vector<OrientationSample> shape;
   if (motion)
     for (const JointSample& s : motion->samples) shape.push_back({s.time_s, setup.robot.T_base_flange(s.q).R});
+  CheckTiltUnits(setup.inclinometer, reference, inclinometer);
   return AuditInclinometer(setup.inclinometer, reference, readings, options, shape);
 }
 
@@ -49,7 +96,8 @@ RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints,
   }
   if (static_cast<int>(log.rows.size()) < kMinRobotLogRows)
     Throw("audit fusion: only ", log.rows.size(), " tracked frames of ", tracker_name, " fall within the joint log ",
-          joints_name, "'s time span; the audit needs at least ", kMinRobotLogRows, " (are the two logs on the same clock?)");
+          joints_name, "'s time span; the audit needs at least ", kMinRobotLogRows,
+          " (are the two logs on the same clock?)");
   return log;
 }
 
@@ -120,6 +168,5 @@ void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const s
     print("wrote " + a.json + "\n");
   }
 }
-
 
 }  // namespace mcms

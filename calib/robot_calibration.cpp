@@ -442,9 +442,17 @@ Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasuremen
   const Vec3 cs = src.rowwise().mean(), cd = dst.rowwise().mean();
   const Eigen::Matrix3d H = (dst.colwise() - cd) * (src.colwise() - cs).transpose();
   Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  if (svd.singularValues()[1] < 1e-9 * std::max(1e-30, svd.singularValues()[0]))
-    Throw("InitialBaseGuess: the measured positions are (nearly) collinear; give measurements spread over the "
-          "workspace or a starting base transform");
+  if (svd.singularValues()[1] < 1e-9 * std::max(1e-30, svd.singularValues()[0])) {
+    const double spread_meas = (dst.colwise() - cd).norm() / std::sqrt(n);
+    const double spread_model = (src.colwise() - cs).norm() / std::sqrt(n);
+    const char* why = spread_meas < 1e-6    ? "every measured position is the same (the same row repeated?)"
+                      : spread_model < 1e-6 ? "the logged joints put the tool at the same place in every row (are "
+                                              "the joint columns filled, in the unit their headers give?)"
+                                            : "the measured positions, or the tool positions of the logged "
+                                              "joints, lie on one line";
+    Throw("the starting registration cannot be found: ", why,
+          "; give measurements spread over the workspace, or a starting base transform");
+  }
   Mat3 S = Mat3::Identity();
   if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) S(2, 2) = -1;
   Pose T;

@@ -91,7 +91,14 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
       say(s.str());
     };
 
-  const Pose guess = job.base_guess ? *job.base_guess : InitialBaseGuess(robot, ms);
+  const Pose guess = [&] {
+    if (job.base_guess) return *job.base_guess;
+    try {
+      return InitialBaseGuess(robot, ms);
+    } catch (const InputError& e) {
+      Throw(job.measurements.string(), ": ", e.what());
+    }
+  }();
   const RobotCalibrationResult r = CalibrateRobot(robot, guess, ms, opt);
   say(std::string(r.converged ? "converged" : "stopped") + " after " + std::to_string(r.iterations) + " iterations");
 

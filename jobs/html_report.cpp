@@ -1,7 +1,7 @@
 #include "jobs/html_report.h"
 
-#include <numbers>
 #include <Eigen/Cholesky>
+#include <numbers>
 
 #include <algorithm>
 #include <cmath>
@@ -16,10 +16,10 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "core/pose_math.h"
 #include "core/statistics.h"
 #include "core/svg_plot.h"
-#include "core/output_folder.h"
 
 namespace mcms {
 
@@ -46,12 +46,23 @@ std::string Html(const std::string& s) {
   o.reserve(s.size());
   for (char c : s) {
     switch (c) {
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '&': o += "&amp;"; break;
-      case '"': o += "&quot;"; break;
-      case '\'': o += "&#39;"; break;
-      default: o += c;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '&':
+        o += "&amp;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      case '\'':
+        o += "&#39;";
+        break;
+      default:
+        o += c;
     }
   }
   return o;
@@ -82,7 +93,9 @@ std::string Lower(std::string s) {
   return s;
 }
 
-bool StartsWith(const std::string& s, const std::string& p) { return s.compare(0, p.size(), p) == 0; }
+bool StartsWith(const std::string& s, const std::string& p) {
+  return s.compare(0, p.size(), p) == 0;
+}
 
 std::string Num(double v) {
   char buf[32];
@@ -92,9 +105,12 @@ std::string Num(double v) {
 
 std::string Bytes(uintmax_t n) {
   char buf[32];
-  if (n < 10000) std::snprintf(buf, sizeof(buf), "%ju B", n);
-  else if (n < 10000000) std::snprintf(buf, sizeof(buf), "%.0f kB", n / 1e3);
-  else std::snprintf(buf, sizeof(buf), "%.0f MB", n / 1e6);
+  if (n < 10000)
+    std::snprintf(buf, sizeof(buf), "%ju B", n);
+  else if (n < 10000000)
+    std::snprintf(buf, sizeof(buf), "%.0f kB", n / 1e3);
+  else
+    std::snprintf(buf, sizeof(buf), "%.0f MB", n / 1e6);
   return buf;
 }
 
@@ -127,9 +143,12 @@ std::vector<std::string> SplitCsv(const std::string& line) {
   for (size_t i = 0; i < line.size(); ++i) {
     const char c = line[i];
     if (quoted) {
-      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') cell += '"', ++i;
-      else if (c == '"') quoted = false;
-      else cell += c;
+      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"')
+        cell += '"', ++i;
+      else if (c == '"')
+        quoted = false;
+      else
+        cell += c;
     } else if (c == '"') {
       quoted = true;
     } else if (c == ',') {
@@ -189,7 +208,9 @@ std::string FigureHtml(const std::string& svg, const std::string& caption) {
          "\"><figcaption>" + Html(caption) + "</figcaption></figure>\n";
 }
 
-std::string Note(const std::string& s) { return "<p class=\"note\">" + Html(s) + "</p>\n"; }
+std::string Note(const std::string& s) {
+  return "<p class=\"note\">" + Html(s) + "</p>\n";
+}
 
 // Rows of a table as HTML (all columns; the container scrolls sideways when wide).
 void TableRows(std::ostringstream& o, const Table& t, size_t begin, size_t end) {
@@ -211,15 +232,19 @@ std::string TableHtml(const Table& t, size_t max_rows) {
   if (n > max_rows) {
     // Per-column statistics.
     o << "<p>" << n << " rows, " << t.header.size() << " columns; per column:</p>\n<div class=\"scroll\"><table>\n"
-      << "<tr><th>column</th><th>values</th><th>min</th><th>median</th><th>max</th><th>mean</th><th>text values (count)</th></tr>\n";
+      << "<tr><th>column</th><th>values</th><th>min</th><th>median</th><th>max</th><th>mean</th><th>text values "
+         "(count)</th></tr>\n";
     for (size_t c = 0; c < t.header.size(); ++c) {
       std::vector<double> v;
       std::map<std::string, size_t> text;
       size_t empty = 0;
       for (size_t r = 0; r < n; ++r) {
-        if (auto x = t.Value(r, static_cast<int>(c))) v.push_back(*x);
-        else if (t.rows[r][c].empty()) ++empty;
-        else ++text[t.rows[r][c]];
+        if (auto x = t.Value(r, static_cast<int>(c)))
+          v.push_back(*x);
+        else if (t.rows[r][c].empty())
+          ++empty;
+        else
+          ++text[t.rows[r][c]];
       }
       o << "<tr><td>" << Html(t.header[c]) << "</td><td>" << v.size() << " numbers";
       if (empty) o << ", " << empty << " empty";
@@ -268,7 +293,9 @@ bool IsTrackerPoses(const Table& t) {
 }
 
 // 95 % two-sided band of a chi-square variable with k degrees of freedom.
-std::pair<double, double> ChiSquareBand95(int k) { return ChiSquareBand(k, 0.95); }
+std::pair<double, double> ChiSquareBand95(int k) {
+  return ChiSquareBand(k, 0.95);
+}
 
 // Adds err_x_mm, err_y_mm, err_z_mm, err_rot_mdeg and nees columns to a tracker pose table
 // from a truth pose table (frame,x_m,y_m,z_m,qw,qx,qy,qz: T_rig_target, what `mcms render`
@@ -399,7 +426,7 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
     Plot p{"Predicted position sigma per frame (from the 6x6 covariance)", "time (s)", "sigma (mm)", {}};
     const int cols[] = {cxx, cyy, czz};
     for (int a = 0; a < 3; ++a) {
-      PlotSeries s{std::string("sigma_") + "xyz"[a], {}, {}, colors[(a + 3) % 6], false};
+      PlotSeries s{std::string("sigma_") + "xyz" [a], {}, {}, colors[(a + 3) % 6], false};
       for (size_t r = 0; r < n; ++r) {
         const auto v = t.Value(r, cols[a]);
         s.x.push_back(time[r]);
@@ -426,7 +453,9 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
       if (c < 0) continue;
       Plot p{std::string("Error in ") + axes[a] + " against the truth per frame" +
                  (cov[a] >= 0 ? " (band: predicted +-3 sigma)" : ""),
-             "time (s)", std::string(1, axes[a]) + " error (mm)", {}};
+             "time (s)",
+             std::string(1, axes[a]) + " error (mm)",
+             {}};
       PlotSeries s{"measured error", {}, {}, colors[(a + 3) % 6], true};
       for (size_t r = 0; r < n; ++r) {
         s.x.push_back(time[r]);
@@ -448,7 +477,8 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
       if (!StartsWith(h, "err") || axis_error) continue;
       Plot q{"Per-frame " + h, "time (s)", h, {}};
       PlotSeries s{h, {}, {}, colors[2], true};
-      for (size_t r = 0; r < n; ++r) s.x.push_back(time[r]), s.y.push_back(t.Value(r, static_cast<int>(c)).value_or(NAN));
+      for (size_t r = 0; r < n; ++r)
+        s.x.push_back(time[r]), s.y.push_back(t.Value(r, static_cast<int>(c)).value_or(NAN));
       q.series.push_back(s);
       emit(q, h + " per frame");
     }
@@ -458,8 +488,10 @@ size_t TrackerPlots(const Table& t, const std::string& name, std::ostringstream&
     if (!StartsWith(h, "nees")) continue;
     const int k = h.find("pos") != std::string::npos || h.find("_p") != std::string::npos ? 3 : 6;
     const auto [lo, hi] = ChiSquareBand95(k);
-    Plot p{"NEES per frame against the truth (band: 95 % of chi-square, " + std::to_string(k) + " dof)", "time (s)",
-           t.header[c], {}};
+    Plot p{"NEES per frame against the truth (band: 95 % of chi-square, " + std::to_string(k) + " dof)",
+           "time (s)",
+           t.header[c],
+           {}};
     PlotSeries s{t.header[c], {}, {}, colors[3], true};
     for (size_t r = 0; r < n; ++r) {
       s.x.push_back(time[r]);
@@ -494,15 +526,20 @@ size_t Iso9283Plots(const Table& t, const std::string& name, std::ostringstream&
   }
   Plot ap{"ISO 9283 pose accuracy AP per pose", "pose (P1..P5)", "AP (mm)", {}};
   ap.log_y = true;
-  Plot rp{std::string("ISO 9283 pose repeatability RP per pose") + (cq >= 0 ? " (markers: measured, lines: predicted)" : ""),
-          "pose (P1..P5)", "RP (mm)", {}};
+  Plot rp{std::string("ISO 9283 pose repeatability RP per pose") +
+              (cq >= 0 ? " (markers: measured, lines: predicted)" : ""),
+          "pose (P1..P5)",
+          "RP (mm)",
+          {}};
   for (size_t k = 0; k < conditions.size(); ++k) {
-    PlotSeries a{conditions[k], {}, {}, colors[k % 6], true}, r = a, q{conditions[k] + " (predicted)", {}, {}, colors[k % 6], false};
+    PlotSeries a{conditions[k], {}, {}, colors[k % 6], true},
+        r = a, q{conditions[k] + " (predicted)", {}, {}, colors[k % 6], false};
     for (size_t i = 0; i < t.rows.size(); ++i) {
       if ((cc >= 0 ? t.rows[i][cc] : std::string("measured")) != conditions[k]) continue;
       // Pose "P3" -> 3; a plain number is used as it is.
       const std::string& pose = t.rows[i][cp];
-      const double x = std::strtod(pose.c_str() + (pose.size() > 1 && (pose[0] == 'P' || pose[0] == 'p') ? 1 : 0), nullptr);
+      const double x =
+          std::strtod(pose.c_str() + (pose.size() > 1 && (pose[0] == 'P' || pose[0] == 'p') ? 1 : 0), nullptr);
       a.x.push_back(x), a.y.push_back(t.Value(i, ca).value_or(NAN));
       r.x.push_back(x), r.y.push_back(t.Value(i, cr).value_or(NAN));
       if (cq >= 0) q.x.push_back(x), q.y.push_back(t.Value(i, cq).value_or(NAN));
@@ -516,18 +553,66 @@ size_t Iso9283Plots(const Table& t, const std::string& name, std::ostringstream&
   return 2;
 }
 
+// The demo's answer, for the page's first screen: the flange error of each sensor and each
+// fused result by the paper's three-sigma rule with the reduction, from summary.txt's table
+// (rows "method points posRMS pos3sig reduction tiltRMS yawRMS NEES [band]") and its lines
+// against the paper. Empty when the summary does not hold them.
+std::string DemoHeadline(const std::string& summary) {
+  std::istringstream in(summary);
+  std::string line;
+  bool in_table = false;
+  std::ostringstream rows, paper;
+  int n = 0;
+  while (std::getline(in, line)) {
+    if (StartsWith(line, "Flange pose at the")) {
+      in_table = true;
+      continue;
+    }
+    if (in_table && line.empty()) in_table = false;
+    if (in_table) {
+      std::istringstream ls(line);
+      std::vector<std::string> tok;
+      for (std::string t; ls >> t;) tok.push_back(t);
+      if (tok.size() >= 8 && (tok[0] == "camera" || tok[0] == "robot" || tok[0] == "MOIFA" || tok[0] == "KF")) {
+        const bool fused = tok[0] == "MOIFA" || tok[0] == "KF";
+        rows << "<tr" << (fused ? " class=\"fused\"" : "") << "><td>" << Html(tok[0]) << "</td><td>" << Html(tok[3])
+             << "</td><td>" << Html(tok[2]) << "</td><td>" << Html(tok[4]) << "</td><td>" << Html(tok[5]) << "</td><td>"
+             << Html(tok[7]) << "</td></tr>\n";
+        ++n;
+      }
+    }
+    if (StartsWith(line, "  three-sigma position error") || StartsWith(line, "  MOIFA reduction") ||
+        StartsWith(line, "  KF    reduction"))
+      paper << "<li>" << Html(line.substr(2)) << "</li>\n";
+  }
+  if (n == 0) return "";
+  std::ostringstream o;
+  o << "<section id=\"answer\"><h2>The answer</h2>\n<p>Flange pose error at the demo's points (robot base frame), "
+       "each sensor alone and fused; reduction = 1 - method's three-sigma error / the camera's, as the paper "
+       "reports it.</p>\n<table class=\"headline\"><thead><tr><th>method</th><th>position 3&sigma; mm</th>"
+       "<th>position RMS mm</th><th>reduction</th><th>tilt RMS deg</th><th>mean NEES</th></tr></thead><tbody>\n"
+    << rows.str() << "</tbody></table>\n";
+  if (!paper.str().empty()) o << "<p>Against the paper's lab experiment:</p><ul>\n" << paper.str() << "</ul>\n";
+  o << "</section>\n";
+  return o.str();
+}
+
 std::string DetectKind(const std::vector<File>& files, const std::map<std::string, Table>& tables,
                        const std::map<std::string, std::string>& texts) {
   std::set<std::string> names;
   for (const auto& f : files) names.insert(f.name);
-  auto any = [&](auto pred) { return std::any_of(files.begin(), files.end(), [&](const File& f) { return pred(f.name); }); };
+  auto any = [&](auto pred) {
+    return std::any_of(files.begin(), files.end(), [&](const File& f) { return pred(f.name); });
+  };
   if (names.count("point_errors.csv") && names.count("fused_poses.csv")) return "demo";
   if (names.count("map.csv") || any([](const std::string& n) { return StartsWith(n, "heatmap_z"); })) return "fov-map";
-  if (names.count("rig.yaml") && any([](const std::string& n) { return StartsWith(n, "residuals-"); })) return "calib-rig";
+  if (names.count("rig.yaml") && any([](const std::string& n) { return StartsWith(n, "residuals-"); }))
+    return "calib-rig";
   for (const auto& [n, text] : texts) {
     if (text.find("# mcms calib-robot report") != std::string::npos) return "calib-robot";
     if (text.find("\"effects\"") != std::string::npos && text.find("\"nominal\"") != std::string::npos) return "audit";
-    if (text.find("camera  observations  chi2/dof") != std::string::npos) return "audit";  // `mcms audit cameras` > FILE
+    if (text.find("camera  observations  chi2/dof") != std::string::npos)
+      return "audit";  // `mcms audit cameras` > FILE
   }
   for (const auto& [n, t] : tables) {
     if (IsIso9283Characteristics(t) || (t.Column("pose") >= 0 && t.Column("cycle") >= 0)) return "iso9283";
@@ -542,7 +627,8 @@ pre{background:#f6f6f6;padding:10px;overflow-x:auto;font-size:12px;line-height:1
 figure{margin:18px 0}figure img{max-width:100%;height:auto;border:1px solid #ddd}figcaption{font-size:13px;color:#555}
 table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right;white-space:nowrap}
 th{background:#eee}.scroll{overflow-x:auto;max-width:100%}.note{color:#a00}.comment{font-family:monospace;font-size:12px;color:#555}
-td.gap{text-align:center;color:#777}ul.files{columns:2;font-size:13px}summary{cursor:pointer;font-weight:bold})";
+td.gap{text-align:center;color:#777}ul.files{columns:2;font-size:13px}summary{cursor:pointer;font-weight:bold}
+table.headline{font-size:15px}table.headline td:first-child{text-align:left}table.headline tr.fused{font-weight:bold})";
 
 // Counts the figures the browser decoded and logs one console line: an error naming the
 // figures that did not render, otherwise a plain log line.
@@ -562,14 +648,16 @@ const char* kScript = R"(window.addEventListener('load', function () {
 // The folder a report is made of: it exists and is a folder.
 void RequireReportFolder(const fs::path& dir) {
   std::error_code ec;
-  if (!fs::exists(dir, ec)) Throw("mcms report DIR: ", dir.string(), " does not exist; expected the output folder of an mcms command");
+  if (!fs::exists(dir, ec))
+    Throw("mcms report DIR: ", dir.string(), " does not exist; expected the output folder of an mcms command");
   if (!fs::is_directory(dir, ec))
     Throw("mcms report DIR: ", dir.string(), " is not a folder; expected the output folder of an mcms command");
 }
 
 // The files of an output folder, in name order, and its subfolders with their file counts;
 // hidden files, temporaries of an atomic write and earlier HTML pages left out.
-void ListFolder(const fs::path& dir, std::vector<File>* files_out, std::vector<std::pair<std::string, size_t>>* folders_out) {
+void ListFolder(const fs::path& dir, std::vector<File>* files_out,
+                std::vector<std::pair<std::string, size_t>>* folders_out) {
   std::vector<File>& files = *files_out;
   std::vector<std::pair<std::string, size_t>>& folders = *folders_out;
   std::error_code ec;
@@ -594,7 +682,6 @@ void ListFolder(const fs::path& dir, std::vector<File>* files_out, std::vector<s
   }
   std::sort(files.begin(), files.end(), [](const File& a, const File& b) { return a.name < b.name; });
   std::sort(folders.begin(), folders.end());
-
 }
 
 std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents* contents) {
@@ -610,9 +697,11 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   std::vector<const File*> svgs, csvs, reports, inputs, others;
   for (const auto& f : files) {
     const std::string ext = Lower(f.path.extension().string());
-    (ext == ".svg" ? svgs : ext == ".csv" ? csvs : ext == ".txt" || ext == ".md" || ext == ".log" ? reports
-     : ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel"                   ? inputs
-                                                                                                    : others)
+    (ext == ".svg"                                                                ? svgs
+     : ext == ".csv"                                                              ? csvs
+     : ext == ".txt" || ext == ".md" || ext == ".log"                             ? reports
+     : ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel" ? inputs
+                                                                                  : others)
         .push_back(&f);
   }
   if (svgs.empty() && csvs.empty() && reports.empty() && inputs.empty())
@@ -650,8 +739,10 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
     }
     std::string err;
     Table t = ParseCsv(ReadTextFile(f->path), &err);
-    if (!err.empty()) table_errors[f->name] = err;
-    else tables[f->name] = std::move(t);
+    if (!err.empty())
+      table_errors[f->name] = err;
+    else
+      tables[f->name] = std::move(t);
   }
   // A tracker pose table beside the truth of a rendered recording (`mcms render` writes
   // truth/poses.csv, `mcms track DIR` poses.csv): errors and NEES against the truth, unless
@@ -668,16 +759,20 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   c.kind = DetectKind(files, tables, texts);
 
   std::ostringstream o;
-  const std::string title = options.title.empty() ? "mcms report: " + fs::absolute(dir).lexically_normal().filename().string()
-                                                  : options.title;
+  const std::string title = options.title.empty()
+                                ? "mcms report: " + fs::absolute(dir).lexically_normal().filename().string()
+                                : options.title;
   o << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" << Html(title) << "</title>\n"
-    << "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src 'unsafe-inline'; "
+    << "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src data:; style-src "
+       "'unsafe-inline'; "
        "script-src 'unsafe-inline'\">\n<style>"
     << kStyle << "</style>\n</head>\n<body>\n<h1>" << Html(title) << "</h1>\n";
   o << "<p>Folder <code>" << Html(fs::absolute(dir).lexically_normal().string()) << "</code>, the output of <b>"
     << Html(c.kind == "mcms output" ? "an mcms command" : "mcms " + c.kind) << "</b>: " << files.size() << " files";
   if (!folders.empty()) o << ", " << folders.size() << " folders";
   o << ".</p>\n";
+  // The answer first (issue 26): for the demo, its headline table before everything else.
+  if (c.kind == "demo" && texts.count("summary.txt")) o << DemoHeadline(texts.at("summary.txt"));
 
   // Sections; the table of contents is filled as they are written.
   std::ostringstream body;
@@ -705,12 +800,14 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
       const size_t total_lines = static_cast<size_t>(std::count(text.begin(), text.end(), '\n'));
       body << "<h3>" << Html(f->name) << "</h3>\n";
       if (total_lines > kReportHeadLines + 10) {
-        body << "<pre>" << Html(text.substr(0, cut_at)) << "</pre>\n<details><summary>" << total_lines - kReportHeadLines
-             << " more lines</summary><pre>" << Html(text.substr(cut_at)) << "</pre></details>\n";
+        body << "<pre>" << Html(text.substr(0, cut_at)) << "</pre>\n<details><summary>"
+             << total_lines - kReportHeadLines << " more lines</summary><pre>" << Html(text.substr(cut_at))
+             << "</pre></details>\n";
       } else {
         body << "<pre>" << Html(text) << "</pre>\n";
       }
-      if (cut[f->name]) body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
+      if (cut[f->name])
+        body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
       ++c.texts;
     }
   }
@@ -737,7 +834,8 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   for (const auto& [name, t] : tables)
     if (IsTrackerPoses(t) && !t.rows.empty()) c.figures += TrackerPlots(t, name, track);
   // ISO 9283 characteristics get their plots unless the folder has them already (the demo).
-  const bool has_iso_svg = std::any_of(svgs.begin(), svgs.end(), [](const File* f) { return StartsWith(f->name, "iso9283_"); });
+  const bool has_iso_svg =
+      std::any_of(svgs.begin(), svgs.end(), [](const File* f) { return StartsWith(f->name, "iso9283_"); });
   for (const auto& [name, t] : tables)
     if (IsIso9283Characteristics(t) && !t.rows.empty() && !has_iso_svg) c.figures += Iso9283Plots(t, name, figs);
   if (!figs.str().empty() || !track.str().empty()) {
@@ -756,8 +854,10 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
       const auto t = tables.find(f->name);
       const bool small = t != tables.end() && t->second.rows.size() <= options.max_table_rows;
       body << "<details" << (small ? " open" : "") << "><summary>" << Html(f->name) << " (";
-      if (t != tables.end()) body << t->second.rows.size() << " rows)";
-      else body << Bytes(f->size) << ")";
+      if (t != tables.end())
+        body << t->second.rows.size() << " rows)";
+      else
+        body << Bytes(f->size) << ")";
       body << "</summary>\n";
       if (t != tables.end()) {
         body << TableHtml(t->second, options.max_table_rows);
@@ -775,7 +875,8 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
     for (const File* f : inputs) {
       body << "<details><summary>" << Html(f->name) << " (" << Bytes(f->size) << ")</summary>\n<pre>"
            << Html(texts[f->name]) << "</pre>\n";
-      if (cut[f->name]) body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
+      if (cut[f->name])
+        body << Note(f->name + ": cut after " + Bytes(options.max_text_bytes) + " of " + Bytes(f->size));
       body << "</details>\n";
       ++c.inputs;
     }
@@ -784,7 +885,8 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   section("files", "Files");
   body << "<ul class=\"files\">\n";
   for (const auto& f : files) body << "<li>" << Html(f.name) << " (" << Bytes(f.size) << ")</li>\n";
-  for (const auto& [name, count] : folders) body << "<li>" << Html(name) << "/ (" << count << " files, not embedded)</li>\n";
+  for (const auto& [name, count] : folders)
+    body << "<li>" << Html(name) << "/ (" << count << " files, not embedded)</li>\n";
   body << "</ul>\n";
   for (const File* f : others) c.listed.push_back(f->name);
 

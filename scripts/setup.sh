@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # One-step set-up on Debian bookworm: install the missing Debian packages, build,
 # then either run the main job (demo) or the tests (test).
-#   scripts/setup.sh demo   # install + build + `mcms demo` on the embedded default scenario
-#   scripts/setup.sh test   # install + build + the whole test suite
+#   scripts/setup.sh demo   # install + build the mcms program only + `mcms demo` on the embedded
+#                           # default scenario; prints where its HTML report is
+#   scripts/setup.sh test   # install + build everything (tests, benchmarks) + the whole test suite
 # Runs as root, or as a user with sudo. Builds into ./build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,6 +16,7 @@ esac
 
 packages=(
   build-essential cmake pkg-config
+  ccache  # a rebuild after a small change recompiles only what changed (Ceres and OpenCV headers are slow)
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
@@ -40,10 +42,11 @@ jobs=$(nproc 2>/dev/null || echo 2)
 launcher=()
 if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache); fi
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMCMS_WERROR=ON "${launcher[@]}"
-cmake --build build -j"$jobs"
-
 if [ "$mode" = demo ]; then
+  cmake --build build -j"$jobs" --target mcms  # only the program: no tests, benchmarks or fuzz targets
   ./build/app/mcms demo -o mcms-demo
+  echo "setup: the demo's results are in mcms-demo/; its report: $(pwd)/mcms-demo/report.html"
 else
+  cmake --build build -j"$jobs"
   ctest --test-dir build --output-on-failure -j"$jobs"
 fi

@@ -6,6 +6,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <string>
 
 #include "tests/test_util.h"
@@ -31,6 +32,24 @@ inline CliRun Mcms(const std::filesystem::path& dir, const std::string& args) {
   // Built by append: `"'" + std::string(...)` trips GCC 12's -Wrestrict false positive.
   std::string command = std::string("'").append(MCMS_CLI).append("' ").append(args);
   return Shell(dir, command);
+}
+
+// Every entry under `dir` (but the runner's stdout.txt / stderr.txt): its content for a
+// file, its target for a symlink, "<dir>" for a folder.
+inline std::map<std::string, std::string> Snapshot(const std::filesystem::path& dir) {
+  std::map<std::string, std::string> s;
+  for (auto it = std::filesystem::recursive_directory_iterator(dir);
+       it != std::filesystem::recursive_directory_iterator(); ++it) {
+    const std::filesystem::path rel = std::filesystem::relative(it->path(), dir);
+    if (rel == "stdout.txt" || rel == "stderr.txt") continue;
+    if (it->is_symlink())
+      s[rel.string()] = "-> " + std::filesystem::read_symlink(it->path()).string();
+    else if (it->is_directory())
+      s[rel.string()] = "<dir>";
+    else
+      s[rel.string()] = ReadAll(it->path());
+  }
+  return s;
 }
 
 }  // namespace mcms::test

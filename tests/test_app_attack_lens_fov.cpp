@@ -27,16 +27,7 @@ namespace {
 namespace fs = std::filesystem;
 using test::CliRun;
 
-// Every entry under `dir` but the runner's stdout.txt / stderr.txt, with its content.
-std::map<std::string, std::string> Snapshot(const fs::path& dir) {
-  std::map<std::string, std::string> s;
-  for (auto it = fs::recursive_directory_iterator(dir); it != fs::recursive_directory_iterator(); ++it) {
-    const fs::path rel = fs::relative(it->path(), dir);
-    if (rel == "stdout.txt" || rel == "stderr.txt") continue;
-    s[rel.string()] = it->is_directory() ? std::string("<dir>") : test::ReadAll(it->path());
-  }
-  return s;
-}
+using test::Snapshot;
 
 bool Has(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;

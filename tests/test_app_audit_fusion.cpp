@@ -309,5 +309,21 @@ TEST(BadInput, AMistypedTrackerRowIsNamed) {
   EXPECT_FALSE(fs::exists(d / "a.json"));
 }
 
+// Issue 29: an inclinometer log in radians under _deg headers failed the residual tests
+// without a word on the likely cause: now named before any fit.
+TEST(BadInput, InclinometerRadiansUnderDegreeHeadersAreNamed) {
+  const fs::path d = test::ScratchDir("audit_fusion_incl_units");
+  test::Logs l = test::MovingLogs(test::AuditLogOptions(4));
+  ASSERT_EQ(l.files["incl.csv"][0], "time_s,tilt_x_rad,tilt_y_rad");
+  l.files["incl.csv"][0] = "time_s,tilt_x_deg,tilt_y_deg";
+  test::Write(d, l);
+  const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv -o out"));
+  EXPECT_EQ(run.code, 2) << run.out << run.err;
+  EXPECT_NE(run.err.find("incl.csv: the inclinometer's readings are 0.017"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("radians under _deg headers"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(d / "a.json"));
+  EXPECT_FALSE(fs::exists(d / "out"));
+}
+
 }  // namespace
 }  // namespace mcms

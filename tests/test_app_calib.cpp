@@ -6,8 +6,8 @@
 // Real data (skipped with the reason when absent):
 //   industrial-calibration-positioner  205 joint/pose measurements of a two-axis positioner
 //   opencv-stereo-chessboard           OpenCV's 13 stereo chessboard pairs (640x480, 9x6, 25 mm)
-#include <numbers>
 #include <gtest/gtest.h>
+#include <numbers>
 
 #include <sys/wait.h>
 
@@ -23,12 +23,12 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "model/robot_model.h"
 #include "core/io.h"
 #include "core/pose_math.h"
-#include "vision/camera_model.h"
+#include "model/robot_model.h"
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"
+#include "vision/camera_model.h"
 
 namespace mcms {
 namespace {
@@ -163,8 +163,9 @@ TEST(AppCalibRobot, PositionerWithErrorMotionThenRegistrationOnly) {
   WriteText(d / "positioner.yaml", kPositionerYaml);
   const std::string meas = (data / "measurements.yaml").string();
 
-  const CliRun r = Mcms(d, "calib-robot " + meas + " --robot positioner.yaml " + kBaseGuess + " " + kSigmas +
-                               " --error-motion 0,2 --folds 3 -o calibrated.yaml --report report.txt --plot errors.svg");
+  const CliRun r =
+      Mcms(d, "calib-robot " + meas + " --robot positioner.yaml " + kBaseGuess + " " + kSigmas +
+                  " --error-motion 0,2 --folds 3 -o calibrated.yaml --report report.txt --plot errors.svg");
   ASSERT_EQ(r.code, 0) << r.err;
   std::printf("%s", r.out.c_str());
   EXPECT_NE(r.err.find("calib-robot: converged"), std::string::npos) << r.err;
@@ -187,9 +188,10 @@ TEST(AppCalibRobot, PositionerWithErrorMotionThenRegistrationOnly) {
   const double nominal = Figure(r.out, "residuals, nominal DH registered:", "position mean ");
   const double held = Figure(r.out, "held out (3-fold), calibrated:", "position mean ");
   const double held_nominal = Figure(r.out, "held out (3-fold), nominal DH:", "position mean ");
-  std::printf("mean position error (mm): nominal registered %.4f, calibrated %.4f; held out: nominal %.4f, "
-              "calibrated %.4f\n",
-              nominal, fit, held_nominal, held);
+  std::printf(
+      "mean position error (mm): nominal registered %.4f, calibrated %.4f; held out: nominal %.4f, "
+      "calibrated %.4f\n",
+      nominal, fit, held_nominal, held);
   EXPECT_LT(fit, kMaxMeanPositionMm);
   EXPECT_LT(held, kMaxMeanPositionMm);
   EXPECT_LT(fit, nominal) << "error motion and DH must fit better than the registered nominal table";
@@ -231,13 +233,24 @@ TEST(AppCalibRobot, BadInputIsRefusedWithoutOutput) {
   const std::vector<Case> cases = {
       // j1 is limited to +-180 deg; 3.5 rad is 200.5 deg.
       {"limits", EditJoints(entries, 4, "3.5", false), "", {"measurements.yaml", "measurement 5", "j1", "limit"}},
-      {"joint_count", EditJoints(entries, 6, "", true), "", {"measurements.yaml", "measurement 7", "3 joint values", "2 joints"}},
-      {"too_few", Join({entries[0], entries[1], entries[2]}), "", {"3 measurements do not identify", "Add measurements"}},
+      {"joint_count",
+       EditJoints(entries, 6, "", true),
+       "",
+       {"measurements.yaml", "measurement 7", "3 joint values", "2 joints"}},
+      {"too_few",
+       Join({entries[0], entries[1], entries[2]}),
+       "",
+       {"3 measurements do not identify", "Add measurements"}},
       // The same pose 20 times: nothing separates base and tool (a singular problem).
-      {"singular", Repeated(entries[0], 20), " --registration-only",
+      {"singular",
+       Repeated(entries[0], 20),
+       " --registration-only",
        {"20 measurements do not identify", "tool.x", "Joint ranges covered", "move every joint"}},
       // One harmonic count for a two-joint robot.
-      {"error_motion_count", Join(entries), " --error-motion 1", {"error_motion", "has 1 count", "2 joints", "one count per joint"}},
+      {"error_motion_count",
+       Join(entries),
+       " --error-motion 1",
+       {"error_motion", "has 1 count", "2 joints", "one count per joint"}},
       {"missing_measurements", "", "", {"nothing.yaml"}},
       {"missing_robot", Join(entries), "", {"positioner.yaml"}},
   };
@@ -290,7 +303,9 @@ void LinkViews(const fs::path& data, const std::string& side, const fs::path& fo
       fs::create_symlink(e.path(), folder / name.substr(side.size()));
   }
 }
-void LinkLeftViews(const fs::path& data, const fs::path& folder) { LinkViews(data, "left", folder); }
+void LinkLeftViews(const fs::path& data, const fs::path& folder) {
+  LinkViews(data, "left", folder);
+}
 
 // `n` uniform grey 640x480 PNGs named 01.png, 02.png, ...: images without a board.
 void WriteBlankImages(const fs::path& folder, int n) {
@@ -302,7 +317,9 @@ void WriteBlankImages(const fs::path& folder, int n) {
   }
 }
 
-bool HasPythonMrcal() { return std::system("/usr/bin/python3 -c 'import mrcal' > /dev/null 2>&1") == 0; }
+bool HasPythonMrcal() {
+  return std::system("/usr/bin/python3 -c 'import mrcal' > /dev/null 2>&1") == 0;
+}
 
 TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
   MCMS_REQUIRE_DATA(data, "opencv-stereo-chessboard");
@@ -327,7 +344,8 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
     const std::string svg = ReadAll(d / "out" / "residuals-left.svg");
     EXPECT_NE(svg.find("<svg"), std::string::npos);
     size_t arrows = 0;
-    for (size_t at = svg.find("stroke-width='1'/>"); at != std::string::npos; at = svg.find("stroke-width='1'/>", at + 1))
+    for (size_t at = svg.find("stroke-width='1'/>"); at != std::string::npos;
+         at = svg.find("stroke-width='1'/>", at + 1))
       ++arrows;
     EXPECT_GT(arrows, 13u * 54u * 9 / 10) << "residual arrows drawn";
     EXPECT_NE(svg.find("over the image, arrows x"), std::string::npos);
@@ -352,8 +370,10 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
     ASSERT_EQ(mrcal_file.NumIntrinsics(), rig.cameras[c].NumIntrinsics());
     ASSERT_EQ(opencv_file.NumIntrinsics(), rig.cameras[c].NumIntrinsics());
     for (int i = 0; i < rig.cameras[c].NumIntrinsics(); ++i) {
-      EXPECT_NEAR(mrcal_file.Intrinsics()[i], rig.cameras[c].Intrinsics()[i], 1e-9 * (1 + std::abs(rig.cameras[c].Intrinsics()[i])));
-      EXPECT_NEAR(opencv_file.Intrinsics()[i], rig.cameras[c].Intrinsics()[i], 1e-6 * (1 + std::abs(rig.cameras[c].Intrinsics()[i])));
+      EXPECT_NEAR(mrcal_file.Intrinsics()[i], rig.cameras[c].Intrinsics()[i],
+                  1e-9 * (1 + std::abs(rig.cameras[c].Intrinsics()[i])));
+      EXPECT_NEAR(opencv_file.Intrinsics()[i], rig.cameras[c].Intrinsics()[i],
+                  1e-6 * (1 + std::abs(rig.cameras[c].Intrinsics()[i])));
     }
     EXPECT_EQ(mrcal_file.Width(), 640);
     EXPECT_EQ(mrcal_file.Height(), 480);
@@ -391,9 +411,11 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
 
   // The .cameramodel is mrcal's own format: mrcal itself reads it and finds the lens.
   if (HasPythonMrcal()) {
-    const CliRun py = Shell(d, "/usr/bin/python3 -c \"import mrcal; "
-                               "m = mrcal.cameramodel('out/right.cameramodel'); "
-                               "print(m.intrinsics()[0], m.intrinsics()[1][0], m.imagersize()[0], m.extrinsics_rt_fromref()[3])\"");
+    const CliRun py =
+        Shell(d,
+              "/usr/bin/python3 -c \"import mrcal; "
+              "m = mrcal.cameramodel('out/right.cameramodel'); "
+              "print(m.intrinsics()[0], m.intrinsics()[1][0], m.imagersize()[0], m.extrinsics_rt_fromref()[3])\"");
     ASSERT_EQ(py.code, 0) << py.err;
     std::printf("mrcal reads out/right.cameramodel: %s", py.out.c_str());
     std::istringstream s(py.out);
@@ -412,14 +434,20 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
     const double rms_px = Figure(r.out, "residual RMS", "residual RMS ");
     for (int c = 0; c < 2; ++c) {
       SCOPED_TRACE(rig.names[c]);
-      const CliRun u = Shell(d, "/usr/bin/python3 -c \"import mrcal, numpy as np\n"
-                                "m = mrcal.cameramodel('out/" + rig.names[c] + ".cameramodel')\n"
-                                "oi = m.optimization_inputs()\n"
-                                "W, H = m.imagersize()\n"
-                                "q = np.array([((i + 0.5) * W / 8 - 0.5, (j + 0.5) * H / 6 - 0.5) for j in range(6) for i in range(8)])\n"
-                                "v = mrcal.unproject(q, *m.intrinsics(), normalize=True)\n"
-                                "s = mrcal.projection_uncertainty(v * 10.0, model=m, what='worstdirection-stdev', observed_pixel_uncertainty=1.0)\n"
-                                "print(oi['observations_board'].shape[0], oi['lensmodel'], m.icam_intrinsics(), ' '.join('%.12g' % x for x in s))\"");
+      const CliRun u = Shell(
+          d,
+          "/usr/bin/python3 -c \"import mrcal, numpy as np\n"
+          "m = mrcal.cameramodel('out/" +
+              rig.names[c] +
+              ".cameramodel')\n"
+              "oi = m.optimization_inputs()\n"
+              "W, H = m.imagersize()\n"
+              "q = np.array([((i + 0.5) * W / 8 - 0.5, (j + 0.5) * H / 6 - 0.5) for j in range(6) for i in range(8)])\n"
+              "v = mrcal.unproject(q, *m.intrinsics(), normalize=True)\n"
+              "s = mrcal.projection_uncertainty(v * 10.0, model=m, what='worstdirection-stdev', "
+              "observed_pixel_uncertainty=1.0)\n"
+              "print(oi['observations_board'].shape[0], oi['lensmodel'], m.icam_intrinsics(), ' '.join('%.12g' % x for "
+              "x in s))\"");
       ASSERT_EQ(u.code, 0) << u.err;
       std::istringstream us(u.out);
       int nobs = 0, icam = -1;
@@ -447,11 +475,13 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
       for (int k = 0; k < 48; ++k) {
         const double diff = std::abs(ours[k] - k_sigma * mrcal_sigma[k]);
         worst = std::max(worst, diff);
-        EXPECT_LE(diff, 0.0006 + 1e-3 * ours[k]) << "cell " << k << ": ours " << ours[k] << ", mrcal "
-                                                  << mrcal_sigma[k] << " x " << k_sigma;
+        EXPECT_LE(diff, 0.0006 + 1e-3 * ours[k])
+            << "cell " << k << ": ours " << ours[k] << ", mrcal " << mrcal_sigma[k] << " x " << k_sigma;
       }
-      std::printf("%s: our projection uncertainty = mrcal's (1 px noise) x %.5f, worst cell off by %.5f px "
-                  "(residual RMS %.4f px)\n", rig.names[c].c_str(), k_sigma, worst, rms_px);
+      std::printf(
+          "%s: our projection uncertainty = mrcal's (1 px noise) x %.5f, worst cell off by %.5f px "
+          "(residual RMS %.4f px)\n",
+          rig.names[c].c_str(), k_sigma, worst, rms_px);
       // k is our noise estimate sqrt(sum e^2 / dof), slightly above the RMS.
       EXPECT_GT(k_sigma, rms_px);
       EXPECT_LT(k_sigma, 1.1 * rms_px);
@@ -615,6 +645,20 @@ TEST(AppIso9283, PoseFileAndItsErrors) {
                   {d / "one_out.csv"});
   }
   ExpectRefused(Mcms(d, "iso9283 absent.csv -o absent_out.csv"), d, {"absent.csv"}, {d / "absent_out.csv"});
+}
+
+// Issue 29: 100 identical measurements gave "InitialBaseGuess: the measured positions are
+// (nearly) collinear", naming no file and the wrong cause. Now the file and the cause.
+TEST(BadInput, CalibRobotOnOneRepeatedMeasurementNamesTheFileAndTheCause) {
+  const fs::path d = test::ScratchDir("calib_robot_repeated");
+  std::string yaml = "measurements:\n";
+  for (int i = 0; i < 100; ++i) yaml += "  - {q_rad: [0.1, -0.5, 0.8, 0.2, 0.6, 0.1], position_m: [0.5, 0.1, 0.7]}\n";
+  WriteText(d / "same.yaml", yaml);
+  const CliRun r = Mcms(d, "calib-robot same.yaml -o out.yaml --quiet");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("same.yaml: the starting registration cannot be found"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("every measured position is the same"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(d / "out.yaml"));
 }
 
 }  // namespace

@@ -40,10 +40,12 @@ TEST(DemoCameraModelCli, FitJsonRoundTripsAndIsThePaperPreset) {
   EXPECT_NEAR(m.pixel_noise_scale, preset.pixel_noise_scale, 1e-6 * preset.pixel_noise_scale);
   EXPECT_NEAR(m.floor_m, preset.floor_m, 1e-9);
   for (int a = 0; a < 3; ++a) EXPECT_NEAR(m.anisotropy_m[a], preset.anisotropy_m[a], 1e-9) << a;
-  const test::CliRun demo = test::Mcms(s, "demo --points 2 --no-iso9283 -q --threads 2 --camera-model fit.json -o demo");
+  const test::CliRun demo = test::Mcms(s, "demo --points 2 --no-iso9283 --no-html -q --threads 2 --camera-model fit.json -o demo");
   ASSERT_EQ(demo.code, 0) << demo.err;
   EXPECT_NE(demo.out.find("camera model: fit.json: pixel noise x11.08"), std::string::npos) << demo.out;
   EXPECT_NE(test::ReadAll(s / "demo" / "summary.txt").find("Against the paper's lab experiment"), std::string::npos);
+  EXPECT_FALSE(fs::exists(s / "demo" / "report.html")) << "--no-html";
+  EXPECT_EQ(demo.out.find("report:"), std::string::npos) << demo.out;
 }
 
 }  // namespace

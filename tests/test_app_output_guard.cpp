@@ -24,22 +24,7 @@ namespace {
 namespace fs = std::filesystem;
 using test::CliRun;
 
-// Every entry under `dir` (but the runner's stdout.txt / stderr.txt): its content for a
-// file, its target for a symlink, "<dir>" for a folder.
-std::map<std::string, std::string> Snapshot(const fs::path& dir) {
-  std::map<std::string, std::string> s;
-  for (auto it = fs::recursive_directory_iterator(dir); it != fs::recursive_directory_iterator(); ++it) {
-    const fs::path rel = fs::relative(it->path(), dir);
-    if (rel == "stdout.txt" || rel == "stderr.txt") continue;
-    if (it->is_symlink())
-      s[rel.string()] = "-> " + fs::read_symlink(it->path()).string();
-    else if (it->is_directory())
-      s[rel.string()] = "<dir>";
-    else
-      s[rel.string()] = test::ReadAll(it->path());
-  }
-  return s;
-}
+using test::Snapshot;
 
 const fs::path& Recording() {
   static const fs::path dir = [] {

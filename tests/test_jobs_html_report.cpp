@@ -14,9 +14,9 @@
 #include <string>
 
 #include "core/error.h"
-#include "jobs/html_report.h"
 #include "core/io.h"
 #include "core/svg_plot.h"
+#include "jobs/html_report.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -139,18 +139,54 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   EXPECT_EQ(c.kind, "mcms output");
 }
 
+// Issue 26: the demo's page leads with the answer: the headline table of each sensor's and
+// each fused result's three-sigma error and reduction, before the reports and figures.
+TEST(HtmlReport, DemoPageLeadsWithTheAnswer) {
+  const fs::path d = test::ScratchDir("html_report_demo_headline");
+  test::WriteText(
+      d / "summary.txt",
+      "Tracker (rig frame, every frame):\nframes: 8 (ok 8, degraded 0, lost 0)\n\n"
+      "Flange pose at the 2 points (robot base frame), each sensor alone and fused:\n"
+      "method   points   pos RMS mm  pos 3sig mm  reduction tilt RMS deg  yaw RMS deg  mean NEES 95% band\n"
+      "camera        2       0.0077       0.0170       0.0%      0.00473      0.00210       5.77 [5.25, 6.80]\n"
+      "robot         2       0.0732       0.1211    -611.1%      0.00687      0.00748       4.57 [5.25, 6.80]\n"
+      "MOIFA         2       0.0073       0.0163       4.2%      0.00073      0.00198       5.61 [5.25, 6.80]\n"
+      "KF            2       0.0073       0.0163       4.2%      0.00073      0.00198       5.69 [5.25, 6.80]\n"
+      "\nAgainst the paper's lab experiment (Tables 3-4):\n"
+      "  three-sigma position error, mm: camera 0.017 (paper 3.940), robot 0.121 (paper 3.379)\n"
+      "  MOIFA reduction   4.2 % +- 1.8 % (paper 38.2 %): NOT within 2 sd\n");
+  test::WriteText(d / "point_errors.csv", "point,camera_pos_err_mm\n0,0.1\n");
+  test::WriteText(d / "fused_poses.csv", "frame,time_s\n0,1\n");
+  WriteHtmlReport({d}, d / "report.html");
+  const std::string html = test::ReadAll(d / "report.html");
+  const size_t answer = html.find("<h2>The answer</h2>");
+  ASSERT_NE(answer, std::string::npos) << html.substr(0, 2000);
+  EXPECT_LT(answer, html.find("<h3>summary.txt</h3>"));
+  EXPECT_NE(html.find("<tr class=\"fused\"><td>MOIFA</td><td>0.0163</td><td>0.0073</td><td>4.2%</td>"),
+            std::string::npos);
+  EXPECT_NE(html.find("<tr><td>robot</td><td>0.1211</td>"), std::string::npos);
+  EXPECT_NE(html.find("<li>MOIFA reduction   4.2 % +- 1.8 % (paper 38.2 %): NOT within 2 sd</li>"), std::string::npos);
+  // Another command's folder gets no demo headline.
+  const fs::path other = test::ScratchDir("html_report_no_headline");
+  test::WriteText(other / "summary.txt", "ok\n");
+  WriteHtmlReport({other}, other / "report.html");
+  EXPECT_EQ(test::ReadAll(other / "report.html").find("The answer"), std::string::npos);
+}
+
 TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
   const fs::path d = test::ScratchDir("html_report_track");
-  std::string csv = "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,rms_px,cov_px_px,cov_py_py,cov_pz_pz,"
-                    "err_x_mm,err_y_mm,err_z_mm,err_rot_mdeg,nees\n";
+  std::string csv =
+      "frame,time_s,status,reason,x_m,y_m,z_m,qw,qx,qy,qz,balls,rms_px,cov_px_px,cov_py_py,cov_pz_pz,"
+      "err_x_mm,err_y_mm,err_z_mm,err_rot_mdeg,nees\n";
   for (int i = 0; i < 40; ++i) {
     const bool lost = i % 10 == 7;
     char row[400];
     if (lost)
       std::snprintf(row, sizeof(row), "%d,%.2f,lost,\"2 balls, 1 camera\",,,,,,,,2,,,,,,,,,\n", i, 0.1 * i);
     else
-      std::snprintf(row, sizeof(row), "%d,%.2f,ok,\"\",0.1,0.2,%.4f,1,0,0,0,5,0.12,1e-10,4e-10,9e-10,%.4f,%.4f,%.4f,%.3f,%.3f\n",
-                    i, 0.1 * i, 1.0 + 0.001 * i, 0.01 * std::sin(i), 0.02 * std::cos(i), -0.03 * std::sin(i), 1.5, 3.0 + i % 5);
+      std::snprintf(
+          row, sizeof(row), "%d,%.2f,ok,\"\",0.1,0.2,%.4f,1,0,0,0,5,0.12,1e-10,4e-10,9e-10,%.4f,%.4f,%.4f,%.3f,%.3f\n",
+          i, 0.1 * i, 1.0 + 0.001 * i, 0.01 * std::sin(i), 0.02 * std::cos(i), -0.03 * std::sin(i), 1.5, 3.0 + i % 5);
     csv += row;
   }
   test::WriteText(d / "poses.csv", csv);
@@ -171,8 +207,9 @@ TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
   EXPECT_NE(status.find("ok (36 frames)"), std::string::npos);
   EXPECT_NE(status.find("lost (4 frames)"), std::string::npos);
   for (const char* axis : {"x", "y", "z"}) {
-    const std::string err = find(std::string("Error in ") + axis + " against the truth per frame (band: predicted +-3 sigma)");
-    EXPECT_EQ(Count(err, "<polygon"), 1u);  // the band
+    const std::string err =
+        find(std::string("Error in ") + axis + " against the truth per frame (band: predicted +-3 sigma)");
+    EXPECT_EQ(Count(err, "<polygon"), 1u);          // the band
     EXPECT_EQ(Count(err, "<circle cx"), 36u + 1u);  // the tracked frames and the legend's marker
   }
   const std::string nees = find("NEES per frame");
@@ -197,7 +234,8 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
   for (int k = 0; k < 4; ++k) {
     const double half = 0.5 * 1e-4 * k;
     char row[200];
-    std::snprintf(row, sizeof(row), "%d,%d,ok,\"\",0.101,0.2,0.9,%.12f,0,0,%.12f,5,0.1", k, k, std::cos(half), -std::sin(half));
+    std::snprintf(row, sizeof(row), "%d,%d,ok,\"\",0.101,0.2,0.9,%.12f,0,0,%.12f,5,0.1", k, k, std::cos(half),
+                  -std::sin(half));
     est += row;
     for (int i = 0; i < 6; ++i)
       for (int j = 0; j < 6; ++j) est += i != j ? ",0" : i < 3 ? ",1e-8" : ",1e-6";
@@ -222,7 +260,8 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
   // of core/statistics.h PoseError, as every NEES in the project), NEES 1 + k^2.
   EXPECT_NE(html.find("<th>nees</th>"), std::string::npos);
   EXPECT_EQ(html.find("<td>-1</td>"), std::string::npos);
-  for (const char* v : {"<td>1</td>", "<td>2</td>", "<td>5</td>", "<td>10</td>"}) EXPECT_NE(html.find(v), std::string::npos) << v;
+  for (const char* v : {"<td>1</td>", "<td>2</td>", "<td>5</td>", "<td>10</td>"})
+    EXPECT_NE(html.find(v), std::string::npos) << v;
 }
 
 TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
@@ -232,7 +271,8 @@ TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
   EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "file.txt"}); }).find("is not a folder"), std::string::npos);
   fs::create_directories(d / "empty");
   test::WriteText(d / "empty" / "x.bin", "x");
-  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"), std::string::npos);
+  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"),
+            std::string::npos);
   // An output that is a folder: refused before anything is built.
   fs::create_directories(d / "run" / "out.html");
   test::WriteText(d / "run" / "summary.txt", "ok");
@@ -275,11 +315,13 @@ TEST(SvgPlot, LogAxisIsLabelledInRealUnits) {
 TEST(SvgPlot, LegendSitsAboveThePlotAreaAndLinearTicksHaveNoRoundingNoise) {
   Plot p = SamplePlot();
   for (int k = 0; k < 6; ++k)
-    p.series.push_back(PlotSeries{"a rather long series label number " + std::to_string(k), {0.5, 2.0}, {-0.3, 0.6}, "#000", false});
+    p.series.push_back(
+        PlotSeries{"a rather long series label number " + std::to_string(k), {0.5, 2.0}, {-0.3, 0.6}, "#000", false});
   const std::string svg = p.ToSvg(900, 420);
   // The plot area is the framed rect; every legend label is above its top edge.
   std::smatch m;
-  ASSERT_TRUE(std::regex_search(svg, m, std::regex("<rect x='80' y='([0-9.]+)' width='[0-9.]+' height='[0-9.]+' fill='none' stroke='black'/>")));
+  ASSERT_TRUE(std::regex_search(
+      svg, m, std::regex("<rect x='80' y='([0-9.]+)' width='[0-9.]+' height='[0-9.]+' fill='none' stroke='black'/>")));
   const double top = std::stod(m[1]);
   const std::regex legend("<text x='[0-9.]+' y='([0-9.]+)'>(measured|predicted|a rather long[^<]*)</text>");
   int n = 0;
@@ -305,7 +347,8 @@ TEST(SvgPlot, ResidualVectorsOverTheImageKeepImageAxes) {
   p.series = {r};
   const std::string svg = p.ToSvg(900, 600);
   // Two arrow shafts, two heads; the base markers at the points.
-  const std::regex shaft("<line x1='([0-9.]+)' y1='([0-9.]+)' x2='([0-9.]+)' y2='([0-9.]+)' stroke='#d62728' stroke-width='1'/>");
+  const std::regex shaft(
+      "<line x1='([0-9.]+)' y1='([0-9.]+)' x2='([0-9.]+)' y2='([0-9.]+)' stroke='#d62728' stroke-width='1'/>");
   std::vector<std::array<double, 4>> shafts;
   for (auto it = std::sregex_iterator(svg.begin(), svg.end(), shaft); it != std::sregex_iterator(); ++it)
     shafts.push_back({std::stod((*it)[1]), std::stod((*it)[2]), std::stod((*it)[3]), std::stod((*it)[4])});
@@ -328,9 +371,10 @@ TEST(SvgPlot, GridPlacesEachPlotInItsCell) {
   for (int i = 0; i < 5; ++i) plots[i].title = "panel " + std::to_string(i);
   const std::string svg = PlotGridSvg(plots, 3, 400, 300);
   // 3 columns, 2 rows; each panel a nested viewport at its cell, all titles present.
-  EXPECT_EQ(svg.rfind("<svg xmlns='http://www.w3.org/2000/svg' width='1200' height='600'", 0), 0u) << svg.substr(0, 120);
-  for (const char* cell : {"<svg x='0' y='0'", "<svg x='400' y='0'", "<svg x='800' y='0'", "<svg x='0' y='300'",
-                           "<svg x='400' y='300'"})
+  EXPECT_EQ(svg.rfind("<svg xmlns='http://www.w3.org/2000/svg' width='1200' height='600'", 0), 0u)
+      << svg.substr(0, 120);
+  for (const char* cell :
+       {"<svg x='0' y='0'", "<svg x='400' y='0'", "<svg x='800' y='0'", "<svg x='0' y='300'", "<svg x='400' y='300'"})
     EXPECT_EQ(Count(svg, cell), 1u) << cell;
   EXPECT_EQ(Count(svg, "<svg"), 6u);
   EXPECT_EQ(Count(svg, "</svg>"), 6u);
