@@ -573,7 +573,9 @@ std::string DemoHeadline(const std::string& summary) {
       std::istringstream ls(line);
       std::vector<std::string> tok;
       for (std::string t; ls >> t;) tok.push_back(t);
-      if (tok.size() >= 8 && (tok[0] == "camera" || tok[0] == "robot" || tok[0] == "MOIFA" || tok[0] == "KF")) {
+      const bool counted = tok.size() >= 8 && !tok[1].empty() &&
+                           tok[1].find_first_not_of("0123456789") == std::string::npos;  // "points" column
+      if (counted && (tok[0] == "camera" || tok[0] == "robot" || tok[0] == "MOIFA" || tok[0] == "KF")) {
         const bool fused = tok[0] == "MOIFA" || tok[0] == "KF";
         rows << "<tr" << (fused ? " class=\"fused\"" : "") << "><td>" << Html(tok[0]) << "</td><td>" << Html(tok[3])
              << "</td><td>" << Html(tok[2]) << "</td><td>" << Html(tok[4]) << "</td><td>" << Html(tok[5]) << "</td><td>"

@@ -152,6 +152,8 @@ TEST(HtmlReport, DemoPageLeadsWithTheAnswer) {
       "robot         2       0.0732       0.1211    -611.1%      0.00687      0.00748       4.57 [5.25, 6.80]\n"
       "MOIFA         2       0.0073       0.0163       4.2%      0.00073      0.00198       5.61 [5.25, 6.80]\n"
       "KF            2       0.0073       0.0163       4.2%      0.00073      0.00198       5.69 [5.25, 6.80]\n"
+      "inclinometer alone: tilt reading RMS error 0.00073 deg (dwell mean); yaw: not observable\n"
+      "KF mean NIS per dof: camera 1.005, robot 0.002, inclinometer 0.999 (1 when consistent)\n"
       "\nAgainst the paper's lab experiment (Tables 3-4):\n"
       "  three-sigma position error, mm: camera 0.017 (paper 3.940), robot 0.121 (paper 3.379)\n"
       "  MOIFA reduction   4.2 % +- 1.8 % (paper 38.2 %): NOT within 2 sd\n");
@@ -165,6 +167,11 @@ TEST(HtmlReport, DemoPageLeadsWithTheAnswer) {
   EXPECT_NE(html.find("<tr class=\"fused\"><td>MOIFA</td><td>0.0163</td><td>0.0073</td><td>4.2%</td>"),
             std::string::npos);
   EXPECT_NE(html.find("<tr><td>robot</td><td>0.1211</td>"), std::string::npos);
+  EXPECT_EQ(html.find("<td>per</td>"), std::string::npos) << "the NIS line is not a row";
+  const size_t table_end = html.find("</table>", answer);
+  size_t rows = 0;
+  for (size_t at = html.find("<tr", answer); at < table_end; at = html.find("<tr", at + 1)) ++rows;
+  EXPECT_EQ(rows, 5u) << "a header and the four methods";
   EXPECT_NE(html.find("<li>MOIFA reduction   4.2 % +- 1.8 % (paper 38.2 %): NOT within 2 sd</li>"), std::string::npos);
   // Another command's folder gets no demo headline.
   const fs::path other = test::ScratchDir("html_report_no_headline");
