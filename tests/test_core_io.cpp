@@ -16,18 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The message of the InputError `f` throws; fails the test when it throws nothing.
-template <typename F>
-std::string InputErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected an InputError";
-  return {};
-}
-
 size_t FilesIn(const fs::path& dir) {
   size_t n = 0;
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++n;
@@ -62,7 +50,7 @@ TEST(Io, AFailedWriteLeavesThePreviousFileAndNoPartialOne) {
 
 TEST(Io, ReadTextFileNamesAMissingFile) {
   const fs::path p = test::ScratchDir("core_io_missing") / "absent.csv";
-  const std::string msg = InputErrorOf([&] { ReadTextFile(p); });
+  const std::string msg = test::ErrorOf([&] { ReadTextFile(p); });
   EXPECT_NE(msg.find(p.string()), std::string::npos) << msg;
 }
 
@@ -86,20 +74,20 @@ TEST(Io, ReadCsvSkipsCommentsAndBlankLinesTrimsCellsAndKeepsLineNumbers) {
 TEST(Io, ReadCsvErrorsNameFileLineAndColumn) {
   const fs::path dir = test::ScratchDir("core_io_csv_errors");
   test::WriteText(dir / "short.csv", "a,b,c\n1,2,3\n4,5\n");
-  std::string msg = InputErrorOf([&] { ReadCsv(dir / "short.csv"); });
+  std::string msg = test::ErrorOf([&] { ReadCsv(dir / "short.csv"); });
   EXPECT_NE(msg.find("short.csv line 3"), std::string::npos) << msg;
   EXPECT_NE(msg.find("expected 3 columns"), std::string::npos) << msg;
 
   test::WriteText(dir / "empty.csv", "# only a comment\n\n");
-  msg = InputErrorOf([&] { ReadCsv(dir / "empty.csv"); });
+  msg = test::ErrorOf([&] { ReadCsv(dir / "empty.csv"); });
   EXPECT_NE(msg.find("empty.csv"), std::string::npos) << msg;
 
   test::WriteText(dir / "cells.csv", "a,b\n1,x\n2,nan\n3,\n4,5abc\n");
   const CsvTable t = ReadCsv(dir / "cells.csv");
-  msg = InputErrorOf([&] { t.Column("z"); });
+  msg = test::ErrorOf([&] { t.Column("z"); });
   EXPECT_NE(msg.find("'z'"), std::string::npos) << msg;
   for (size_t row = 0; row < t.rows.size(); ++row) {
-    msg = InputErrorOf([&] { t.Number(row, 1); });
+    msg = test::ErrorOf([&] { t.Number(row, 1); });
     EXPECT_NE(msg.find("line " + std::to_string(row + 2)), std::string::npos) << msg;
     EXPECT_NE(msg.find("column 'b'"), std::string::npos) << msg;
   }
@@ -111,13 +99,13 @@ TEST(Io, OutputPathsAreCheckedBeforeWork) {
   test::WriteText(dir / "file.txt", "x");
   fs::create_directories(dir / "folder");
   // A folder where a file is wanted, and the reverse, are refused with the option named.
-  std::string msg = InputErrorOf([&] { RequireWritableFile(dir / "folder", "-o"); });
+  std::string msg = test::ErrorOf([&] { RequireWritableFile(dir / "folder", "-o"); });
   EXPECT_NE(msg.find("-o"), std::string::npos) << msg;
   EXPECT_NE(msg.find("is a folder"), std::string::npos) << msg;
-  msg = InputErrorOf([&] { RequireWritableFolder(dir / "file.txt", "--out"); });
+  msg = test::ErrorOf([&] { RequireWritableFolder(dir / "file.txt", "--out"); });
   EXPECT_NE(msg.find("--out"), std::string::npos) << msg;
   // A path under an existing file cannot be created.
-  msg = InputErrorOf([&] { RequireWritableFile(dir / "file.txt" / "x.csv", "-o"); });
+  msg = test::ErrorOf([&] { RequireWritableFile(dir / "file.txt" / "x.csv", "-o"); });
   EXPECT_NE(msg.find("not a folder"), std::string::npos) << msg;
   EXPECT_THROW(RequireWritableFile("", "-o"), InputError);
   EXPECT_THROW(RequireWritableFolder("", "-o"), InputError);

@@ -59,17 +59,6 @@ std::vector<std::string> EmbeddedFigures(const std::string& html) {
   return out;
 }
 
-template <typename F>
-std::string InputErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "no InputError";
-  return "";
-}
-
 size_t Count(const std::string& s, const std::string& needle) {
   size_t n = 0;
   for (size_t p = s.find(needle); p != std::string::npos; p = s.find(needle, p + 1)) ++n;
@@ -273,17 +262,17 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
 
 TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
   const fs::path d = test::ScratchDir("html_report_bad");
-  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "missing"}); }).find("missing does not exist"), std::string::npos);
+  EXPECT_NE(test::ErrorOf([&] { BuildHtmlReport({d / "missing"}); }).find("missing does not exist"), std::string::npos);
   test::WriteText(d / "file.txt", "x");
-  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "file.txt"}); }).find("is not a folder"), std::string::npos);
+  EXPECT_NE(test::ErrorOf([&] { BuildHtmlReport({d / "file.txt"}); }).find("is not a folder"), std::string::npos);
   fs::create_directories(d / "empty");
   test::WriteText(d / "empty" / "x.bin", "x");
-  EXPECT_NE(InputErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"),
+  EXPECT_NE(test::ErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"),
             std::string::npos);
   // An output that is a folder: refused before anything is built.
   fs::create_directories(d / "run" / "out.html");
   test::WriteText(d / "run" / "summary.txt", "ok");
-  EXPECT_NE(InputErrorOf([&] { WriteHtmlReport({d / "run"}, d / "run" / "out.html"); }).find("is a folder"),
+  EXPECT_NE(test::ErrorOf([&] { WriteHtmlReport({d / "run"}, d / "run" / "out.html"); }).find("is a folder"),
             std::string::npos);
   // A failing build leaves no file.
   EXPECT_THROW(WriteHtmlReport({d / "empty"}, d / "empty.html"), InputError);
