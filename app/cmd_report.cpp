@@ -34,6 +34,9 @@ McmsCommand report_command([](CLI::App& app) {
                           std::printf("wrote %s: the output of %s, %zu figures, %zu tables, %zu reports, %zu inputs\n",
                                       file.string().c_str(), c.kind == "mcms output" ? "an mcms command" : ("mcms " + c.kind).c_str(),
                                       c.figures, c.tables, c.texts, c.inputs);
+                          if (c.status == "failed" || c.status == "empty")
+                            std::fprintf(stderr, "mcms report: note: %s %s; its first screen says so\n", dir->c_str(),
+                                         c.status == "empty" ? "holds no result" : "is the output of a run that failed");
                           return 0;
                         }));
 });

@@ -228,7 +228,7 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
   // rig.yaml would overwrite an input.
   std::vector<fs::path> inputs = a.folders;
   inputs.push_back(a.board);
-  std::vector<RunOutput> outputs{{a.output / "rig.yaml", "calib-rig -o"}};
+  std::vector<RunOutput> outputs{{a.output / "rig.yaml", "calib-rig -o"}, {a.output / "summary.txt", "calib-rig -o"}};
   for (size_t c = 0; c < a.folders.size(); ++c)
     for (const std::string& file : {"residuals-" + CameraNameOfFolder(a.folders[c], c) + ".svg",
                                     CameraNameOfFolder(a.folders[c], c) + ".cameramodel",
@@ -263,10 +263,14 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
       WriteCameramodelWithOptimizationInputs(r, static_cast<int>(c), optimization_inputs, out / (name + ".cameramodel"));
     r.rig.cameras[c].WriteOpenCvYaml(out / (name + ".yml"));
   }
+  // The summary is printed and kept beside the models (mcms report's first screen reads it).
+  std::string summary;
+  ReportSolution(a, r, grids, [&](const std::string& s) { summary += s; });
+  WriteFileAtomically(out / "summary.txt", [&](std::ostream& o) { o << summary; });
   r.rig.Write(out / "rig.yaml");
 
-  ReportSolution(a, r, grids, print);
-  print(Format("wrote %zu camera models (.cameramodel%s, .yml), residual plots and rig.yaml to %s\n", r.rig.size(),
+  print(summary);
+  print(Format("wrote %zu camera models (.cameramodel%s, .yml), residual plots, summary.txt and rig.yaml to %s\n", r.rig.size(),
                optimization_inputs.empty() ? "" : " with mrcal's optimization_inputs", out.string().c_str()));
   if (!no_inputs_why.empty()) print("note: " + no_inputs_why + "\n");
 }

@@ -7,11 +7,14 @@
 // What the folder holds decides what the page shows; files are recognised by their
 // extension and, for the folders of known commands, by their names and CSV columns:
 //   *.svg                      figures (the plots of core/svg_plot), embedded as images
-//   *.csv                      tables: shown whole up to `max_table_rows` rows, otherwise
+//   *.csv                      HTML tables: shown whole up to `max_table_rows` rows, otherwise
 //                              summarised (rows, per-column min / median / max / mean for
-//                              numeric columns, counts for text columns, first and last rows)
-//   *.txt, *.md, *.log         reports, shown as preformatted text (summary*.txt first; the
-//                              first 60 lines of a long one, the rest in a collapsed section)
+//                              numeric columns, counts for text columns) with the whole table
+//                              sortable by any column (a click on its header) in a folded
+//                              section, up to 2,000 rows (first and last rows beyond)
+//   *.txt, *.md, *.log         reports, as preformatted text folded away below the figures
+//                              (summary*.txt first; the first 60 lines of a long one, the
+//                              rest in a further collapsed section)
 //   *.yaml, *.yml, *.json,     inputs and models, in collapsed sections (*.html files, earlier
 //                              reports, are left out)
 //   *.cameramodel
@@ -43,15 +46,19 @@ struct HtmlReportContents {
   // What the folder looks like it came from: "demo", "fov-map", "calib-rig", "track",
   // "iso9283", "calib-robot", "audit", or "mcms output" when no rule matched.
   std::string kind;
+  // What the page's first screen says of the run: "ok", "findings" (an audit named effects,
+  // a sensor was flagged, a fit warned), "failed" (the run did not finish or tracked
+  // nothing) or "empty" (the folder holds no result file).
+  std::string status;
   size_t figures = 0;   // SVG images on the page (files and plots made from CSVs)
   size_t tables = 0, texts = 0, inputs = 0;
   std::vector<std::string> listed;  // files listed but not embedded
 };
 
-// The page. InputError naming the folder when it is not a readable folder or holds no
-// file the report can show. An SVG file that is not an SVG document, or a CSV that cannot
-// be parsed, is shown as a note on the page (naming the file and the problem), not skipped
-// silently.
+// The page, led by its first screen: what the run found (or that it failed, or that the
+// folder is empty). InputError naming the folder when it is not a readable folder. An SVG
+// file that is not an SVG document, or a CSV that cannot be parsed, is shown as a note on
+// the page (naming the file and the problem), not skipped silently.
 std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents* contents = nullptr);
 
 // Builds the page and writes it atomically (core/io.h): the output is checked for

@@ -336,8 +336,21 @@ TEST(AppCalibRig, CalibratesOpenCvStereoPairs) {
   EXPECT_NE(r.err.find("right: board found in 13 of 13 images"), std::string::npos) << r.err;
   // Outputs.
   for (const char* f : {"left.cameramodel", "left.yml", "residuals-left.svg", "right.cameramodel", "right.yml",
-                        "residuals-right.svg", "rig.yaml"})
+                        "residuals-right.svg", "rig.yaml", "summary.txt"})
     EXPECT_TRUE(fs::exists(d / "out" / f)) << f;
+  {
+    // The summary is kept beside the models, and `mcms report` leads with it (issue 26).
+    EXPECT_NE(r.out.find(ReadAll(d / "out" / "summary.txt")), std::string::npos);
+    const CliRun rep = Mcms(d, "report out");
+    ASSERT_EQ(rep.code, 0) << rep.err;
+    EXPECT_NE(rep.out.find("the output of mcms calib-rig"), std::string::npos) << rep.out;
+    const std::string html = ReadAll(d / "out" / "report.html");
+    const size_t answer = html.find("<section id=\"answer\" class=\"answer ok\">");
+    ASSERT_NE(answer, std::string::npos) << html.substr(0, 3000);
+    EXPECT_NE(html.find("<td>left</td><td>13</td>", answer), std::string::npos);
+    EXPECT_NE(html.find("<td>right</td><td>13</td>", answer), std::string::npos);
+    EXPECT_NE(html.find("residual against the views&#39; own noise floor", answer), std::string::npos);
+  }
   {
     // The residuals are drawn as magnified vectors over the whole image (one arrow per
     // inlier corner: 13 views x 54 corners), in image coordinates.

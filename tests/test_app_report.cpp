@@ -1,4 +1,5 @@
-// mcms report (and --html of demo and fov-map) in a real browser: the HTML page of `mcms demo`
+// mcms report (and --html of demo and fov-map) in a real browser: the HTML page of `mcms demo`,
+// and the first screen of every command's output (visible without scrolling at 1366 x 768),
 // and of `mcms fov-map` opens in
 // headless Chromium (Debian's chromium, scripts/setup.sh installs it) with no console
 // message but the page's own "N of N figures rendered", every figure decoded by the
@@ -47,6 +48,8 @@ size_t Count(const std::string& s, const std::string& needle) {
 
 struct BrowserResult {
   int figures = -1, rendered = -1;          // from the page's script, read back from the DOM
+  int headline_bottom = -1;                 // where the first screen's headline ends (px, at 1366 x 768)
+  std::string answer_status;                // its class: ok, findings, failed, empty
   std::vector<std::string> console;         // every console message of the page
 };
 
@@ -59,17 +62,27 @@ BrowserResult OpenInBrowser(const fs::path& page, const fs::path& scratch, const
                              (scratch / "chromium-profile").string();
   const std::string url = "file://" + fs::absolute(page).string();
   BrowserResult r;
-  const CliRun dom = Shell(common + " --dump-dom " + url, scratch);
+  // The DOM at a laptop's 1366 x 768: what the page's script measured there.
+  const CliRun dom = Shell(common + " --window-size=1366,768 --dump-dom " + url, scratch);
   EXPECT_EQ(dom.code, 0) << dom.err;
   std::smatch m;
   if (std::regex_search(dom.out, m, std::regex("<body data-figures=\"([0-9]+)\" data-figures-rendered=\"([0-9]+)\"")))
     r.figures = std::stoi(m[1]), r.rendered = std::stoi(m[2]);
+  if (std::regex_search(dom.out, m, std::regex("data-headline-bottom=\"([0-9]+)\"")))
+    r.headline_bottom = std::stoi(m[1]);
+  if (std::regex_search(dom.out, m, std::regex("data-answer-status=\"([a-z]+)\""))) r.answer_status = m[1];
   // Chromium logs every console message of the page (log, warning, error, uncaught
   // exception, refused resource) as one INFO:CONSOLE line on stderr.
   std::istringstream lines(dom.err);
   for (std::string line; std::getline(lines, line);)
     if (line.find(":CONSOLE") != std::string::npos) r.console.push_back(line);
   if (!screenshot.empty()) {
+    // The first screen as a laptop shows it, kept beside the whole page.
+    const fs::path first = screenshot.parent_path() / ("first-screen-" + screenshot.filename().string());
+    fs::remove(first);
+    const CliRun first_shot = Shell(common + " --window-size=1366,768 --screenshot=" + first.string() + " " + url, scratch);
+    EXPECT_EQ(first_shot.code, 0) << first_shot.err;
+    EXPECT_TRUE(fs::exists(first));
     fs::remove(screenshot);
     const CliRun shot = Shell(common + " --window-size=1280,4000 --screenshot=" + screenshot.string() + " " + url, scratch);
     EXPECT_EQ(shot.code, 0) << shot.err;
@@ -141,6 +154,67 @@ TEST(ReportCli, DemoReportOpensInHeadlessChromiumWithEveryFigure) {
   const fs::path artefacts = fs::path(MCMS_BINARY_DIR) / "test-artifacts";
   fs::create_directories(artefacts);
   ExpectCleanPage(page, s, svgs + 4, artefacts / "report-demo.png");
+  const BrowserResult b = OpenInBrowser(page, s);
+  EXPECT_EQ(b.answer_status, "ok");
+  EXPECT_GT(b.headline_bottom, 100);
+  EXPECT_LE(b.headline_bottom, 768) << "the demo's headline is not visible without scrolling at 1366 x 768";
+}
+
+// Issue 26: the output of every command that writes a folder leads with its own first
+// screen, visible without scrolling at 1366 x 768 (the bottom of its lead and first table,
+// measured by the browser), with no console error; a screenshot of each first screen is kept
+// in build/test-artifacts/first-screen-<command>.png.
+TEST(ReportCli, EveryCommandsFirstScreenIsVisibleWithoutScrolling) {
+  REQUIRE_CHROMIUM();
+  const fs::path s = test::ScratchDir("report_first_screens");
+  const std::string d = s.string();
+  for (const std::string& cmd :
+       {"render --quiet --frames 40 -o " + d + "/rec", "track --quiet " + d + "/rec",
+        "audit cameras --quiet " + d + "/rec -o " + d + "/audit",
+        "fov-map --quiet --grid=-0.5:0.5:5,-0.4:0.4:4,0:1:3 -o " + d + "/fov",
+        "iso9283 --simulate --cycles 3 -o " + d + "/iso/iso9283.csv"}) {
+    if (cmd.rfind("iso9283", 0) == 0) fs::create_directories(s / "iso");
+    const CliRun r = Mcms(cmd, s);
+    ASSERT_EQ(r.code, 0) << cmd << "\n" << r.err;
+  }
+  fs::create_directories(s / "empty");
+  const fs::path artefacts = fs::path(MCMS_BINARY_DIR) / "test-artifacts";
+  fs::create_directories(artefacts);
+  struct Case {
+    std::string folder, kind, status, lead;
+  };
+  for (const Case& c : std::vector<Case>{{"rec", "track", "ok", "40 frames: "},
+                                         {"audit", "audit", "", "audit"},
+                                         {"fov", "fov-map", "ok", "The rig measures with sigma_d"},
+                                         {"iso", "iso9283", "ok", "ISO 9283 pose accuracy AP and repeatability RP"},
+                                         {"empty", "mcms output", "empty", "Nothing to report"}}) {
+    SCOPED_TRACE(c.folder);
+    const fs::path page = s / (c.folder + ".html");
+    const CliRun rep = Mcms("report " + (s / c.folder).string() + " -o " + page.string(), s);
+    ASSERT_EQ(rep.code, 0) << rep.err;
+    EXPECT_NE(rep.out.find(c.kind == "mcms output" ? "an mcms command" : "the output of mcms " + c.kind),
+              std::string::npos) << rep.out;
+    EXPECT_NE(test::ReadAll(page).find(c.lead), std::string::npos);
+    const std::string name = c.kind == "mcms output" ? c.folder : c.kind;
+    const fs::path shot = artefacts / ("first-screen-" + name + ".png");
+    fs::remove(shot);
+    const BrowserResult b = OpenInBrowser(page, s);
+    if (!c.status.empty()) {
+      EXPECT_EQ(b.answer_status, c.status);
+    }
+    EXPECT_GT(b.headline_bottom, 100);
+    EXPECT_LE(b.headline_bottom, 768) << "the headline is not visible without scrolling at 1366 x 768";
+    for (const auto& l : b.console) EXPECT_EQ(l.find("error"), std::string::npos) << l;
+    const CliRun pic = Shell("timeout 120 " + Chromium() + " --headless --no-sandbox --disable-gpu --no-first-run " +
+                                 "--hide-scrollbars --user-data-dir=" + (s / "chromium-profile").string() +
+                                 " --window-size=1366,768 --screenshot=" + shot.string() + " file://" + page.string(),
+                             s);
+    EXPECT_EQ(pic.code, 0) << pic.err;
+    EXPECT_FALSE(cv::imread(shot.string()).empty()) << shot;
+  }
+  // An empty folder's page says so on the command line too.
+  const CliRun empty = Mcms("report " + (s / "empty").string() + " -o " + (s / "e.html").string(), s);
+  EXPECT_NE(empty.err.find("holds no result; its first screen says so"), std::string::npos) << empty.err;
 }
 
 TEST(ReportCli, FovMapReportOpensInHeadlessChromium) {
@@ -176,11 +250,10 @@ TEST(ReportCli, BadInputIsRefusedWithNothingWritten) {
   CliRun r = Mcms("report " + (s / "missing").string(), s);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("missing does not exist"), std::string::npos) << r.err;
-  fs::create_directories(s / "empty");
-  r = Mcms("report " + (s / "empty").string(), s);
+  std::ofstream(s / "file.txt") << "x\n";
+  r = Mcms("report " + (s / "file.txt").string(), s);
   EXPECT_EQ(r.code, 2);
-  EXPECT_NE(r.err.find("holds no file a report can show"), std::string::npos) << r.err;
-  EXPECT_FALSE(fs::exists(s / "empty" / "report.html"));
+  EXPECT_NE(r.err.find("is not a folder"), std::string::npos) << r.err;
   fs::create_directories(s / "run" / "x.html");
   std::ofstream(s / "run" / "summary.txt") << "ok\n";
   r = Mcms("report " + (s / "run").string() + " -o " + (s / "run" / "x.html").string(), s);

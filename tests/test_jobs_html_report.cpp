@@ -114,7 +114,18 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   EXPECT_NE(html.find("100 rows, 2 columns"), std::string::npos);
   EXPECT_NE(html.find("a, b (66)"), std::string::npos);  // a quoted cell with a comma, counted
   EXPECT_NE(html.find("# a comment line"), std::string::npos);
-  EXPECT_NE(html.find("... 76 rows ..."), std::string::npos);
+  // A long table: summarised, the whole of it sortable in a folded section; beyond 2,000
+  // rows its first and last rows.
+  EXPECT_NE(html.find("<details><summary>all 100 rows (a click on a column's header sorts by it)</summary>"),
+            std::string::npos);
+  EXPECT_NE(html.find("<tr><td>c</td><td>99</td></tr>"), std::string::npos);
+  EXPECT_EQ(Count(html, "<table class=\"sortable\">"), 2u);
+  std::string huge = "i\n";
+  for (int i = 0; i < 2500; ++i) huge += std::to_string(i) + "\n";
+  test::WriteText(d / "huge.csv", huge);
+  const std::string with_huge = BuildHtmlReport({d, "", 25, 100000});
+  EXPECT_NE(with_huge.find("... 2476 rows ..."), std::string::npos);
+  fs::remove(d / "huge.csv");
   EXPECT_NE(html.find("rig: {cameras: 4}"), std::string::npos);
   // Bad files are named on the page, with the problem.
   EXPECT_NE(html.find("broken.svg: not an SVG document"), std::string::npos);
@@ -162,11 +173,14 @@ TEST(HtmlReport, DemoPageLeadsWithTheAnswer) {
   for (size_t at = html.find("<tr", answer); at < table_end; at = html.find("<tr", at + 1)) ++rows;
   EXPECT_EQ(rows, 5u) << "a header and the four methods";
   EXPECT_NE(html.find("<li>MOIFA reduction   4.2 % +- 1.8 % (paper 38.2 %): NOT within 2 sd</li>"), std::string::npos);
-  // Another command's folder gets no demo headline.
+  // Another command's folder gets no demo headline: its first screen says no result was
+  // recognised.
   const fs::path other = test::ScratchDir("html_report_no_headline");
   test::WriteText(other / "summary.txt", "ok\n");
   WriteHtmlReport({other}, other / "report.html");
-  EXPECT_EQ(test::ReadAll(other / "report.html").find("The answer"), std::string::npos);
+  const std::string other_html = test::ReadAll(other / "report.html");
+  EXPECT_EQ(other_html.find("Flange pose error"), std::string::npos);
+  EXPECT_NE(other_html.find("No known command&#39;s result was recognised"), std::string::npos);
 }
 
 TEST(HtmlReport, TrackerPosesGetPerFramePlotsWithPredictedBands) {
@@ -260,23 +274,175 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
     EXPECT_NE(html.find(v), std::string::npos) << v;
 }
 
+// The first screen of a page (section#answer), "" when it has none; it comes before every
+// other section.
+std::string AnswerOf(const std::string& html) {
+  const size_t b = html.find("<section id=\"answer\"");
+  if (b == std::string::npos) return "";
+  EXPECT_LT(b, html.find("<h2 id=")) << "the answer comes first";
+  return html.substr(b, html.find("</section>", b) - b);
+}
+
+struct FirstScreen {
+  std::string kind, status, answer;
+};
+
+FirstScreen ReportOn(const fs::path& d) {
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d}, &c);
+  return {c.kind, c.status, AnswerOf(html)};
+}
+
+// Issue 26: every command's output folder gets a first screen of its own that says what the
+// run found, and a run that failed or left nothing says so.
+TEST(HtmlReport, EveryCommandsFolderLeadsWithItsAnswer) {
+  // An audit that names an effect: its size, held-out gain and the plot that shows it.
+  const fs::path audit = test::ScratchDir("first_screen_audit");
+  test::WriteText(audit / "report.json", R"J({"mode": "robot", "nominal": {"chi2_per_dof": 4.5, "n": 600},
+    "clean": false, "rms_unit": "m", "tests": [{"name": "trend vs joint 2 angle (x)", "statistic": 5,
+    "p_value": 1e-9, "failed": true}, {"name": "chi-square", "statistic": 1, "p_value": 0.5, "failed": false}],
+    "effects": [{"name": "joint_offset", "where": "joint 2", "parameters": {"offset": 0.00035},
+    "sigma": {"offset": 0.00002}, "heldout_rms_before": 0.0004, "heldout_rms_after": 0.00003,
+    "heldout_loglik_gain": 812.5, "bic_gain": 900}], "undecided": [["link_length at a2", "joint_scale at joint 2"]],
+    "notes": []})J");
+  fs::create_directories(audit / "plots");
+  SamplePlot().WriteSvg(audit / "plots" / "effect1.svg");
+  test::WriteText(audit / "report.txt", "audit (robot)\n");
+  FirstScreen f = ReportOn(audit);
+  EXPECT_EQ(f.kind, "audit");
+  EXPECT_EQ(f.status, "findings");
+  for (const char* want : {"The robot audit names 1 effect: joint_offset at joint 2.", "<td>offset = 0.00035 ± 2e-05</td>",
+                           "<td>812.5</td>", "trend vs joint 2 angle (x)", "link_length at a2 or joint_scale at joint 2",
+                           "plots/effect1.svg"})
+    EXPECT_NE(f.answer.find(want), std::string::npos) << want << "\n" << f.answer;
+  EXPECT_EQ(f.answer.find("<li>chi-square</li>"), std::string::npos) << "only the failed tests";
+  // A clean audit, and one whose failures no catalog effect explains.
+  test::WriteText(audit / "report.json", R"J({"mode": "cameras", "nominal": {"chi2_per_dof": 1.01, "n": 900},
+    "clean": true, "rms_unit": "px", "tests": [{"name": "x", "statistic": 1, "p_value": 0.5, "failed": false}],
+    "effects": [], "undecided": [], "notes": []})J");
+  f = ReportOn(audit);
+  EXPECT_EQ(f.status, "ok");
+  EXPECT_NE(f.answer.find("No effect found: the nominal model explains the cameras data within its noise (chi2/dof 1.010"),
+            std::string::npos) << f.answer;
+  test::WriteText(audit / "report.json", R"J({"mode": "cameras", "nominal": {"chi2_per_dof": 24.6, "n": 900},
+    "clean": false, "tests": [{"name": "pixel noise scale of cam2", "statistic": 10, "p_value": 0, "failed": true}],
+    "effects": [], "undecided": [], "notes": []})J");
+  f = ReportOn(audit);
+  EXPECT_EQ(f.status, "findings");
+  EXPECT_NE(f.answer.find("does not explain the cameras data (chi2/dof 24.600; 1 of 1 tests failed), and no effect of "
+                          "the catalog explains it"), std::string::npos) << f.answer;
+  test::WriteText(audit / "report.json", "{\"mode\": \"cameras\"}");
+  EXPECT_EQ(ReportOn(audit).status, "failed");
+
+  // fov-map: the region below the threshold, and sigma against distance.
+  const fs::path fov = test::ScratchDir("first_screen_fov");
+  test::WriteText(fov / "region.txt", "# Predicted precision\ngrid a: 8 points\nbest  sigma_d 0.0140 mm at (0, 0, 1) m\n"
+                                      "worst sigma_d 0.0322 mm at (0, 0, 0) m\nsigma_d < 0.03 mm at 7 of 8 grid points (87.5 %)\n");
+  test::WriteText(fov / "map.csv", "x_m,sigma_d_mm\n0,0.01\n");
+  SamplePlot().WriteSvg(fov / "sigma_vs_distance.svg");
+  f = ReportOn(fov);
+  EXPECT_EQ(f.kind, "fov-map");
+  EXPECT_NE(f.answer.find("The rig measures with sigma_d &lt; 0.03 mm at 7 of 8 grid points (87.5 %)."), std::string::npos)
+      << f.answer;
+  EXPECT_NE(f.answer.find("worst sigma_d 0.0322 mm"), std::string::npos);
+  EXPECT_NE(f.answer.find("sigma_vs_distance.svg"), std::string::npos);
+
+  // calib-rig: each camera's fit and the residual against the noise floor.
+  const fs::path rig = test::ScratchDir("first_screen_calib_rig");
+  test::WriteText(rig / "rig.yaml", "cameras: []\n");
+  SamplePlot().WriteSvg(rig / "residuals-left.svg");
+  test::WriteText(rig / "summary.txt",
+                  "residual RMS 0.2100 px per coordinate, 1400 inlier points, 2 rejected\nlast solve: 9 iterations, converged\n"
+                  "left: 13 views, 700/702 points, RMS 0.2000 px per coordinate (0.2800 px per point), max 1.2000 px\n"
+                  "  LENSMODEL_OPENCV8 intrinsics (+- 1 sigma): 530 +- 0.4\n"
+                  "right: 13 views, 698/700 points, RMS 0.2200 px per coordinate (0.3100 px per point), max 1.4000 px\n"
+                  "residual against the views' own noise floor (each view's board pose fitted alone): 0.21 / 0.20 px per "
+                  "coordinate = 1.05\n");
+  f = ReportOn(rig);
+  EXPECT_EQ(f.kind, "calib-rig");
+  EXPECT_EQ(f.status, "ok");
+  for (const char* want : {"<td>left</td><td>13</td><td>700/702</td><td>0.2000</td><td>1.2000</td>",
+                           "<td>right</td><td>13</td><td>698/700</td><td>0.2200</td><td>1.4000</td>", "= 1.05",
+                           "residuals-left.svg"})
+    EXPECT_NE(f.answer.find(want), std::string::npos) << want << "\n" << f.answer;
+  fs::remove(rig / "summary.txt");
+  EXPECT_EQ(ReportOn(rig).status, "failed");
+
+  // calib-robot: the residuals before and after, held out.
+  const fs::path robot = test::ScratchDir("first_screen_calib_robot");
+  test::WriteText(robot / "calib.txt", "# mcms calib-robot report\nrobot: kr5 (6 joints)\n"
+                                       "solver: converged after 7 iterations; variance factor 1.02; observability index 0.01\n"
+                                       "residuals, nominal DH registered:     RMS 0.4100 mm, max 0.9 mm\n"
+                                       "residuals, calibrated:                RMS 0.0300 mm, max 0.08 mm\n"
+                                       "held out (5-fold), calibrated: RMS 0.0350 mm, max 0.1 mm\n");
+  f = ReportOn(robot);
+  EXPECT_EQ(f.kind, "calib-robot");
+  for (const char* want : {"converged after 7 iterations", "<td>residuals, calibrated</td><td>RMS 0.0300 mm, max 0.08 mm</td>",
+                           "<td>held out (5-fold), calibrated</td>"})
+    EXPECT_NE(f.answer.find(want), std::string::npos) << want << "\n" << f.answer;
+
+  // iso9283: AP and RP per condition.
+  const fs::path iso = test::ScratchDir("first_screen_iso");
+  test::WriteText(iso / "iso.csv", "condition,pose,AP_mm,RP_mm\nbefore,P1,0.8,0.04\nbefore,P2,1.0,0.03\nafter,P1,0.1,0.04\n"
+                                   "after,P2,0.05,0.03\n");
+  f = ReportOn(iso);
+  EXPECT_EQ(f.kind, "iso9283");
+  EXPECT_NE(f.answer.find("<td>before</td><td>2</td><td>0.9000</td><td>1.0000</td><td>0.0350</td><td>0.0400</td>"),
+            std::string::npos) << f.answer;
+  EXPECT_LT(f.answer.find("<td>before</td>"), f.answer.find("<td>after</td>")) << "in the file's order";
+
+  // fuse: rows per method, flagged sensors, the predicted sigma.
+  const fs::path fuse = test::ScratchDir("first_screen_fuse");
+  test::WriteText(fuse / "fused.csv", "frame,time_s,method,x_m,sensors,flagged,excluded,cov_px_px,cov_py_py,cov_pz_pz\n"
+                                      "0,1,moifa,0.1,camera;robot,,,1e-10,1e-10,2e-10\n"
+                                      "0,1,kf,0.1,camera;robot,robot,,1e-10,1e-10,2e-10\n");
+  f = ReportOn(fuse);
+  EXPECT_EQ(f.kind, "fuse");
+  EXPECT_EQ(f.status, "findings");
+  EXPECT_NE(f.answer.find("fused.csv: 2 fused poses by 2 methods; 1 with a sensor flagged as inconsistent."),
+            std::string::npos) << f.answer;
+  EXPECT_NE(f.answer.find("<td>kf</td><td>1</td><td>1</td><td>0</td><td>0.0200</td>"), std::string::npos) << f.answer;
+
+  // A tracker that tracked nothing, and one that wrote only its header: failed, said first.
+  const fs::path lost = test::ScratchDir("first_screen_lost");
+  test::WriteText(lost / "poses.csv", "frame,time_s,status,x_m\n0,0,lost,\n1,0.1,lost,\n");
+  f = ReportOn(lost);
+  EXPECT_EQ(f.status, "failed");
+  EXPECT_NE(f.answer.find("No frame tracked: all 2 frames of poses.csv are lost."), std::string::npos) << f.answer;
+  test::WriteText(lost / "poses.csv", "frame,time_s,status,x_m\n");
+  EXPECT_NE(ReportOn(lost).answer.find("poses.csv holds no frame"), std::string::npos);
+  // A demo that stopped before its summary.
+  const fs::path demo = test::ScratchDir("first_screen_demo_failed");
+  test::WriteText(demo / "point_errors.csv", "point,camera_pos_err_mm\n0,0.1\n");
+  test::WriteText(demo / "fused_poses.csv", "frame,time_s\n0,1\n");
+  f = ReportOn(demo);
+  EXPECT_EQ(f.status, "failed");
+  EXPECT_NE(f.answer.find("The demo did not finish"), std::string::npos);
+  // An empty folder, and one with nothing a page can show: a page that says so.
+  const fs::path empty = test::ScratchDir("first_screen_empty");
+  f = ReportOn(empty);
+  EXPECT_EQ(f.status, "empty");
+  EXPECT_NE(f.answer.find("Nothing to report: "), std::string::npos);
+  EXPECT_NE(f.answer.find(" holds no file. The command that should have written it failed or has not run"),
+            std::string::npos) << f.answer;
+  test::WriteText(empty / "x.bin", "x");
+  EXPECT_NE(ReportOn(empty).answer.find("holds no result file"), std::string::npos);
+}
+
 TEST(HtmlReport, BadFolderOrOutputIsRefusedAndNothingWritten) {
   const fs::path d = test::ScratchDir("html_report_bad");
   EXPECT_NE(test::ErrorOf([&] { BuildHtmlReport({d / "missing"}); }).find("missing does not exist"), std::string::npos);
   test::WriteText(d / "file.txt", "x");
   EXPECT_NE(test::ErrorOf([&] { BuildHtmlReport({d / "file.txt"}); }).find("is not a folder"), std::string::npos);
-  fs::create_directories(d / "empty");
-  test::WriteText(d / "empty" / "x.bin", "x");
-  EXPECT_NE(test::ErrorOf([&] { BuildHtmlReport({d / "empty"}); }).find("holds no file a report can show"),
-            std::string::npos);
+
   // An output that is a folder: refused before anything is built.
   fs::create_directories(d / "run" / "out.html");
   test::WriteText(d / "run" / "summary.txt", "ok");
   EXPECT_NE(test::ErrorOf([&] { WriteHtmlReport({d / "run"}, d / "run" / "out.html"); }).find("is a folder"),
             std::string::npos);
   // A failing build leaves no file.
-  EXPECT_THROW(WriteHtmlReport({d / "empty"}, d / "empty.html"), InputError);
-  EXPECT_FALSE(fs::exists(d / "empty.html"));
+  EXPECT_THROW(WriteHtmlReport({d / "missing"}, d / "missing.html"), InputError);
+  EXPECT_FALSE(fs::exists(d / "missing.html"));
   // A good run writes the page; a report.html in the folder is not reported on itself.
   WriteHtmlReport({d / "run"}, d / "run" / "report.html");
   const std::string first = test::ReadAll(d / "run" / "report.html");
