@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "audit/model_selection.h"
 #include "tracking/pose_refinement.h"
+#include "vision/blob_detector.h"
 #include "vision/sphere_projection.h"
 #include "vision/triangulation.h"
 
@@ -33,6 +34,11 @@ bool CameraAuditOptions::IsValid(std::string* why) const {
 }
 
 namespace {
+
+// Outline to outline, the reach of another ball's light into a blob's measurement: the
+// detector's window margin (its background ring is fitted robustly), the crowding margin of
+// the field-of-view prediction (tracking/fov_prediction.h) too.
+const double kCrowdedGapPx = BlobDetectorOptions{}.window_margin_px;
 
 bool HasK1(const CameraModel& cam) {
   return cam.LensModelName().rfind("LENSMODEL_OPENCV", 0) == 0 && cam.NumIntrinsics() > 4;
@@ -235,9 +241,13 @@ class Auditor {
             T_c = ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data()));
         const auto& blobs = r.image_points[c];
         std::vector<bool> used(blobs.size(), false);
+        // A ball whose image another ball's crowds may be hidden in part, merged with it or
+        // lit by it inside its measurement window and ring: its centre is the detector's
+        // limit, not a test of the camera model.
+        const std::vector<bool> crowded = CrowdedBallImages(cam, target_x, f.T, kCrowdedGapPx);
         for (int b = 0; b < nb; ++b) {
           const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[b]);
-          if (!cam.Sees(p_cam, 10)) continue;
+          if (crowded[b] || !cam.Sees(p_cam, 10)) continue;
           const Vec3 p_cam_c = cam.T_cam_rig() * (T_c * target_x.balls_target[b]);
           const Vec2 q0 = cam.Project(p_cam);
           const Vec2 q = cam.Project(p_cam_c) + SphereProjectionBias(cam, p_cam_c, target_x.ball_radius, 32);

@@ -82,4 +82,23 @@ void Target::Write(const std::filesystem::path& path) const {
   WriteFileAtomically(path, [&](std::ostream& o) { o << text << "\n"; });
 }
 
+std::vector<bool> CrowdedBallImages(const CameraModel& cam, const Target& target, const Pose& T_rig_target,
+                                    double gap_px, double gap_radii) {
+  const size_t nb = target.balls_target.size();
+  std::vector<Vec2> q(nb);
+  std::vector<double> radius(nb, -1.0);
+  for (size_t b = 0; b < nb; ++b) {
+    const Vec3 p_cam = cam.T_cam_rig() * (T_rig_target * target.balls_target[b]);
+    if (!(p_cam.z() > 0.0)) continue;
+    q[b] = cam.Project(p_cam);
+    radius[b] = cam.Intrinsics()[0] * target.ball_radius / p_cam.z();
+  }
+  std::vector<bool> crowded(nb, false);
+  for (size_t b = 0; b < nb; ++b)
+    for (size_t o = 0; o < nb && radius[b] > 0; ++o)
+      crowded[b] = crowded[b] || (o != b && radius[o] > 0 &&
+                                  (q[o] - q[b]).norm() < gap_px + (1.0 + gap_radii) * (radius[b] + radius[o]));
+  return crowded;
+}
+
 }  // namespace mcms

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/pose_math.h"
+#include "vision/camera_model.h"
 
 namespace mcms {
 
@@ -26,5 +27,16 @@ struct Target {
   // distance signature is. InputError when fewer than 3 balls or two coincide.
   double MinDistanceGap() const;
 };
+
+// The balls whose images `cam` sees crowded, with the target at T_rig_target: another
+// ball's image comes nearer than gap_px + gap_radii * (r_b + r_o) outline to outline (r the
+// apparent radius f * R / z), so that the two discs may merge into one blob, one may hide
+// part of the other, or the other's light falls in this one's measurement window and
+// background ring: a detected centre is pulled away from the ball's. The tracker does not
+// count such a ball as missing (gap_radii 1: centres within two diameters); the camera audit
+// does not test it (gap_px: the detector's window margin plus its ring). A limit of the
+// detector, not a fault of the camera model. Balls behind the camera are never crowded.
+std::vector<bool> CrowdedBallImages(const CameraModel& cam, const Target& target, const Pose& T_rig_target,
+                                    double gap_px, double gap_radii = 0.0);
 
 }  // namespace mcms

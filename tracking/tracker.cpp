@@ -217,28 +217,18 @@ void Tracker::DescribeRejections(const std::vector<std::vector<ImagePoint>>& pts
     if (spurious[c]) spur << (spur.tellp() > 0 ? " / " : "") << rig_.names[c] << " " << spurious[c];
     if (c >= static_cast<int>(in.size()) || !in[c]) continue;  // no image: already said
     const CameraModel& cam = rig_.cameras[c];
-    // Predicted image centre and apparent radius of every ball in front of the camera.
-    std::vector<Vec2> q(nb);
-    std::vector<double> radius(nb, -1.0);
-    for (int b = 0; b < nb; ++b) {
-      const Vec3 p_cam = cam.T_cam_rig() * (ref.T_rig_target * target_.balls_target[b]);
-      if (!(p_cam.z() > 0.0)) continue;
-      q[b] = cam.Project(p_cam);
-      radius[b] = cam.Intrinsics()[0] * target_.ball_radius / p_cam.z();
-    }
+    // Images within two diameters of another ball's image may merge into one blob (a limit
+    // of the detector, not a fault): only isolated ball images count as missing.
+    const std::vector<bool> crowded = CrowdedBallImages(cam, target_, ref.T_rig_target, 0.0, 1.0);
     std::string balls;
     int nmiss = 0;
     for (int b = 0; b < nb; ++b) {
-      if (views[b] == 0 || seen.count({c, b}) || radius[b] < 0) continue;
-      // Images within two diameters of another ball's image may merge into one blob (a
-      // limit of the detector, not a fault): only isolated ball images count as missing.
-      bool crowded = false;
-      for (int o = 0; o < nb; ++o)
-        crowded = crowded || (o != b && radius[o] > 0 && (q[o] - q[b]).norm() < 2.0 * (radius[b] + radius[o]));
-      if (crowded) continue;
+      if (views[b] == 0 || seen.count({c, b}) || crowded[b]) continue;
       const Vec3 p_cam = cam.T_cam_rig() * (ref.T_rig_target * target_.balls_target[b]);
+      if (!(p_cam.z() > 0.0)) continue;
+      const double radius = cam.Intrinsics()[0] * target_.ball_radius / p_cam.z();
       // Fully inside the image with a margin of the ball's apparent radius plus 2 px.
-      if (cam.Sees(p_cam, radius[b] + 2.0)) {
+      if (cam.Sees(p_cam, radius + 2.0)) {
         balls += ' ';
         balls += std::to_string(b);
         ++nmiss;
