@@ -2,7 +2,7 @@
 """Runs every shell command the Markdown pages show, so the docs cannot rot.
 
     run_docs.py --build BUILD_DIR [PAGE.md ...] [--section HEADING] [--keep DIR]
-                [--not-run PAGE=REASON ...]
+                [--not-run PAGE=REASON ...] [--listing FILE]
     run_docs.py --build BUILD_DIR --self-test    # a failing command fails the run
 
 Pages: README.md, every docs/*.md and examples/README.md of this checkout when none are given.
@@ -23,14 +23,15 @@ marked in the page by an HTML comment on the line(s) before it, `<!-- not run: R
 it is listed as not run with the reason, never silently skipped.
 
 How they run: each page in its own fresh folder (one bash session; every block starts in
-the page's folder and a `cd` carries over to the rest of its block), which holds a copy of the checkout's examples/ and `build`, a link to
-BUILD_DIR, so that the docs' paths (`examples/robot_log.csv`, `build/python`) work as from
-the checkout; `mcms` is on the PATH from BUILD_DIR/app, and $EXAMPLES is the copied
+the page's folder and a `cd` carries over to the rest of its block), which holds a copy of
+the checkout's examples/ and `build`, a link to BUILD_DIR, so that the docs' paths
+(`examples/robot_log.csv`, `build/python`) work as from the checkout; `mcms` is on the PATH from BUILD_DIR/app, and $EXAMPLES is the copied
 examples/. A page whose first commands are the same as an earlier page's (same text, up to
 a trailing comment, started from the same fresh folder) takes that page's folder as it was
 after them instead of running them again, e.g. the demo shown by three pages runs once;
 the listing says so. Every command is listed with its page and line, its status and its
-time; the first failure of a page stops that page and shows its output. Exit status 0 when
+time (also written to --listing FILE); the first failure of a page stops that page, shows
+its output and lists the page's remaining commands as not reached. Exit status 0 when
 every command ran and succeeded, 1 when one failed, 2 on bad arguments.
 """
 import argparse
@@ -160,6 +161,16 @@ mcms audit --help \\
 }
 
 
+LISTING = []
+
+
+def say(*args):
+    """Prints a line of the listing and keeps it for --listing."""
+    line = " ".join(str(x) for x in args)
+    print(line)
+    LISTING.append(line)
+
+
 def self_test(argv):
     """Runs this script on SELF_TEST_PAGES: the good page must pass with 2 commands ok and
     1 not run; the bad one must fail, name the failing command and stop there."""
@@ -176,7 +187,7 @@ def self_test(argv):
     if good.returncode != 0 or "2 commands ok, 0 reused, 1 not run, 0 failed" not in good.stdout:
         problems.append(f"the good page should pass with 2 commands ok and 1 not run (exit {good.returncode})")
     if bad.returncode != 1 or not re.search(r"^FAIL .*mcms no-such-command", bad.stdout, re.M) \
-            or "1 commands ok, 0 reused, 0 not run, 1 failed" not in bad.stdout:
+            or "1 commands ok, 0 reused, 0 not run, 1 failed" not in bad.stdout or "not reached  bad.md:5" not in bad.stdout:
         problems.append(f"the bad page should fail at its 2nd command and stop (exit {bad.returncode})")
     for m in problems:
         print("run_docs --self-test: " + m, file=sys.stderr)
@@ -192,6 +203,7 @@ def main():
     p.add_argument("--build", help="the CMake build folder (mcms is BUILD/app/mcms)")
     p.add_argument("--bin", help="folder of the mcms executable (default BUILD/app)")
     p.add_argument("--section", help="run only this section (heading text) of each page")
+    p.add_argument("--listing", help="also write the listing to this file")
     p.add_argument("--keep", help="run in this folder (one sub-folder per page) and keep it")
     p.add_argument("--not-run", action="append", default=[], metavar="PAGE=REASON",
                    help="list this page's commands as not run, with the reason (e.g. a part not built)")
@@ -246,10 +258,10 @@ def main():
     listing = []
     for i, (page, bs) in enumerate(plan):
         name = rel(page)
-        print(f"== {name}")
+        say(f"== {name}")
         sys.stdout.flush()
         if not bs:
-            print("   (shows no shell command)")
+            say("   (shows no shell command)")
             continue
         folder = os.path.join(work_root, re.sub(r"[^\w.-]", "_", name))
         shutil.rmtree(folder, ignore_errors=True)
@@ -277,7 +289,7 @@ def main():
                     counts["not run"] += 1
         if start >= len(cmds):
             for _, e in sorted(entries):
-                print(e)
+                say(e)
             continue
         script = "set -o pipefail\n"
         for k in range(start, len(cmds)):
@@ -308,18 +320,24 @@ def main():
             entries.append((n, f"{'ok  ' if ok else 'FAIL'} {secs:4d} s  {name}:{n}  {c}" + ("" if ok else f"   (exit {code})")))
             counts["ok" if ok else "FAIL"] += 1
             if not ok:
+                for n2, c2, _, _ in cmds[k + 1:]:
+                    entries.append((n2, f"not reached  {name}:{n2}  {c2}   (after the failure above)"))
                 break
         for _, e in sorted(entries):
-            print(e)
+            say(e)
         sys.stdout.flush()
         if r.returncode != 0 or len(status) < len(cmds) - start:
             failed_pages.append(name)
-            print(f"--- {name}: output (last 3000 characters of stdout, then stderr)")
-            print(r.stdout[-3000:])
-            print("\n".join(l for l in r.stderr.splitlines() if not l.startswith("@@"))[-3000:])
-    print(f"run_docs: {len(pages)} pages, {counts['ok']} commands ok, {counts['reused']} reused, "
+            say(f"--- {name}: output (last 3000 characters of stdout, then stderr)")
+            say(r.stdout[-3000:])
+            say("\n".join(l for l in r.stderr.splitlines() if not l.startswith("@@"))[-3000:])
+    say(f"run_docs: {len(pages)} pages, {counts['ok']} commands ok, {counts['reused']} reused, "
           f"{counts['not run']} not run, {counts['FAIL']} failed ({time.time() - t_all:.0f} s)"
           + (f"; failed: {', '.join(failed_pages)}" if failed_pages else ""))
+    if a.listing:
+        os.makedirs(os.path.dirname(os.path.abspath(a.listing)), exist_ok=True)
+        with open(a.listing, "w") as f:
+            f.write("\n".join(LISTING) + "\n")
     if not a.keep:
         shutil.rmtree(work_root, ignore_errors=True)
     return 1 if failed_pages else 0
