@@ -8,6 +8,11 @@
 //                 png/libspng  the same PNG files through libspng (when built with it)
 //                 pgm, tiff    the same frames as binary PGM and uncompressed TIFF files
 //                              (written beside, in a temporary folder), memory-mapped
+//                 png/rows     with predicted windows only: our PNG reader in two steps
+//                              (ImageFileRows): frames inflated on the worker threads, and
+//                              only the rows the detector reads unfiltered (its windows and
+//                              sample), as `mcms track --predicted-windows` reads PNG files
+//                              (a PNG whose rows are all filtered None is unfiltered whole)
 //   in memory   the same frame sets decoded once beforehand (the images handed over as
 //               cv::Mat, no copy).
 //
@@ -373,12 +378,63 @@ int Main(int argc, char** argv) {
     window_dets = tracker.window_detections();
     whole_dets = tracker.whole_image_detections();
   };
+  // From PNG files twice: every frame decoded whole ("png"), and read in part ("png/rows":
+  // FilesOf's image_rows, what `mcms track --predicted-windows` does: only the rows the
+  // detector reads are unfiltered).
+  FrameSource png_whole = FilesOf(seq);
+  png_whole.image_rows = nullptr;
+  std::vector<std::pair<std::string, const FrameSource*>> window_sources;
+  std::vector<FrameResult> windowed_png;  // "png" with predicted windows, to compare "png/rows" with
+  bool rows_identical = true;
   for (const Source& src : sources) {
-    if (src.name != "png" && src.name != "pgm" && src.name != "memory") continue;
+    if (src.name == "png") {
+      window_sources.push_back({"png", &png_whole});
+      window_sources.push_back({"png/rows", &src.frames});
+    } else if (src.name == "pgm" || src.name == "memory") {
+      window_sources.push_back({src.name, &src.frames});
+    }
+  }
+  for (const auto& [name, frames_source] : window_sources) {
     for (int t : max_threads > 1 ? std::vector<int>{1, max_threads} : std::vector<int>{1}) {
-      window_rows.push_back({src.name, t, Measure(repeat, [&] { ours_windows(src.frames, t); })});
+      window_rows.push_back({name, t, Measure(repeat, [&] { ours_windows(*frames_source, t); })});
       std::printf("  measured %-11s %d thread(s), predicted windows\n", window_rows.back().source.c_str(), t);
       std::fflush(stdout);
+      if (name == "png") windowed_png = windowed;
+      if (name == "png/rows") {
+        // Exactly the results of the frames decoded whole, frame for frame.
+        rows_identical = rows_identical && windowed.size() == windowed_png.size();
+        for (size_t i = 0; rows_identical && i < windowed.size(); ++i) {
+          const FrameResult &a = windowed[i], &b = windowed_png[i];
+          rows_identical = a.status == b.status && a.reason == b.reason && a.cov == b.cov &&
+                           a.T_rig_target.has_value() == b.T_rig_target.has_value() &&
+                           (!a.T_rig_target || (a.T_rig_target->R == b.T_rig_target->R && a.T_rig_target->t == b.T_rig_target->t));
+        }
+      }
+    }
+  }
+  // The rows a run with predicted windows asks for, per frame and camera (each request: row
+  // ranges; every row when the camera is detected whole), recorded in one thread, to time
+  // the decoding they need alone; and how many rows they unfilter.
+  std::vector<std::vector<std::vector<std::vector<cv::Range>>>> asked(n, std::vector<std::vector<std::vector<cv::Range>>>(ncam));
+  size_t rows_unfiltered = 0, rows_total = 0;
+  {
+    TrackerOptions o = OurOptions(gain);
+    o.predicted_windows = true;
+    Tracker tracker(rig, target, o);
+    for (size_t i = 0; i < n; ++i) {
+      std::vector<std::string> problems;
+      std::vector<ImageFileRows> frame_rows = LoadFrameRows(seq, i, &problems);
+      std::vector<cv::Mat> images;
+      for (const ImageFileRows& r : frame_rows) images.push_back(r.image());
+      tracker.ProcessFrame(seq.frames[i], seq.times_s[i], images, problems,
+                           [&](size_t c, const std::vector<cv::Range>* rows) {
+                             asked[i][c].push_back(rows ? *rows : std::vector<cv::Range>{cv::Range(0, images[c].rows)});
+                             frame_rows[c].Prepare(asked[i][c].back());
+                           });
+      for (const ImageFileRows& r : frame_rows) {
+        rows_unfiltered += r.rows_ready();
+        rows_total += static_cast<size_t>(r.image().rows);
+      }
     }
   }
   // The decoding alone, one thread: every image of every frame set, then one byte read per
@@ -401,6 +457,23 @@ int Main(int argc, char** argv) {
   };
   for (const Source& src : sources)
     if (src.name != "memory") decode_rows.push_back({src.name, Measure(repeat, [&] { decode_all(src.decode_one); })});
+  // Ours read in part: the file read, checked and inflated, no row unfiltered ("png/inflate",
+  // the floor); then the rows the run with predicted windows asked for ("png/rows").
+  auto decode_in_part = [&](bool prepare) {
+    unsigned sum = 0;
+    for (size_t i = 0; i < n; ++i) {
+      std::vector<std::string> problems;
+      std::vector<ImageFileRows> frame_rows = LoadFrameRows(seq, i, &problems);
+      for (size_t c = 0; c < ncam; ++c) {
+        if (prepare)
+          for (const std::vector<cv::Range>& rows : asked[i][c]) frame_rows[c].Prepare(rows);
+        sum += frame_rows[c].rows_ready();
+      }
+    }
+    sink = sink + sum;
+  };
+  decode_rows.push_back({"png/inflate", Measure(repeat, [&] { decode_in_part(false); })});
+  decode_rows.push_back({"png/rows", Measure(repeat, [&] { decode_in_part(true); })});
   decode_rows.push_back({"pgm/opencv", Measure(repeat, [&] {
                            decode_all([&](size_t i, size_t c) { return opencv_decode(seq_pgm.ImagePath(i, c)); });
                          })});
@@ -448,7 +521,7 @@ int Main(int argc, char** argv) {
   }
   std::printf("ours with predicted windows (mcms track --predicted-windows):\n");
   for (const WindowRow& w : window_rows) {
-    const Row* full = find(w.source, w.threads);
+    const Row* full = find(w.source == "png/rows" ? "png" : w.source, w.threads);
     const Row* png = find("png", w.threads);
     const double f = dn / w.t.wall_s;
     std::printf("%-11s %7d | %12.1f fps, %.3f ms CPU/set; %.2fx the whole-image rate, %.1fx the baseline from PNG\n",
@@ -467,7 +540,12 @@ int Main(int argc, char** argv) {
   std::printf("  detections in windows %zu, whole images %zu (last run); same status as the whole-image "
               "run on %zu/%zu frame sets, poses differ by at most %.3g m and %.3g rad\n",
               window_dets, whole_dets, same_status, n, max_dp, max_dr);
-  std::printf("decoding alone, 1 thread (then one byte read per 4 KB page of the pixels):\n");
+  std::printf("  png/rows: %zu of %zu rows unfiltered (%.1f%%), the rest inflated only; results identical to png "
+              "(frames decoded whole): %s\n", rows_unfiltered, rows_total,
+              100.0 * static_cast<double>(rows_unfiltered) / static_cast<double>(std::max<size_t>(rows_total, 1)),
+              rows_identical ? "yes" : "NO");
+  std::printf("decoding alone, 1 thread (then one byte read per 4 KB page of the pixels; png/inflate and "
+              "png/rows: ImageFileRows, no page read):\n");
   std::printf("  %-12s %12s %14s %14s\n", "reader", "sets/s", "ms per set", "pixels MB/s");
   for (const DecodeRow& d : decode_rows)
     std::printf("  %-12s %12.1f %14.3f %14.0f\n", d.reader.c_str(), dn / d.t.wall_s, 1e3 * d.t.wall_s / dn,
@@ -477,7 +555,7 @@ int Main(int argc, char** argv) {
   std::printf("ours posed %zu/%zu frame sets; results on every thread count, reader and source identical to 1 "
               "thread in memory, in frame order: %s; at most %zu frame sets held at once\n",
               posed, n, identical ? "yes" : "NO", max_held);
-  return identical ? 0 : 1;
+  return identical && rows_identical ? 0 : 1;
 }
 
 }  // namespace

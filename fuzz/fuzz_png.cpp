@@ -3,7 +3,9 @@
 // PGM/TIFF reader, or OpenCV's decoder. Problems are reported per frame, not thrown, so
 // the outcome is an image or a reason naming the file; an image must have the size the
 // rig expects. And a differential check: an image our own readers decode must equal
-// cv::imread(IMREAD_UNCHANGED)'s bit for bit whenever OpenCV decodes the file too.
+// cv::imread(IMREAD_UNCHANGED)'s bit for bit whenever OpenCV decodes the file too, and the
+// file read in part (ImageFileRows, the tracker's reader with predicted windows) gives the
+// same rows.
 //
 // Every input runs twice: as it is, and with its checksums made right (each PNG chunk's
 // CRC, the zlib stream's Adler-32), so that mutations reach the inflate and the
@@ -86,6 +88,35 @@ std::vector<uint8_t> WithChecksumsRepaired(const uint8_t* data, size_t size) {
   return b;
 }
 
+// The same file read in part (ImageFileRows, as the tracker reads frames for predicted
+// windows): rows picked from the input's last bytes, then every row. The rows asked for
+// equal ReadImageFile's; any other row is either equal too (a row they depend on) or zero.
+void CheckRows(const std::filesystem::path& path, const cv::Mat& whole, const uint8_t* data, size_t size) {
+  ImageFileRows rows;
+  std::string problem;
+  if (!rows.Read(path, {}, &problem))
+    throw std::logic_error("ImageFileRows::Read refuses " + path.string() + ", which ReadImageFile decodes: " + problem);
+  const int h = whole.rows;
+  auto byte = [&](size_t k) { return size > k ? int{data[size - 1 - k]} : 0; };
+  const std::vector<cv::Range> asked = {cv::Range(byte(0) % h, byte(0) % h + 1 + byte(1) % 8),
+                                        cv::Range(h - 1 - byte(2) % h, h), cv::Range(-3, byte(3) % 4)};
+  rows.Prepare(asked);
+  const cv::Mat& part = rows.image();
+  if (part.size() != whole.size() || part.type() != whole.type())
+    throw std::logic_error("ImageFileRows: another size or type than ReadImageFile's for " + path.string());
+  for (int y = 0; y < h; ++y) {
+    bool wanted = false;
+    for (const cv::Range& r : asked) wanted = wanted || (y >= r.start && y < r.end);
+    const bool same = cv::norm(part.row(y), whole.row(y), cv::NORM_INF) == 0;
+    if (!same && (wanted || cv::countNonZero(part.row(y)) != 0))
+      throw std::logic_error("ImageFileRows: row " + std::to_string(y) + " of " + path.string() +
+                             (wanted ? " was asked for but differs from ReadImageFile's" : " is neither prepared nor zero"));
+  }
+  rows.PrepareAll();
+  if (rows.rows_ready() != static_cast<size_t>(h) || cv::norm(rows.image(), whole, cv::NORM_INF) != 0)
+    throw std::logic_error("ImageFileRows: every row prepared differs from ReadImageFile's image of " + path.string());
+}
+
 void Check(const uint8_t* data, size_t size) {
   const auto path = WriteInput(data, size, ".png");
   // Once with the rig's size (the seeds are 64 x 48) and once unchecked.
@@ -110,6 +141,7 @@ void Check(const uint8_t* data, size_t size) {
   ImageFileReader reader = ImageFileReader::kOpenCv;
   const cv::Mat ours = ReadImageFile(path, {}, &problem, &reader);
   if (ours.empty() || reader == ImageFileReader::kOpenCv) return;
+  CheckRows(path, ours, data, size);
   // Only formats whose header our reader checked reach OpenCV here (PNG, PGM, TIFF).
   cv::Mat theirs;
   try {

@@ -20,6 +20,7 @@
 #include "synthetic/recording.h"
 #include "synthetic/scenario.h"
 #include "tests/test_util.h"
+#include "tracking/sequence.h"
 #include "vision/sphere_projection.h"
 
 namespace mcms {
@@ -257,6 +258,51 @@ TEST(RenderSequence, SameSeedSameBytesOtherSeedOtherBytes) {
   std::ofstream(dir / "foreign" / "notes.txt") << "keep me";
   EXPECT_THROW(RenderSequence(s, dir / "foreign", true), InputError);
   EXPECT_TRUE(fs::exists(dir / "foreign" / "notes.txt"));
+}
+
+// Tracking a rendered recording from PNG with predicted windows, the frames read in part
+// (FilesOf's image_rows: only the rows the detector reads unfiltered) writes the same
+// poses.csv, byte for byte, as with every frame decoded whole, on 1 and 2 threads; also
+// from the same frames re-encoded by OpenCV (libpng's filters: rows predicted from the
+// row above, so chains of rows are unfiltered).
+TEST(RenderSequence, TrackedFromPngRowsInPartGivesTheSamePosesAsWholeFrames) {
+  Scenario sc = Scenario::Default();
+  sc.times.resize(60);
+  sc.T_rig_target.resize(60);
+  const fs::path dir = test::ScratchDir("render_png_rows");
+  RenderSequence(sc, dir / "rec", true, 2);
+  const CameraRig rig = CameraRig::Read(dir / "rec" / "rig.yaml");
+  const Target target = Target::Read(dir / "rec" / "target.yaml");
+  // The same frames written by OpenCV (libpng's adaptive filters), in a second folder.
+  for (const std::string& name : rig.names) {
+    fs::create_directories(dir / "libpng" / name);
+    for (const auto& e : fs::directory_iterator(dir / "rec" / "images" / name)) {
+      const cv::Mat im = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+      ASSERT_TRUE(cv::imwrite((dir / "libpng" / name / e.path().filename()).string(), im));
+    }
+  }
+  for (const fs::path& images : {dir / "rec" / "images", dir / "libpng"}) {
+    SCOPED_TRACE(images.string());
+    const ImageSequence seq = ScanImageSequence({images, dir / "rec" / "frames.csv", 10.0}, rig);
+    ASSERT_EQ(seq.frames.size(), 60u);
+    auto track = [&](bool in_part, int threads, const std::string& csv) {
+      TrackerOptions o;
+      o.detector.gain_e_per_dn = sc.render.gain_e_per_dn;
+      o.predicted_windows = true;
+      Tracker tracker(rig, target, o);
+      FrameSource source = FilesOf(seq);
+      if (!in_part) source.image_rows = nullptr;
+      std::vector<FrameResult> results;
+      TrackFramesStreaming(source, tracker, [&](FrameResult&& r) { results.push_back(std::move(r)); }, {}, threads);
+      WritePoseCsv(dir / csv, results);
+      EXPECT_GT(tracker.window_detections(), 4 * tracker.whole_image_detections());
+      return test::ReadAll(dir / csv);
+    };
+    const std::string whole = track(false, 1, "whole.csv");
+    EXPECT_EQ(track(true, 1, "rows_1.csv"), whole);
+    EXPECT_EQ(track(true, 2, "rows_2.csv"), whole);
+    EXPECT_NE(whole.find("\n59,"), std::string::npos);  // every frame has its row
+  }
 }
 
 TEST(RenderSequence, OutputFilesMatchTheTruth) {

@@ -403,6 +403,51 @@ TEST(BlobDetector, WindowsMeasureAsTheWholeImageAndFlagACutBlob) {
   EXPECT_THROW(DetectBlobsInWindows(cv::Mat(), {cv::Rect(0, 0, 5, 5)}), InputError);
 }
 
+// DetectBlobsInWindows reads only the rows RowsReadInWindows lists (a frame read in part,
+// vision/image_file.h ImageFileRows, holds only those): with every other row overwritten,
+// the same blobs and statistics. 637 px wide, the sample's last column is the image's
+// last, so the row below each sampled row is read too.
+TEST(BlobDetector, WindowsReadOnlyTheRowsRowsReadInWindowsLists) {
+  const std::vector<EllipseShape> shapes = {{{100.3, 80.8}, 4, 4, 0}, {{400.6, 300.2}, 3, 2.2, 0.3},
+                                            {{420.1, 330.5}, 5, 4, 1}, {{600.2, 450.0}, 3, 3, 0}};
+  const cv::Mat rendered = RenderExpected(640, 480, shapes, 10, 200, 0.8);
+  for (const int width : {640, 637}) {
+    const cv::Mat expected = rendered.colRange(0, width).clone();
+    for (int depth : {CV_8U, CV_16U}) {
+      SCOPED_TRACE(std::to_string(width) + " px, depth " + std::to_string(depth));
+      Rng rng(7);
+      const cv::Mat img = AddNoise(expected, 0, 1.5, depth, &rng);
+      std::vector<cv::Rect> windows;
+      for (size_t i = 0; i < 3; ++i)
+        windows.emplace_back(static_cast<int>(shapes[i].centre.x()) - 25, static_cast<int>(shapes[i].centre.y()) - 25, 51, 51);
+      const std::vector<cv::Range> rows = RowsReadInWindows(img.size(), windows);
+      cv::Mat part(img.size(), img.type(), cv::Scalar(depth == CV_8U ? 255 : 65535));
+      int listed = 0, previous_end = -1;
+      for (const cv::Range& r : rows) {
+        EXPECT_GT(r.start, previous_end) << "ranges sorted, disjoint and not touching";
+        previous_end = r.end;
+        img.rowRange(r).copyTo(part.rowRange(r));
+        listed += r.size();
+      }
+      EXPECT_LT(listed, img.rows / 2);
+      BlobImageStats a, b;
+      const std::vector<Blob> in_img = DetectBlobsInWindows(img, windows, {}, &a);
+      const std::vector<Blob> in_part = DetectBlobsInWindows(part, windows, {}, &b);
+      EXPECT_EQ(a.background_dn, b.background_dn);
+      EXPECT_EQ(a.noise_dn, b.noise_dn);
+      EXPECT_EQ(a.threshold_dn, b.threshold_dn);
+      EXPECT_EQ(a.num_regions, b.num_regions);
+      ASSERT_EQ(in_img.size(), 3u);
+      ASSERT_EQ(in_img.size(), in_part.size());
+      for (size_t i = 0; i < in_img.size(); ++i) {
+        EXPECT_EQ(in_img[i].centre, in_part[i].centre) << i;
+        EXPECT_EQ(in_img[i].cov, in_part[i].cov) << i;
+        EXPECT_EQ(in_img[i].flux, in_part[i].flux) << i;
+      }
+    }
+  }
+}
+
 TEST(BlobDetector, FlagsSaturationAndTheBorder) {
   const std::vector<EllipseShape> shapes = {{{20.2, 20.4}, 4, 4, 0}, {{2.5, 30.3}, 4, 4, 0}};
   // 8-bit with a peak of 10 + 400 DN: the first disc clips at 255.

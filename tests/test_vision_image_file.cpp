@@ -286,6 +286,137 @@ TEST(PngReader, OpenCvWrittenPngsAtEveryCompressionSettingEqualOpenCv) {
   }
 }
 
+// ---- Frames read in part (ImageFileRows) ---------------------------------------------
+
+// The rows Prepare(asked) must unfilter when the rows in `ready` are ready: the rows
+// asked for and, for a row filtered Up, Average or Paeth (2..4), the row above, and so on
+// up to a row filtered None or Sub or the first one (or a row already ready).
+std::vector<char> RowsNeeded(const std::vector<cv::Range>& asked, const std::function<int(int)>& filter, int h,
+                             const std::vector<char>& ready) {
+  std::vector<char> need(h, 0);
+  for (const cv::Range& r : asked)
+    for (int y = std::max(r.start, 0); y < std::min(r.end, h); ++y)
+      for (int k = y; k >= 0 && !ready[k] && !need[k]; --k) {
+        need[k] = 1;
+        if (filter(k) < 2) break;
+      }
+  return need;
+}
+
+// PNGs with every filter type forced (one type for all rows, cycles, a Sub row between
+// runs of Paeth rows, random), 8- and 16-bit: the rows asked for, in two rounds, are
+// bit-exact against cv::imread's decode; exactly the rows they depend on are unfiltered
+// too; every other row is zero; then every row equals cv::imread's image. (All rows None:
+// unfiltered whole by Read().)
+TEST(PngReader, RowsReadInPartEqualOpenCvForEveryFilterType) {
+  const fs::path d = test::ScratchDir("png_rows");
+  int files = 0;
+  for (const int depth : {CV_8U, CV_16U})
+    for (const auto& [w, h] : std::vector<std::pair<int, int>>{{1, 1}, {3, 5}, {17, 9}, {64, 48}, {640, 480}}) {
+      const cv::Mat im = FrameLike(w, h, depth, 17 + w);
+      std::vector<int> random_filters(h);
+      std::mt19937 rng(w * 7 + h);
+      for (int& f : random_filters) f = int(rng() % 5);
+      const std::vector<std::pair<std::string, std::function<int(int)>>> patterns = {
+          {"none", [](int) { return 0; }},
+          {"sub", [](int) { return 1; }},
+          {"up", [](int) { return 2; }},
+          {"average", [](int) { return 3; }},
+          {"paeth", [](int) { return 4; }},
+          {"cycle", [](int y) { return y % 5; }},
+          {"paeth_sub_every_7", [](int y) { return y % 7 == 3 ? 1 : 4; }},
+          {"average_none_every_11", [](int y) { return y % 11 == 5 ? 0 : 3; }},
+          {"random", [&random_filters](int y) { return random_filters[y]; }}};
+      for (const auto& [name, filter] : patterns) {
+        PngOptions o;
+        o.bit_depth = depth == CV_8U ? 8 : 16;
+        o.filter = filter;
+        const fs::path p = d / (name + "_" + std::to_string(w) + "x" + std::to_string(h) + "_" +
+                                std::to_string(o.bit_depth) + ".png");
+        SCOPED_TRACE(p.string());
+        WriteBytes(p, EncodePng(im, o));
+        const cv::Mat theirs = cv::imread(p.string(), cv::IMREAD_UNCHANGED);
+        ASSERT_TRUE(SameImage(theirs, im));
+        ImageFileRows rows;
+        std::string problem;
+        ImageFileReader reader = ImageFileReader::kOpenCv;
+        ASSERT_TRUE(rows.Read(p, {}, &problem, &reader)) << problem;
+        EXPECT_EQ(ToString(reader), std::string("png"));
+        ASSERT_EQ(rows.image().size(), theirs.size());
+        ASSERT_EQ(rows.image().type(), theirs.type());
+        bool all_none = true;
+        for (int y = 0; y < h; ++y) all_none = all_none && filter(y) == 0;
+        if (all_none) {  // unfiltered whole by Read(): a copy, cheaper than zeroing
+          EXPECT_EQ(rows.rows_ready(), static_cast<size_t>(h));
+          EXPECT_TRUE(SameImage(rows.image(), theirs));
+          EXPECT_EQ(rows.Prepare({cv::Range(0, h)}), 0u);
+          ++files;
+          continue;
+        }
+        EXPECT_EQ(rows.rows_ready(), 0u);
+        EXPECT_EQ(cv::countNonZero(rows.image()), 0) << "rows not prepared must read as zero";
+        // Two windows' rows, then more rows (next to, and below, rows already ready: the
+        // prior of a row filtered from above is then a row prepared before).
+        const std::vector<std::vector<cv::Range>> rounds = {
+            {cv::Range(h / 3, h / 3 + 4), cv::Range(h - 2, h + 5)},
+            {cv::Range(h / 3 + 4, h / 3 + 6), cv::Range(h / 2, h / 2 + 1), cv::Range(-4, 1)}};
+        std::vector<char> ready(h, 0);
+        for (const auto& asked : rounds) {
+          const std::vector<char> need = RowsNeeded(asked, filter, h, ready);
+          const size_t expected = static_cast<size_t>(std::count(need.begin(), need.end(), 1));
+          EXPECT_EQ(rows.Prepare(asked), expected);
+          for (int y = 0; y < h; ++y) ready[y] = ready[y] || need[y];
+          for (int y = 0; y < h; ++y) {
+            const cv::Mat ours = rows.image().row(y), cv_row = theirs.row(y);
+            if (ready[y])
+              EXPECT_EQ(cv::norm(ours, cv_row, cv::NORM_INF), 0.0) << "row " << y << " differs from cv::imread";
+            else
+              EXPECT_EQ(cv::countNonZero(ours), 0) << "row " << y << " was not needed but is not zero";
+          }
+        }
+        EXPECT_EQ(rows.rows_ready(), static_cast<size_t>(std::count(ready.begin(), ready.end(), 1)));
+        rows.PrepareAll();
+        EXPECT_EQ(rows.rows_ready(), static_cast<size_t>(h));
+        EXPECT_TRUE(SameImage(rows.image(), theirs));
+        ++files;
+      }
+    }
+  EXPECT_EQ(files, 2 * 5 * 9);
+}
+
+// Other files are read whole at once; bad ones give ReadImageFile's reasons.
+TEST(PngReader, RowsReadInPartOfOtherFilesAreWholeAndBadFilesRefused) {
+  const fs::path d = test::ScratchDir("png_rows_other");
+  const cv::Mat grey = FrameLike(37, 23, CV_8U, 5);
+  WriteImageFile(d / "a.pgm", grey, ImageFileFormat::kPgm);
+  PngOptions interlaced;
+  interlaced.interlace = true;
+  WriteBytes(d / "interlaced.png", EncodePng(grey, interlaced));
+  for (const char* name : {"a.pgm", "interlaced.png"}) {
+    SCOPED_TRACE(name);
+    ImageFileRows rows;
+    std::string problem;
+    ASSERT_TRUE(rows.Read(d / name, {}, &problem)) << problem;
+    EXPECT_EQ(rows.rows_ready(), 23u);
+    EXPECT_TRUE(SameImage(rows.image(), grey));
+    EXPECT_EQ(rows.Prepare({cv::Range(0, 5)}), 0u);
+  }
+  Bytes png = EncodePng(grey);
+  png[png.size() - 20] ^= 1;  // in the IDAT: a wrong CRC
+  WriteBytes(d / "bad.png", png);
+  ImageFileRows rows;
+  std::string problem;
+  EXPECT_FALSE(rows.Read(d / "bad.png", {}, &problem));
+  EXPECT_TRUE(rows.image().empty());
+  EXPECT_EQ(problem, ReadIt(d / "bad.png").problem);
+  EXPECT_NE(problem.find((d / "bad.png").string()), std::string::npos) << problem;
+  ImageFileOptions o;
+  o.expected_size = std::array<int, 2>{40, 23};
+  WriteBytes(d / "good.png", EncodePng(grey));
+  EXPECT_FALSE(rows.Read(d / "good.png", o, &problem));
+  EXPECT_NE(problem.find("but the rig says 40x23"), std::string::npos) << problem;
+}
+
 // Colour, bit depths below 8 and interlaced PNGs are the general reader's: the same image
 // as cv::imread, through it.
 TEST(PngReader, OtherPngsGoToTheGeneralReader) {

@@ -185,6 +185,24 @@ std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::ve
   return images;
 }
 
+std::vector<ImageFileRows> LoadFrameRows(const ImageSequence& seq, size_t i, std::vector<std::string>* problems) {
+  const size_t ncam = seq.cameras();
+  if (i >= seq.frames.size()) Throw("LoadFrameRows: frame index ", i, " of a sequence of ", seq.frames.size());
+  std::vector<ImageFileRows> images(ncam);
+  problems->assign(ncam, std::string());
+  for (size_t c = 0; c < ncam; ++c) {
+    const fs::path p = seq.ImagePath(i, c);
+    if (p.empty()) {
+      (*problems)[c] = "image missing";
+      continue;
+    }
+    ImageFileOptions o;
+    if (c < seq.image_sizes.size()) o.expected_size = seq.image_sizes[c];
+    images[c].Read(p, o, &(*problems)[c]);
+  }
+  return images;
+}
+
 void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn) {
   threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<size_t>(end - begin, 1))));
   if (threads == 1) {
@@ -220,6 +238,7 @@ FrameSource FilesOf(const ImageSequence& seq) {
   s.frame = [&seq](size_t i) { return seq.frames[i]; };
   s.time_s = [&seq](size_t i) { return seq.times_s[i]; };
   s.images = [&seq](size_t i, std::vector<std::string>* problems) { return LoadFrameImages(seq, i, problems); };
+  s.image_rows = [&seq](size_t i, std::vector<std::string>* problems) { return LoadFrameRows(seq, i, problems); };
   return s;
 }
 
@@ -238,21 +257,41 @@ size_t TrackFramesStreaming(const FrameSource& source, Tracker& tracker,
     std::vector<std::optional<std::vector<ImagePoint>>> points;
     std::vector<std::string> problems;
     std::vector<cv::Mat> images;  // with predicted windows: detected in frame order, in deliver
+    std::vector<ImageFileRows> rows;  // the same images read in part (source.image_rows)
   };
   // Detection in windows needs the track of the frames before, so then the workers only
-  // read the images, and this thread detects.
+  // read the images, and this thread detects. The windows are known only then, so the
+  // workers leave PNG rows inflated but not unfiltered (the costly inflate stays parallel),
+  // and this thread unfilters the rows the detector reads.
   const bool in_order = tracker.options().predicted_windows;
+  const bool in_part = in_order && static_cast<bool>(source.image_rows);
   auto detect = [&](size_t i, Detected* d) {
     d->problems.assign(tracker.rig().size(), std::string());
+    if (in_part) {
+      d->rows = source.image_rows(i, &d->problems);
+      for (const ImageFileRows& r : d->rows) d->images.push_back(r.image());
+      return;
+    }
     std::vector<cv::Mat> images = source.images(i, &d->problems);
     if (in_order)
       d->images = std::move(images);
     else
       d->points = tracker.DetectPoints(images, &d->problems);
   };
-  auto deliver = [&](size_t i, const Detected& d) {
-    on_frame(in_order ? tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems)
-                      : tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems));
+  auto deliver = [&](size_t i, Detected& d) {
+    if (in_part) {
+      const Tracker::PrepareRows prepare = [&d](size_t c, const std::vector<cv::Range>* rows) {
+        if (c >= d.rows.size()) return;
+        if (rows)
+          d.rows[c].Prepare(*rows);
+        else
+          d.rows[c].PrepareAll();
+      };
+      on_frame(tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems, prepare));
+    } else {
+      on_frame(in_order ? tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems)
+                        : tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems));
+    }
     if (progress) progress(i + 1, n);
   };
   if (threads == 1 || n <= 1) {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "tracking/tracker.h"
+#include "vision/image_file.h"
 
 namespace mcms {
 
@@ -60,6 +61,12 @@ ImageSequence ScanImageSequence(const SequenceInput& input, const CameraRig& rig
 // decoded), is an empty Mat with the reason, naming the file, in problems[c].
 std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::vector<std::string>* problems);
 
+// LoadFrameImages in two steps (ImageFileRows): each file read, checked and (PNG)
+// inflated, with the same problems; the rows of a PNG our decoder takes are unfiltered
+// later, by Prepare(), as the detector needs them. A missing or refused image has an
+// empty image().
+std::vector<ImageFileRows> LoadFrameRows(const ImageSequence& seq, size_t i, std::vector<std::string>* problems);
+
 // Runs fn(i) for i in [begin, end) on `threads` threads (1 = in this thread, in order).
 // The first exception thrown by fn is rethrown after every thread has finished.
 void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn);
@@ -77,9 +84,15 @@ struct FrameSource {
   std::function<size_t(size_t)> frame;
   std::function<double(size_t)> time_s;
   std::function<std::vector<cv::Mat>(size_t, std::vector<std::string>*)> images;
+  // Optional: the images read in part (LoadFrameRows), one per rig camera, thread-safe as
+  // `images`. With a tracker whose options have predicted_windows, TrackFramesStreaming
+  // takes these instead, and only the rows the detector reads are unfiltered (the rows of
+  // the windows and of its sample; every row where it detects the whole image).
+  std::function<std::vector<ImageFileRows>(size_t, std::vector<std::string>*)> image_rows;
 };
 
-// A FrameSource reading the image files of `seq` (LoadFrameImages); seq must outlive it.
+// A FrameSource reading the image files of `seq` (LoadFrameImages, and LoadFrameRows for
+// predicted windows); seq must outlive it.
 FrameSource FilesOf(const ImageSequence& seq);
 
 // Runs the tracker over every frame of `source`: the images are fetched and their blobs

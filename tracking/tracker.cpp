@@ -99,11 +99,15 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPoints(const 
 
 std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredicted(double time_s,
                                                                                    const std::vector<cv::Mat>& images,
-                                                                                   std::vector<std::string>* problems) {
+                                                                                   std::vector<std::string>* problems,
+                                                                                   const PrepareRows& prepare) {
   const std::optional<Pose> predicted = Predict(time_s);
   if (!predicted || ++frames_since_full_scan_ >= static_cast<size_t>(options_.full_scan_every)) {
     frames_since_full_scan_ = 0;
     whole_detections_ += rig_.size();
+    if (prepare)
+      for (size_t c = 0; c < rig_.size() && c < images.size(); ++c)
+        if (!images[c].empty()) prepare(c, nullptr);
     return DetectPoints(images, problems);
   }
   const Pose& last = history_.back().second;
@@ -143,6 +147,10 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredict
       if (c < last_observed_.size() && last_observed_[c][b]) expected.emplace_back(q, tolerance);
     }
     if (!windows.empty() && !expected.empty()) {
+      if (prepare) {
+        const std::vector<cv::Range> rows = RowsReadInWindows(images[c].size(), windows);
+        prepare(c, &rows);
+      }
       std::vector<ImagePoint> v = Usable(DetectBlobsInWindows(images[c], windows, DetectorFor(c)));
       // Every ball predicted in view must have a usable blob in the windows; otherwise
       // (occlusion, a ball near a window's edge, a wrong prediction) the whole image.
@@ -159,6 +167,7 @@ std::vector<std::optional<std::vector<ImagePoint>>> Tracker::DetectPointsPredict
       }
     }
     ++whole_detections_;
+    if (prepare) prepare(c, nullptr);
     pts[c] = Usable(DetectBlobs(images[c], DetectorFor(c)));
   }
   return pts;
@@ -174,11 +183,18 @@ void Tracker::CheckTime(size_t frame, double time_s) {
 
 FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
                                   const std::vector<std::string>& problems) {
+  return ProcessFrame(frame, time_s, images, problems, {});
+}
+
+FrameResult Tracker::ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
+                                  const std::vector<std::string>& problems, const PrepareRows& prepare) {
   CheckTime(frame, time_s);
   std::vector<std::string> why(problems);
-  const auto pts =
-      options_.predicted_windows ? DetectPointsPredicted(time_s, images, &why) : DetectPoints(images, &why);
-  return Track(frame, time_s, pts, why);
+  if (options_.predicted_windows) return Track(frame, time_s, DetectPointsPredicted(time_s, images, &why, prepare), why);
+  if (prepare)
+    for (size_t c = 0; c < images.size(); ++c)
+      if (!images[c].empty()) prepare(c, nullptr);
+  return Track(frame, time_s, DetectPoints(images, &why), why);
 }
 
 namespace {

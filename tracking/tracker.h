@@ -6,6 +6,7 @@
 // and, unless ok, the reason.
 #pragma once
 
+#include <functional>
 #include <opencv2/core.hpp>
 #include <optional>
 #include <string>
@@ -79,6 +80,17 @@ class Tracker {
   FrameResult ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
                            const std::vector<std::string>& problems = {});
 
+  // Makes rows of camera `camera`'s image readable before the detector reads them, for
+  // images read in part (vision/image_file.h ImageFileRows, whose rows are unfiltered on
+  // demand): `rows` the row ranges it reads (RowsReadInWindows), nullptr for every row.
+  using PrepareRows = std::function<void(size_t camera, const std::vector<cv::Range>* rows)>;
+  // ProcessFrame on images whose rows are made readable by `prepare` just before they are
+  // read: with predicted_windows, only the rows of the windows and of the detector's
+  // sample, unless the camera is detected whole; otherwise every row. The results are
+  // those of ProcessFrame on the whole images.
+  FrameResult ProcessFrame(size_t frame, double time_s, const std::vector<cv::Mat>& images,
+                           const std::vector<std::string>& problems, const PrepareRows& prepare);
+
   // The detection step of ProcessFrame alone: the usable blobs of every camera (empty
   // optional = no usable image, with the reason in problems[c]). Const and thread-safe,
   // so that frames can be detected in parallel and processed in order.
@@ -87,9 +99,11 @@ class Tracker {
   // DetectPoints in windows around the ball images predicted for time_s (see
   // TrackerOptions::predicted_windows); the whole image where that cannot be trusted.
   // Uses the track, so frames must come in order.
+  // With `prepare`, the rows are made readable as ProcessFrame's overload says.
   std::vector<std::optional<std::vector<ImagePoint>>> DetectPointsPredicted(double time_s,
                                                                             const std::vector<cv::Mat>& images,
-                                                                            std::vector<std::string>* problems);
+                                                                            std::vector<std::string>* problems,
+                                                                            const PrepareRows& prepare = {});
   // Frames detected whole and in windows by DetectPointsPredicted so far, per camera.
   size_t whole_image_detections() const { return whole_detections_; }
   size_t window_detections() const { return window_detections_; }

@@ -309,6 +309,13 @@ void SampleStatsByte(const cv::Mat& img, int step, double* background, double* n
   *noise = std::max(sigma, kQuantSigma);
 }
 
+// The sparse grid's spacing (px) for a W x H image: about 4096 points. Rows
+// min(step / 2, H - 1) + k step are sampled (and the row below each where the last sampled
+// column is the image's last: its difference is vertical); RowsReadInWindows lists them.
+int SampleStep(int W, int H) {
+  return std::max(1, static_cast<int>(std::sqrt(static_cast<double>(W) * H / 4096.0)));
+}
+
 // Global background (median) and noise of about 4096 pixels on a sparse grid. The noise
 // comes from differences of horizontal neighbours, which cancel any smooth background: the
 // median absolute difference gives a robust scale, then the RMS of the differences within
@@ -316,7 +323,7 @@ void SampleStatsByte(const cv::Mat& img, int step, double* background, double* n
 template <typename T>
 void SampleStats(const cv::Mat& img, double* background, double* noise) {
   const int W = img.cols, H = img.rows;
-  const int step = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(W) * H / 4096.0)));
+  const int step = SampleStep(W, H);
   if constexpr (sizeof(T) == 1) {
     SampleStatsByte(img, step, background, noise);
     return;
@@ -763,6 +770,28 @@ std::vector<cv::Rect> MergeWindows(std::vector<cv::Rect> windows, const cv::Size
           merged = true;
         }
       }
+  }
+  return out;
+}
+
+std::vector<cv::Range> RowsReadInWindows(const cv::Size& image_size, const std::vector<cv::Rect>& windows) {
+  const int W = image_size.width, H = image_size.height;
+  std::vector<cv::Range> rows;
+  if (W <= 0 || H <= 0) return rows;
+  // SampleStats's rows (the loops there: y and x from min(step / 2, size - 1) by step).
+  const int step = SampleStep(W, H);
+  const int x0 = std::min(step / 2, W - 1);
+  const bool below = x0 + (W - 1 - x0) / step * step == W - 1;  // the last sampled column is the last
+  for (int y = std::min(step / 2, H - 1); y < H; y += step) rows.emplace_back(y, std::min(y + (below ? 2 : 1), H));
+  for (const cv::Rect& w : MergeWindows(windows, image_size)) rows.emplace_back(w.y, w.y + w.height);
+  // Sorted and united.
+  std::sort(rows.begin(), rows.end(), [](const cv::Range& a, const cv::Range& b) { return a.start < b.start; });
+  std::vector<cv::Range> out;
+  for (const cv::Range& r : rows) {
+    if (!out.empty() && r.start <= out.back().end)
+      out.back().end = std::max(out.back().end, r.end);
+    else
+      out.push_back(r);
   }
   return out;
 }

@@ -142,6 +142,12 @@ std::vector<Blob> DetectBlobsInWindows(const cv::Mat& image,
                                        const BlobDetectorOptions& options = {},
                                        BlobImageStats* stats = nullptr);
 
+// The rows DetectBlobsInWindows(image, windows) reads of an image of `image_size`: the
+// merged windows' rows and the sparse sample's rows (about 1/17 of a frame's), as
+// sorted, disjoint ranges [start, end). An image whose other rows hold anything (a frame
+// read in part, vision/image_file.h ImageFileRows) gives the same blobs.
+std::vector<cv::Range> RowsReadInWindows(const cv::Size& image_size, const std::vector<cv::Rect>& windows);
+
 // The windows clipped to an image of `image_size`, empty ones dropped, those that overlap
 // or touch united (their bounding rectangle) until none do.
 std::vector<cv::Rect> MergeWindows(std::vector<cv::Rect> windows, const cv::Size& image_size);

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <fstream>
 #include <memory>
+#include <mutex>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -337,12 +338,24 @@ std::string ChunkName(const unsigned char* t) {
   return s + "'";
 }
 
-}  // namespace
+// What DecodePng's checks and inflate leave for the unfiltering.
+struct InflatedPng {
+  uint32_t width = 0, height = 0;
+  int bpp = 0;                              // bytes per pixel: 1 or 2
+  size_t row_bytes = 0;                     // bytes per row, without the filter-type byte
+  const unsigned char* filtered = nullptr;  // height x (filter-type byte, row_bytes bytes)
+  const unsigned char* Row(uint32_t y) const { return filtered + size_t{y} * (row_bytes + 1); }
+};
 
-bool DecodePng(std::vector<unsigned char>* bytes_in, const std::string& name, double max_pixels, cv::Mat* image,
-               std::string* problem) {
-  std::vector<unsigned char>& bytes = *bytes_in;
-  image->release();
+// DecodePng up to the unfiltering: the chunks walked and checked, the zlib stream inflated
+// into buffer(size) (exactly the size the header gives; Buffer: size_t -> unsigned char*),
+// every row's filter type checked, so that every error is found here. false with the
+// reason in *problem; true with *handled false when the PNG is valid so far but not one
+// this decoder handles (the general reader's case).
+template <typename Buffer>
+bool InflatePng(std::vector<unsigned char>& bytes, const std::string& name, double max_pixels, Buffer buffer,
+                InflatedPng* out, bool* handled_out, std::string* problem) {
+  *handled_out = false;
   const size_t n = bytes.size();
   auto fail = [&](const auto&... parts) {
     std::ostringstream s;
@@ -443,13 +456,12 @@ bool DecodePng(std::vector<unsigned char>* bytes_in, const std::string& name, do
   const size_t row_bytes = size_t{width} * bpp;
   const size_t needed = size_t{height} * (row_bytes + 1);
   if (needed > UINT32_MAX) return fail("IHDR says ", width, "x", height, ": more than 4 GB of pixels; not decoded");
-  thread_local std::vector<unsigned char> filtered;
-  if (filtered.size() < needed) filtered.resize(needed);
+  unsigned char* const filtered = buffer(needed);
   thread_local std::unique_ptr<inflate_state> inflater = std::make_unique<inflate_state>();  // 87 KB
   isal_inflate_init(inflater.get());
   inflater->next_in = bytes.data() + 8;
   inflater->avail_in = static_cast<uint32_t>(idat_end - 8);
-  inflater->next_out = filtered.data();
+  inflater->next_out = filtered;
   inflater->avail_out = static_cast<uint32_t>(needed);
   inflater->crc_flag = ISAL_ZLIB;
   const int r = isal_inflate_stateless(inflater.get());
@@ -470,23 +482,35 @@ bool DecodePng(std::vector<unsigned char>* bytes_in, const std::string& name, do
     return fail("the IDAT zlib stream inflates to ", actual, " bytes but a ", what, " holds ", needed,
                 " (1 filter byte and ", row_bytes, " bytes per row)");
 
-  // Unfilter row after row into the image (runs of 4 rows of one serial filter type
-  // together, UnfilterRows4). 16-bit samples are big-endian in the file; the rows are
-  // unfiltered as bytes (the previous row in file order is the prior), and each row's
-  // bytes are swapped once the next row no longer needs it.
-  cv::Mat im(static_cast<int>(height), static_cast<int>(width), bit_depth == 8 ? CV_8UC1 : CV_16UC1);
-  thread_local std::vector<unsigned char> zeros;
-  if (zeros.size() < row_bytes) zeros.assign(row_bytes, 0);
-  auto filtered_row = [&](uint32_t y) { return &filtered[size_t{y} * (row_bytes + 1)]; };
+  for (uint32_t y = 0; y < height; ++y) {
+    const unsigned char type = filtered[size_t{y} * (row_bytes + 1)];
+    if (type > 4) return fail("row ", y, " has filter type ", int(type), " (0 to 4 expected)");
+  }
+  out->width = width;
+  out->height = height;
+  out->bpp = bpp;
+  out->row_bytes = row_bytes;
+  out->filtered = filtered;
+  *handled_out = true;
+  return true;
+}
+
+// Unfilters rows [a, b) of `png` into `im` (runs of 4 rows of one serial filter type
+// together, UnfilterRows4). `prior` is row a-1 as the file holds it (zeros for a = 0); it
+// is read only when row a's filter predicts from above. 16-bit samples are big-endian in
+// the file; the rows are unfiltered as bytes (the previous row in file order is the
+// prior), and each row's bytes are swapped once the next row no longer needs it.
+void UnfilterRows(const InflatedPng& png, uint32_t a, uint32_t b, const unsigned char* prior_a, cv::Mat& im) {
+  const int bpp = png.bpp;
+  const size_t row_bytes = png.row_bytes;
+  auto filtered_row = [&](uint32_t y) { return png.Row(y); };
   auto row = [&](uint32_t y) { return im.ptr<unsigned char>(static_cast<int>(y)); };
-  for (uint32_t y = 0; y < height; ++y)
-    if (filtered_row(y)[0] > 4) return fail("row ", y, " has filter type ", int(filtered_row(y)[0]), " (0 to 4 expected)");
   constexpr uint32_t K = 4;
-  uint32_t swapped = 0;  // 16-bit: rows [0, swapped) are in native byte order
-  for (uint32_t y = 0; y < height;) {
-    const unsigned char* prior = y == 0 ? zeros.data() : row(y - 1);
+  uint32_t swapped = a;  // 16-bit: rows [a, swapped) are in native byte order
+  for (uint32_t y = a; y < b;) {
+    const unsigned char* prior = y == a ? prior_a : row(y - 1);
     const int type = filtered_row(y)[0];
-    bool run = (type == 1 || type == 3 || type == 4) && height - y >= K;
+    bool run = (type == 1 || type == 3 || type == 4) && b - y >= K;
     for (uint32_t k = 1; run && k < K; ++k) run = filtered_row(y + k)[0] == type;
     if (run) {
       const unsigned char* f[K];
@@ -513,13 +537,212 @@ bool DecodePng(std::vector<unsigned char>* bytes_in, const std::string& name, do
       y += 1;
     }
     if (bpp == 2) {
-      for (; swapped + 1 < y; ++swapped) SwapBytes16(row(swapped), row(swapped), width);  // the last stays the prior
-      if (y == height)
-        for (; swapped < y; ++swapped) SwapBytes16(row(swapped), row(swapped), width);
+      for (; swapped + 1 < y; ++swapped) SwapBytes16(row(swapped), row(swapped), png.width);  // the last stays the prior
+      if (y == b)
+        for (; swapped < y; ++swapped) SwapBytes16(row(swapped), row(swapped), png.width);
     }
   }
+}
+
+// n zero bytes: the prior of the first row.
+const unsigned char* Zeros(size_t n) {
+  thread_local std::vector<unsigned char> zeros;
+  if (zeros.size() < n) zeros.assign(n, 0);
+  return zeros.data();
+}
+
+}  // namespace
+
+bool DecodePng(std::vector<unsigned char>* bytes, const std::string& name, double max_pixels, cv::Mat* image,
+               std::string* problem) {
+  image->release();
+  thread_local std::vector<unsigned char> filtered;  // reused: no allocation per frame
+  auto buffer = [](size_t size) {
+    if (filtered.size() < size) filtered.resize(size);
+    return filtered.data();
+  };
+  InflatedPng png;
+  bool handled = false;
+  if (!InflatePng(*bytes, name, max_pixels, buffer, &png, &handled, problem)) return false;
+  if (!handled) return true;
+  cv::Mat im(static_cast<int>(png.height), static_cast<int>(png.width), png.bpp == 1 ? CV_8UC1 : CV_16UC1);
+  UnfilterRows(png, 0, png.height, Zeros(png.row_bytes), im);
   *image = im;
   return true;
+}
+
+// ---------------------------------------------------------------------------------------
+// A PNG read in two steps.
+
+namespace {
+
+// The inflated rows' buffers of ImageFileRows, kept for the next frames instead of freed:
+// a fresh 1.3 MB buffer per image is faulted in page by page as the inflate first writes
+// it (glibc hands freed memory at the top of its heap back to the system), which made
+// reading in part slower than decoding whole (13.8 against 7.6 ms per frame set). At
+// most kKept buffers are kept (the tracker holds 4 frame sets per thread).
+class BufferPool {
+ public:
+  std::unique_ptr<unsigned char[]> Take(size_t size, size_t* capacity) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (size_t i = free_.size(); i-- > 0;)  // the last given first: the likeliest still in cache
+        if (free_[i].first >= size) {
+          *capacity = free_[i].first;
+          std::unique_ptr<unsigned char[]> b = std::move(free_[i].second);
+          free_.erase(free_.begin() + static_cast<std::ptrdiff_t>(i));
+          return b;
+        }
+    }
+    *capacity = size;
+    return std::unique_ptr<unsigned char[]>(new unsigned char[size]);  // not zeroed: the inflate writes all of it
+  }
+  void Give(std::unique_ptr<unsigned char[]> b, size_t capacity) {
+    if (!b) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (free_.size() < kKept) free_.emplace_back(capacity, std::move(b));
+  }
+
+ private:
+  static constexpr size_t kKept = 64;
+  std::mutex mutex_;
+  std::vector<std::pair<size_t, std::unique_ptr<unsigned char[]>>> free_;
+};
+
+BufferPool& TheBufferPool() {
+  static BufferPool* p = new BufferPool;  // outlives every ImageFileRows (never destroyed)
+  return *p;
+}
+
+// The pixels of an ImageFileRows image come from TheBufferPool() too, and go back to it
+// when the last Mat sharing them is released (the Mat's UMatData holds the buffer, as
+// for a mapped file above). They are zeroed when handed out: a row not prepared reads
+// as zero. (An anonymous mapping per image, zero for free, cost more in page faults
+// than the unfiltering it saved: 12.7 against 11.3 ms per frame set.)
+class PooledPixelAllocator : public cv::MatAllocator {
+ public:
+  cv::UMatData* allocate(int, const int*, int, void*, size_t*, cv::AccessFlag, cv::UMatUsageFlags) const override {
+    return nullptr;
+  }
+  bool allocate(cv::UMatData*, cv::AccessFlag, cv::UMatUsageFlags) const override { return false; }
+  void deallocate(cv::UMatData* u) const override {
+    if (!u) return;
+    TheBufferPool().Give(std::unique_ptr<unsigned char[]>(u->origdata), u->size);
+    delete u;
+  }
+};
+
+// A zeroed rows x cols Mat of `type` over a pooled buffer.
+cv::Mat PooledZeroMat(int rows, int cols, int type) {
+  const size_t bytes = size_t(rows) * size_t(cols) * CV_ELEM_SIZE(type);
+  size_t capacity = 0;
+  std::unique_ptr<unsigned char[]> b = TheBufferPool().Take(bytes, &capacity);
+  std::memset(b.get(), 0, bytes);
+  static const PooledPixelAllocator* allocator = new PooledPixelAllocator;  // never destroyed
+  cv::Mat im(rows, cols, type, b.get());
+  cv::UMatData* u = new cv::UMatData(allocator);
+  u->data = u->origdata = b.release();
+  u->size = capacity;
+  u->refcount = 1;
+  im.u = u;
+  return im;
+}
+
+}  // namespace
+
+struct ImageFileRows::Png {
+  ~Png() { TheBufferPool().Give(std::move(filtered), capacity); }
+  std::unique_ptr<unsigned char[]> filtered;  // what InflatePng left, from TheBufferPool()
+  size_t capacity = 0;
+  InflatedPng rows;
+  std::vector<unsigned char> ready, need;     // per row
+  std::vector<unsigned char> prior;           // 16-bit: a prepared row swapped back to the file's order
+};
+
+ImageFileRows::ImageFileRows() = default;
+ImageFileRows::~ImageFileRows() = default;
+ImageFileRows::ImageFileRows(ImageFileRows&&) noexcept = default;
+ImageFileRows& ImageFileRows::operator=(ImageFileRows&&) noexcept = default;
+
+bool ImageFileRows::DecodePng(std::vector<unsigned char>* bytes, const std::string& name, double max_pixels,
+                              std::string* problem) {
+  png_.reset();
+  image_.release();
+  rows_ready_ = 0;
+  auto p = std::make_unique<Png>();
+  auto buffer = [&p](size_t size) {
+    p->filtered = TheBufferPool().Take(size, &p->capacity);
+    return p->filtered.get();
+  };
+  bool handled = false;
+  if (!InflatePng(*bytes, name, max_pixels, buffer, &p->rows, &handled, problem)) return false;
+  if (!handled) return true;
+  const InflatedPng& f = p->rows;
+  // Rows filtered None cost only a copy to unfilter, less than zeroing them to skip them:
+  // when every row is None (`mcms render`'s PNGs), all are unfiltered now, on the reading
+  // thread. Row skipping pays where rows are predicted (Sub, Average, Paeth: the serial
+  // recurrences along the row).
+  bool all_none = true;
+  for (uint32_t y = 0; y < f.height && all_none; ++y) all_none = f.Row(y)[0] == 0;
+  if (all_none) {
+    cv::Mat im(static_cast<int>(f.height), static_cast<int>(f.width), f.bpp == 1 ? CV_8UC1 : CV_16UC1);
+    UnfilterRows(f, 0, f.height, Zeros(f.row_bytes), im);
+    image_ = im;
+    rows_ready_ = f.height;
+    return true;  // the inflated rows go back to the pool with p
+  }
+  image_ = PooledZeroMat(static_cast<int>(f.height), static_cast<int>(f.width), f.bpp == 1 ? CV_8UC1 : CV_16UC1);
+  p->ready.assign(f.height, 0);
+  png_ = std::move(p);
+  return true;
+}
+
+size_t ImageFileRows::Prepare(const std::vector<cv::Range>& ranges) {
+  if (!png_) return 0;
+  const InflatedPng& f = png_->rows;
+  const int64_t h = f.height;
+  std::vector<unsigned char>& ready = png_->ready;
+  std::vector<unsigned char>& need = png_->need;
+  need.assign(static_cast<size_t>(h), 0);
+  for (const cv::Range& r : ranges)
+    for (int64_t y = std::max<int64_t>(r.start, 0); y < std::min<int64_t>(r.end, h); ++y) need[y] = 1;
+  // Bottom up, so that a chain of rows predicted from above is followed to its end: a
+  // needed row filtered Up (2), Average (3) or Paeth (4) needs the row above unfiltered.
+  for (int64_t y = h - 1; y > 0; --y)
+    if (need[y] && !ready[y] && f.Row(static_cast<uint32_t>(y))[0] >= 2) need[y - 1] = 1;
+  size_t done = 0;
+  for (int64_t y = 0; y < h;) {
+    if (!need[y] || ready[y]) {
+      ++y;
+      continue;
+    }
+    int64_t b = y + 1;
+    while (b < h && need[b] && !ready[b]) ++b;
+    // Row y's prior: the row above when it is ready (it is whenever row y's filter needs
+    // it, by the pass above), as the file holds it; zeros above the first row.
+    const unsigned char* prior = Zeros(f.row_bytes);
+    if (y > 0 && ready[y - 1]) {
+      const unsigned char* above = image_.ptr<unsigned char>(static_cast<int>(y - 1));
+      if (f.bpp == 1) {
+        prior = above;
+      } else {
+        png_->prior.resize(f.row_bytes);
+        SwapBytes16(above, png_->prior.data(), f.width);
+        prior = png_->prior.data();
+      }
+    }
+    UnfilterRows(f, static_cast<uint32_t>(y), static_cast<uint32_t>(b), prior, image_);
+    std::fill(ready.begin() + y, ready.begin() + b, 1);
+    done += static_cast<size_t>(b - y);
+    y = b;
+  }
+  rows_ready_ += done;
+  if (rows_ready_ == static_cast<size_t>(h)) png_.reset();  // the inflated rows are no longer needed
+  return done;
+}
+
+void ImageFileRows::PrepareAll() {
+  if (png_) Prepare({cv::Range(0, image_.rows)});
 }
 
 namespace {
@@ -681,8 +904,13 @@ const char* ToString(ImageFileReader r) {
   return "?";
 }
 
-cv::Mat ReadImageFile(const fs::path& p, const ImageFileOptions& options, std::string* problem,
-                      ImageFileReader* reader) {
+namespace {
+
+// ReadImageFile, and ImageFileRows::Read when `rows` is given: then a PNG our decoder
+// handles is inflated into *rows, and the image returned is rows->image(), not yet
+// prepared.
+cv::Mat ReadFrame(const fs::path& p, const ImageFileOptions& options, std::string* problem, ImageFileReader* reader,
+                  ImageFileRows* rows) {
   problem->clear();
   const auto header = SniffHeader(p);
   if (!header) {
@@ -712,7 +940,12 @@ cv::Mat ReadImageFile(const fs::path& p, const ImageFileOptions& options, std::s
       *problem = "cannot read " + p.string() + ": " + why;
       return {};
     }
-    if (!DecodePng(&bytes, p.string(), kMaxImageFilePixels, &im, problem)) return {};
+    if (rows) {
+      if (!rows->DecodePng(&bytes, p.string(), kMaxImageFilePixels, problem)) return {};
+      im = rows->image();
+    } else if (!DecodePng(&bytes, p.string(), kMaxImageFilePixels, &im, problem)) {
+      return {};
+    }
     if (!im.empty() && reader) *reader = ImageFileReader::kPng;
   } else if (!options.opencv_only && (header->format == "PNM" || header->format == "TIFF")) {
     Mapping m;
@@ -747,6 +980,31 @@ cv::Mat ReadImageFile(const fs::path& p, const ImageFileOptions& options, std::s
     return {};
   }
   return im;
+}
+
+}  // namespace
+
+cv::Mat ReadImageFile(const fs::path& p, const ImageFileOptions& options, std::string* problem,
+                      ImageFileReader* reader) {
+  return ReadFrame(p, options, problem, reader, nullptr);
+}
+
+bool ImageFileRows::Read(const fs::path& p, const ImageFileOptions& options, std::string* problem,
+                         ImageFileReader* reader) {
+  png_.reset();
+  image_.release();
+  rows_ready_ = 0;
+  const cv::Mat im = ReadFrame(p, options, problem, reader, options.opencv_only ? nullptr : this);
+  if (im.empty()) {
+    png_.reset();
+    image_.release();
+    return false;
+  }
+  if (!png_) {  // read whole (not a PNG our decoder handles)
+    image_ = im;
+    rows_ready_ = static_cast<size_t>(im.rows);
+  }
+  return true;
 }
 
 const char* ToString(ImageFileFormat f) {

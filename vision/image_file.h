@@ -15,10 +15,13 @@
 //     OpenCV returns native, are copied once with their bytes swapped).
 //   anything else (colour PNG, other bit depths, interlaced PNG, compressed TIFF, JPEG,
 //     BMP, ASCII PNM): cv::imread(IMREAD_UNCHANGED), after the header's size was checked.
+// ImageFileRows reads a frame in two steps, for detection in predicted windows: a PNG is
+// read, checked and inflated first, and only the rows the detector reads are unfiltered.
 #pragma once
 
 #include <array>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -76,6 +79,55 @@ cv::Mat ReadImageFile(const std::filesystem::path& path, const ImageFileOptions&
 // modified (the IDAT payloads are moved together in place).
 bool DecodePng(std::vector<unsigned char>* bytes, const std::string& name, double max_pixels, cv::Mat* image,
                std::string* problem);
+
+// A frame read in two steps, for a caller that learns which rows it needs only after the
+// costly part: the tracker's predicted windows come from the frame before, while the next
+// frames are read ahead on other threads (tracking/sequence.h). Read() does everything
+// that can fail and most of the work: ReadImageFile's checks and errors, and for a PNG our
+// decoder takes, the file read, every CRC checked, the zlib stream inflated (with its
+// Adler-32) and every row's filter type checked; only the unfiltering is left. Prepare()
+// then unfilters the rows asked for and the rows their filters depend on: a row filtered
+// Up, Average or Paeth is predicted from the row above, so that row is unfiltered too,
+// and so on back to a row filtered None or Sub (or the first), which needs nothing above
+// it. Every other row is left alone. A PNG whose rows are all filtered None (what `mcms
+// render` writes) is unfiltered whole by Read(): its unfiltering is a copy, cheaper than
+// zeroing the rows to skip. Other files (PGM, TIFF, colour PNGs, JPEG...) are read whole
+// by Read(): every row is ready at once. Movable, not copyable; one thread at a
+// time.
+class ImageFileRows {
+ public:
+  ImageFileRows();
+  ~ImageFileRows();
+  ImageFileRows(ImageFileRows&&) noexcept;
+  ImageFileRows& operator=(ImageFileRows&&) noexcept;
+
+  // ReadImageFile's checks, errors and readers: true, or false with the reason in
+  // *problem naming the file (image() is then empty).
+  bool Read(const std::filesystem::path& path, const ImageFileOptions& options, std::string* problem,
+            ImageFileReader* reader = nullptr);
+  // The PNG decoder's counterpart of DecodePng: true and rows to prepare, false with the
+  // reason, or true and an empty image() when it is not a PNG this decoder handles.
+  bool DecodePng(std::vector<unsigned char>* bytes, const std::string& name, double max_pixels, std::string* problem);
+
+  // Makes every row of `rows` (ranges [start, end) of row indices, clipped to the image,
+  // in any order, overlapping or not) hold its pixels in image(), with the rows they
+  // depend on (see above). Returns how many rows this call unfiltered.
+  size_t Prepare(const std::vector<cv::Range>& rows);
+  // Every row.
+  void PrepareAll();
+
+  // The image, full size; a row not yet prepared reads as zero. Later Prepare() calls
+  // fill this same buffer.
+  const cv::Mat& image() const { return image_; }
+  // Rows that hold their pixels, of image().rows.
+  size_t rows_ready() const { return rows_ready_; }
+
+ private:
+  struct Png;                  // the inflated rows still to unfilter (null once all are ready)
+  std::unique_ptr<Png> png_;
+  cv::Mat image_;
+  size_t rows_ready_ = 0;
+};
 
 // The formats `mcms render --format` writes.
 enum class ImageFileFormat { kPng, kPgm, kTiff };
