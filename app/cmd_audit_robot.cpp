@@ -14,7 +14,8 @@ namespace mcms::app {
 namespace {
 
 struct AuditRobotArgs {
-  std::string log, robot, output, json;
+  std::string log, robot, output, json, base_link, tip_link;
+  std::vector<std::string> validate;
   std::vector<std::string> only;
   std::vector<double> base_guess;
   double false_alarm = 0.01;
@@ -28,6 +29,8 @@ int RunAuditRobot(const AuditRobotArgs& a) {
   job.robot = a.robot;
   job.output_dir = a.output;
   job.json = a.json;
+  job.chain = {a.base_link, a.tip_link};
+  for (const auto& v : a.validate) job.validate.push_back(v);
   job.options.only = a.only;
   job.options.false_alarm = a.false_alarm;
   job.options.folds = a.folds;
@@ -47,8 +50,10 @@ int RunAuditRobot(const AuditRobotArgs& a) {
   const std::string report = RunRobotAuditJob(job);
   std::printf("%s", report.c_str());
   if (!a.output.empty())
-    std::printf("wrote %s (report.txt, report.json, robot.yaml, residuals.csv, plots/%s)\n", a.output.c_str(),
-                std::filesystem::exists(std::filesystem::path(a.output) / "next_poses.csv") ? ", next_poses.csv" : "");
+    std::printf("wrote %s (report.txt, report.json, robot.yaml%s, residuals.csv, plots/%s%s)\n", a.output.c_str(),
+                std::filesystem::exists(std::filesystem::path(a.output) / "robot.urdf") ? ", robot.urdf" : "",
+                std::filesystem::exists(std::filesystem::path(a.output) / "next_poses.csv") ? ", next_poses.csv" : "",
+                std::filesystem::exists(std::filesystem::path(a.output) / "validation.csv") ? ", validation.csv" : "");
   if (!a.json.empty()) std::printf("wrote %s\n", a.json.c_str());
   return 0;
 }
@@ -68,10 +73,21 @@ std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit) {
       "thermal_drift, backlash, error_motion) that earn their parameters on held-out data, with size +- sigma. "
       "Candidates the data cannot tell apart are reported undecided with both sizes, and -o writes the poses that "
       "would separate them (next_poses.csv).");
-  cmd->add_option("LOG", args->log, "measurement log (CSV or calib-robot YAML)")->required();
+  cmd->add_option("LOG", args->log,
+                  "measurement log: CSV (time, joint columns q1_rad.. or the robot's joint names, x_m,y_m,z_m or "
+                  "x1,y1,z1..xK,yK,zK of K points of one rigid body) or calib-robot YAML")
+      ->required();
   cmd->add_option("--robot", args->robot,
-                  "robot description (YAML, model/robots format, optionally with link masses: "
-                  "examples/robots/ur10_like.yaml); default: the built-in KUKA KR 5 arc");
+                  "robot description: YAML (model/robots format, optionally with link masses: "
+                  "examples/robots/ur10_like.yaml) or URDF (masses from its inertials); default: the built-in KUKA "
+                  "KR 5 arc");
+  cmd->add_option("--base-link", args->base_link, "URDF: the chain's base link (default: the URDF's root)");
+  cmd->add_option("--tip-link", args->tip_link,
+                  "URDF: the chain's tip link, where the measured points are fixed (default: the unambiguous leaf)");
+  cmd->add_option("--validate", args->validate,
+                  "another session measured in the same frame: scored with the fitted models (registration, "
+                  "geometry, final) frozen, per point and posture group (repeatable)")
+      ->allow_extra_args(false);
   cmd->add_option("-o,--output", args->output,
                   "output folder: report.txt, report.json, robot.yaml, residuals.csv, plots/, next_poses.csv (when a "
                   "pair is undecided)");

@@ -41,7 +41,9 @@ namespace {
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 struct CalibRobotArgs {
-  std::string measurements, robot, output, report, plot;
+  std::string measurements, robot, output, report, plot, json, base_link, tip_link;
+  std::vector<std::string> validate, estimate;
+  std::vector<int> points;
   std::vector<double> base_guess, tool_guess;
   std::vector<std::string> fixed;
   std::vector<int> error_motion;
@@ -69,6 +71,11 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   job.output = a.output;
   job.report = a.report;
   job.plot = a.plot;
+  job.json = a.json;
+  job.chain = {a.base_link, a.tip_link};
+  job.points = a.points;
+  job.estimate_only = a.estimate;
+  for (const auto& v : a.validate) job.validate.push_back(v);
   if (!a.base_guess.empty()) job.base_guess = PoseFromArgs(a.base_guess, "--base-guess");
   if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "--tool-guess");
   job.fixed = a.fixed;
@@ -107,10 +114,34 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
       "registration starts from a rigid fit of the nominal tool positions to the measured ones.\n"
       "Writes the calibrated robot (-o), the report (stdout and --report) and an SVG of the error per\n"
       "measurement (--plot). Nothing is written when the calibration fails.");
-  sub->add_option("MEASUREMENTS", args->measurements, "Measurement file (YAML)")->required()->check(CLI::ExistingFile);
-  sub->add_option("--robot", args->robot, "Robot description YAML (default: built-in KUKA KR 5 arc)")
+  sub->add_option("MEASUREMENTS", args->measurements,
+                  "Measurement file: CSV (time, joint columns q1_rad.. or the robot's joint names, x_m,y_m,z_m or "
+                  "x1,y1,z1..xK,yK,zK of K points of one rigid body; calib/robot_measurements.h) or YAML")
+      ->required()
       ->check(CLI::ExistingFile);
-  sub->add_option("-o,--output", args->output, "Calibrated robot YAML to write (required)")->type_name("FILE");
+  sub->add_option("--robot", args->robot, "Robot description: YAML or URDF (default: built-in KUKA KR 5 arc)")
+      ->check(CLI::ExistingFile);
+  sub->add_option("--base-link", args->base_link, "URDF: the chain's base link (default: the URDF's root)");
+  sub->add_option("--tip-link", args->tip_link,
+                  "URDF: the chain's tip link, where the measured points are fixed (default: the unambiguous leaf)");
+  sub->add_option("-o,--output", args->output,
+                  "Calibrated robot to write (required): FILE.urdf (for a URDF robot: its URDF with the corrections "
+                  "folded into the joints' <origin>, each with its sigma in a comment) or FILE.yaml")
+      ->type_name("FILE");
+  sub->add_option("--json", args->json, "Machine-readable report (parameters, residuals per point, validation)")
+      ->type_name("FILE");
+  sub->add_option("--points", args->points,
+                  "Use only these points of a rigid body (1-based, e.g. 1 for FIGAROH's point-1 protocol; default: all)")
+      ->delimiter(',');
+  sub->add_option("--estimate", args->estimate,
+                  "Estimate only these geometric parameters (globs, e.g. 'arm_[2-6]_joint.offset' or '*.offset'); the "
+                  "registration is always fitted")
+      ->delimiter(',');
+  sub->add_option("--validate", args->validate,
+                  "Another session measured in the same frame: scored with the fitted models frozen, per point and "
+                  "posture group (repeatable)")
+      ->check(CLI::ExistingFile)
+      ->allow_extra_args(false);
   sub->add_option("--report", args->report, "Also write the report to this file")->type_name("FILE");
   sub->add_option("--plot", args->plot, "SVG plot of the error per measurement (and FILE-joints.svg: against each joint angle)")->type_name("FILE.svg");
   sub->add_option("--base-guess", args->base_guess, "Starting T_meas_base: x y z qw qx qy qz")->expected(7);

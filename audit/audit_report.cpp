@@ -65,6 +65,7 @@ void AuditReport::Merge(const AuditReport& o) {
   }
   undecided.insert(undecided.end(), o.undecided.begin(), o.undecided.end());
   notes.insert(notes.end(), o.notes.begin(), o.notes.end());
+  validation.insert(validation.end(), o.validation.begin(), o.validation.end());
 }
 
 std::string AuditReport::ToJson() const {
@@ -89,6 +90,7 @@ std::string AuditReport::ToJson() const {
     }
   }
   j["notes"] = notes;
+  if (!validation.empty()) j["validation"] = ValidationJson(validation);
   return j.dump(2) + "\n";
 }
 
@@ -131,6 +133,7 @@ std::string AuditReport::Text() const {
       }
   }
   for (const auto& n : notes) o << "note: " << n << "\n";
+  o << ValidationText(validation);
   return o.str();
 }
 

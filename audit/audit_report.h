@@ -6,7 +6,8 @@
 //    "effects": [{"name", "where", "parameters": {..}, "sigma": {..}, "heldout_rms_before",
 //                 "heldout_rms_after", "heldout_loglik_gain", "bic_gain"}],
 //    "undecided": [[name, name], ..], "undecided_effects": [[{effect}, ..], ..],
-//    "tests": [..], "notes": [..]}   (an effect may also carry "held": {name: reason})
+//    "tests": [..], "notes": [..], "validation": [..] (calib/robot_validation.h; when scored)}
+//   (an effect may also carry "held": {name: reason})
 // Units: parameters and sigmas in SI (rad, m, s, dimensionless factors); held-out RMS in
 // the unit the mode states in `rms_unit` (m for robot positions, px for cameras).
 #pragma once
@@ -15,6 +16,8 @@
 #include <map>
 #include <string>
 #include <vector>
+
+#include "calib/robot_validation.h"
 
 namespace mcms {
 
@@ -56,6 +59,9 @@ struct AuditReport {
   // mode gives them (the robot audit); index-aligned with `undecided`, or empty.
   std::vector<std::vector<AuditEffect>> undecided_effects;
   std::vector<std::string> notes;                   // what the audit could not test, and why
+  // Other sessions scored with the fitted models frozen (the robot audit's --validate):
+  // JSON "validation" (calib/robot_validation.h).
+  std::vector<SessionScore> validation;
 
   // Appends another audit of the same data set (fusion: the inclinometer beside the
   // tracker and robot): its tests, effects (with its rms_unit), undecided groups and notes;

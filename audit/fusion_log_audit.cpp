@@ -84,7 +84,7 @@ RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints,
   for (const TrackerSample& s : tracker.samples) {
     Eigen::VectorXd q, qa, qb;
     if (!joints.Interpolate(s.time_s, &q)) continue;
-    RobotLogRow r;
+    RobotMeasurement r;
     r.time_s = s.time_s;
     r.q = q;
     r.p_meas = s.T_rig_target.t;
@@ -94,9 +94,9 @@ RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints,
     if (joints.Interpolate(s.time_s - h, &qa) && joints.Interpolate(s.time_s + h, &qb)) r.qdot = (qb - qa) / (2 * h);
     log.rows.push_back(r);
   }
-  if (static_cast<int>(log.rows.size()) < kMinRobotLogRows)
+  if (static_cast<int>(log.rows.size()) < kMinRobotMeasurements)
     Throw("audit fusion: only ", log.rows.size(), " tracked frames of ", tracker_name, " fall within the joint log ",
-          joints_name, "'s time span; the audit needs at least ", kMinRobotLogRows,
+          joints_name, "'s time span; the audit needs at least ", kMinRobotMeasurements,
           " (are the two logs on the same clock?)");
   return log;
 }

@@ -37,7 +37,7 @@ void RunFusionAuditJob(const FusionAuditJob& job, const std::function<void(const
 // The robot-audit log of a tracker log against a joint log: every tracked frame inside the
 // joint log's time span, with the joints interpolated at its time and their velocities
 // (central differences over 20 ms). InputError naming both logs when fewer than
-// kMinRobotLogRows frames overlap.
+// kMinRobotMeasurements frames overlap.
 RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints, const std::string& tracker_name,
                               const std::string& joints_name);
 

@@ -65,43 +65,18 @@
 
 #include "core/pose_math.h"
 #include "audit/audit_report.h"
+#include "calib/robot_measurements.h"
+#include "calib/robot_validation.h"
 #include "model/extensions.h"
 #include "model/robot_model.h"
 
 namespace mcms {
 
-struct RobotLogRow {
-  double time_s = 0.0;
-  Eigen::VectorXd q;
-  Vec3 p_meas = Vec3::Zero();
-  std::optional<Mat3> R_meas_tool;
-  double temperature_c = std::nan("");
-  double payload_kg = std::nan("");
-  // Joint velocities at the measurement (empty = at rest): with them the audit tests a
-  // clock offset between the joint log and the instrument (`audit fusion`).
-  Eigen::VectorXd qdot;
-  int line = 0;  // 1-based line in the file (0 when made in code)
-};
-
-struct RobotLog {
-  std::filesystem::path source;
-  std::vector<RobotLogRow> rows;
-  bool has_time = false, has_temperature = false, has_payload = false;
-  bool six_dof() const { return !rows.empty() && rows.front().R_meas_tool.has_value(); }
-};
-
-// Reads a measurement log:
-//  - CSV with columns time_s, q1_rad..qN_rad, x_m, y_m, z_m, optional qw, qx, qy, qz
-//    (measured orientation of the tool), temperature_c, payload_kg;
-//  - or a calib-robot measurement file (YAML, calib/robot_calibration.h), rows in order
-//    (no time: the row index is the time).
-// InputError naming the file, the line and the column: fewer than kMinRobotLogRows rows,
-// joint columns that do not match the robot's joint count, joint values outside the
-// robot's limits, time going backwards, non-finite cells, a quaternion that is not unit.
-constexpr int kMinRobotLogRows = 12;
-RobotLog ReadRobotLog(const std::filesystem::path& path, const RobotModel& robot);
-// The same checks on a log made in code.
-void CheckRobotLog(const RobotLog& log, const RobotModel& robot);
+// The audit needs at least this many measurements (the registration alone has 9
+// parameters; repeated poses over time show the noise). Logs are read by
+// calib/robot_measurements.h ReadRobotLog: one point, K >= 3 points of a rigid body (then
+// each row's measured pose of the body), or a pose per row.
+constexpr int kMinRobotMeasurements = 12;
 
 struct RobotAuditOptions {
   // Designed probability that the audit calls a clean log not clean (any test failed or
@@ -167,19 +142,28 @@ struct RobotAuditResult {
     std::vector<SeparatingPose> poses;
   };
   std::vector<NextPoses> next_poses;
+  // (report.validation: every other session of `validate`, scored with the fitted models
+  // frozen: the registration only ("registration"), with the whole identifiable geometry
+  // ("geometry"), and the audit's final model ("final").)
 };
 
 // Writes next_poses as CSV: pair,q1_rad..qN_rad,x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,
 // difference_mm,separation_sigma (atomically).
 void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, int num_joints);
 
-RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& options = {});
+// `validate`: other sessions measured in the same frame, scored frozen (RobotAuditResult::
+// validation; also in the report's JSON and text).
+RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& options = {},
+                            const std::vector<RobotLog>& validate = {});
 
 // The whole `mcms audit robot` job: read, audit, write the output folder (report.txt,
-// report.json, robot.yaml, residuals.csv, plots/*.svg, next_poses.csv when a pair is
-// undecided; atomically) and/or a JSON file.
+// report.json, robot.yaml (and robot.urdf for a URDF robot), residuals.csv, plots/*.svg,
+// next_poses.csv when a pair is undecided, validation.csv with --validate; atomically)
+// and/or a JSON file.
 struct RobotAuditJob {
   std::filesystem::path log, robot, output_dir, json;
+  ChainSelection chain;                       // of a URDF robot
+  std::vector<std::filesystem::path> validate;  // other sessions, scored frozen
   RobotAuditOptions options;
 };
 // Returns the report text.

@@ -26,7 +26,7 @@ Problem Make(int n, bool six_dof) {
   p.nominal.SetT_flange_tool(Pose{Mat3::Identity(), Vec3(0.02, -0.01, 0.15)});
   Eigen::VectorXd dh(4 * p.nominal.NumJoints());
   for (int i = 0; i < dh.size(); ++i) dh[i] = (i % 4 == 0 || i % 4 == 3) ? 8.7e-4 : 5e-4;
-  RobotModel actual = WithDhErrors(p.nominal, dh);
+  RobotModel actual = WithGeometryErrors(p.nominal, dh);
   actual.SetT_flange_tool(Pose{ExpSO3(Vec3(0.005, -0.003, 0.004)), Vec3(0.021, -0.0107, 0.1508)});
   const Pose T_meas_base{ExpSO3(Vec3(0.2, -0.1, 2.8)), Vec3(2.5, 0.3, -0.4)};
   for (int k = 0; k < n; ++k) {

@@ -119,7 +119,7 @@ CircleRegistration RegisterByAxisCircles(const RobotModel& robot, const AxisSwee
   // Nominal axis lines in the base frame at the sweeps' joint values.
   auto axis_line = [&](const AxisSweep& s, Vec3* dir, Vec3* point) {
     const std::vector<Pose> F = robot.LinkFrames(s.q[0]);
-    const Pose& f = robot.Convention() == DhConvention::kStandard ? F[s.axis] : F[s.axis + 1];
+    const Pose& f = robot.Convention() == ChainConvention::kStandard ? F[s.axis] : F[s.axis + 1];
     *dir = f.R.col(2);
     *point = f.t;
   };

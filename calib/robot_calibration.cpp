@@ -27,39 +27,55 @@ namespace mcms {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
-constexpr int kParamsPerJoint = kDhParamsPerJoint;
-constexpr int kBaseAndTool = 12;
 constexpr int kPerHarmonic = kErrorMotionParamsPerHarmonic;  // sin [rx ry rz x y z], cos [..]
 
-int BaseOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints(); }
-int ToolOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints() + 6; }
-int ErrorMotionOffset(const RobotModel& r) { return kParamsPerJoint * r.NumJoints() + kBaseAndTool; }
 // Harmonics of error motion estimated for joint i (options.error_motion_harmonics).
 int HarmonicsOf(const RobotCalibrationOptions& o, int i) {
   return o.error_motion_harmonics.empty() ? 0 : o.error_motion_harmonics[i];
 }
-// Whether parameter k of the layout is an angle (rad) rather than a length (m): DH theta
-// and alpha, the rotation parts of base and tool, the rotation parts of error motion.
-bool IsAngle(const RobotModel& r, int k) {
-  if (k < BaseOffset(r)) return k % kParamsPerJoint == 0 || k % kParamsPerJoint == 3;
-  if (k < ErrorMotionOffset(r)) return (k - BaseOffset(r)) % 6 < 3;
-  return (k - ErrorMotionOffset(r)) % 6 < 3;
-}
-int NumParameters(const RobotModel& r, const RobotCalibrationOptions& o) {
-  int n = ErrorMotionOffset(r);
-  for (int i = 0; i < r.NumJoints(); ++i) n += kPerHarmonic * HarmonicsOf(o, i);
-  return n;
+
+// Where each part of the parameter vector starts (the header's layout).
+struct Layout {
+  int geometry = 0, base = 0, tool = 0, points = 0, error_motion = 0, total = 0;
+  int num_points = 1;
+  Layout(const RobotModel& r, const RobotCalibrationOptions& o, int K) : num_points(std::max(1, K)) {
+    base = r.NumGeometryParameters();
+    tool = base + 6;
+    points = tool + 6;
+    error_motion = points + 3 * (num_points - 1);
+    total = error_motion;
+    for (int i = 0; i < r.NumJoints(); ++i) total += kPerHarmonic * HarmonicsOf(o, i);
+  }
+  bool IsGeometry(int k) const { return k < base; }
+  bool IsBase(int k) const { return k >= base && k < tool; }
+  bool IsTool(int k) const { return k >= tool && k < points; }
+  bool IsPoint(int k) const { return k >= points && k < error_motion; }
+  bool IsErrorMotion(int k) const { return k >= error_motion; }
+};
+
+// Whether parameter k of the layout is an angle (rad) rather than a length (m).
+bool IsAngle(const RobotModel& r, const Layout& L, int k) {
+  if (L.IsGeometry(k)) return GeometryParameterIsAngle(r, k);
+  if (L.IsBase(k)) return k - L.base < 3;
+  if (L.IsTool(k)) return k - L.tool < 3;
+  if (L.IsPoint(k)) return false;
+  return (k - L.error_motion) % 6 < 3;
 }
 
+int NumPointsOf(const std::vector<RobotMeasurement>& ms) { return ms.empty() ? 1 : ms.front().NumPoints(); }
+
 // ---- The one cost functor: whitened prediction error of one measurement. ----
-// Parameter block: the full vector of the header's layout. Residuals: 3 (position) or 6
-// (position, then the rotation vector of R_pred R_meas^T), each divided by its sigma.
+// Parameter block: the full vector of the header's layout. Residuals: 3 per point (point 1
+// at the tool origin, point k at T_flange_tool p_k), and for a pose the rotation vector of
+// R_pred R_meas^T, each divided by its sigma.
 struct MeasurementCost {
   const RobotModel* robot;
+  Layout layout;
   std::vector<int> harmonics;  // estimated error-motion harmonics per joint
   Eigen::VectorXd q;
   Pose base0, tool0;
-  Vec3 p_meas;
+  std::vector<Vec3> points0;   // starting p_k, k = 2..K (tool frame)
+  std::vector<Vec3> measured;  // the K measured points
   std::optional<Mat3> R_meas;
   double inv_sigma_p, inv_sigma_r;
 
@@ -69,15 +85,12 @@ struct MeasurementCost {
     using V3 = Eigen::Matrix<T, 3, 1>;
     const T* x = params[0];
     ChainCorrections<T> c;
-    c.dh = x;
-    c.error_motion = x + ErrorMotionOffset(*robot);
+    c.geometry = x;
+    c.error_motion = x + layout.error_motion;
     c.error_motion_harmonics = harmonics;
     const PoseT<T> F = ForwardKinematicsT(*robot, q, c);
-    const M3& R = F.R;
-    const V3& t = F.t;
-    const auto& joints = robot->Joints();
-    const T* b = x + kParamsPerJoint * joints.size();
-    const T* u = b + 6;
+    const T* b = x + layout.base;
+    const T* u = x + layout.tool;
     M3 dRb, dRu;
     ceres::AngleAxisToRotationMatrix(b, dRb.data());  // column-major, as Eigen stores
     ceres::AngleAxisToRotationMatrix(u, dRu.data());
@@ -86,14 +99,21 @@ struct MeasurementCost {
     const M3 Ru = dRu * tool0.R.cast<T>();
     const V3 tu = tool0.t.cast<T>() + V3(u[3], u[4], u[5]);
     // T_meas_tool = T_meas_base * T_base_flange * T_flange_tool
-    const V3 p = Rb * (R * tu + t) + tb;
-    for (int k = 0; k < 3; ++k) residual[k] = (p[k] - T(p_meas[k])) * T(inv_sigma_p);
+    const M3 R_mt = Rb * F.R * Ru;
+    const V3 t_mt = Rb * (F.R * tu + F.t) + tb;
+    for (size_t k = 0; k < measured.size(); ++k) {
+      V3 p = t_mt;
+      if (k > 0) {
+        const T* pk = x + layout.points + 3 * (k - 1);
+        p += R_mt * (points0[k - 1].cast<T>() + V3(pk[0], pk[1], pk[2]));
+      }
+      for (int a = 0; a < 3; ++a) residual[3 * k + a] = (p[a] - T(measured[k][a])) * T(inv_sigma_p);
+    }
     if (R_meas) {
-      const M3 Rp = Rb * R * Ru;
-      const M3 E = Rp * R_meas->transpose().cast<T>();
+      const M3 E = R_mt * R_meas->transpose().cast<T>();
       T r[3];
       ceres::RotationMatrixToAngleAxis(E.data(), r);
-      for (int k = 0; k < 3; ++k) residual[3 + k] = r[k] * T(inv_sigma_r);
+      for (int a = 0; a < 3; ++a) residual[3 * measured.size() + a] = r[a] * T(inv_sigma_r);
     }
     return true;
   }
@@ -102,12 +122,19 @@ struct MeasurementCost {
 using CostFunction = ceres::DynamicAutoDiffCostFunction<MeasurementCost, 4>;
 
 std::unique_ptr<CostFunction> MakeCost(const RobotModel& robot, const Pose& base0, const RobotMeasurement& m,
-                                       const RobotCalibrationOptions& o) {
-  auto* f = new MeasurementCost{&robot,   o.error_motion_harmonics, m.q, base0, robot.T_flange_tool(), m.p_meas,
-                                m.R_meas_tool, 1.0 / o.position_sigma_m, 1.0 / o.rotation_sigma_rad};
+                                       const RobotCalibrationOptions& o, const std::vector<Vec3>& points0) {
+  const int K = m.NumPoints();
+  if (static_cast<int>(points0.size()) != K - 1)
+    Throw("robot calibration: ", m.source.empty() ? std::string("a measurement") : m.source, " has ", K,
+          " points but the body has ", points0.size() + 1);
+  std::vector<Vec3> measured{m.p_meas};
+  measured.insert(measured.end(), m.other_points.begin(), m.other_points.end());
+  auto* f = new MeasurementCost{&robot, Layout(robot, o, K), o.error_motion_harmonics, m.q,
+                                base0,  robot.T_flange_tool(), points0, measured, m.R_meas_tool,
+                                1.0 / o.position_sigma_m, 1.0 / o.rotation_sigma_rad};
   auto c = std::make_unique<CostFunction>(f);
-  c->AddParameterBlock(NumParameters(robot, o));
-  c->SetNumResiduals(m.R_meas_tool ? 6 : 3);
+  c->AddParameterBlock(f->layout.total);
+  c->SetNumResiduals(3 * K + (m.R_meas_tool ? 3 : 0));
   return c;
 }
 
@@ -115,12 +142,66 @@ std::unique_ptr<CostFunction> MakeCost(const RobotModel& robot, const Pose& base
 
 std::unique_ptr<ceres::CostFunction> MakeRobotMeasurementCost(const RobotModel& robot, const Pose& base0,
                                                                const RobotMeasurement& m,
-                                                               const RobotCalibrationOptions& options) {
-  return MakeCost(robot, base0, m, options);
+                                                               const RobotCalibrationOptions& options,
+                                                               const std::vector<Vec3>& points0) {
+  return MakeCost(robot, base0, m, options, points0);
 }
 
-int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOptions& options) {
-  return NumParameters(robot, options);
+int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOptions& options, int num_points) {
+  return Layout(robot, options, num_points).total;
+}
+
+bool GlobMatch(const std::string& pattern, const std::string& name) {
+  // Iterative matcher with backtracking to the last '*'.
+  size_t p = 0, n = 0, star = std::string::npos, mark = 0;
+  const auto ClassEnd = [&](size_t at) {
+    size_t e = at + 1;
+    if (e < pattern.size() && (pattern[e] == '!' || pattern[e] == '^')) ++e;
+    if (e < pattern.size() && pattern[e] == ']') ++e;
+    while (e < pattern.size() && pattern[e] != ']') ++e;
+    return e;  // at ']' or pattern.size()
+  };
+  const auto InClass = [&](size_t at, char c) {
+    size_t i = at + 1;
+    bool negate = false;
+    if (i < pattern.size() && (pattern[i] == '!' || pattern[i] == '^')) negate = true, ++i;
+    bool hit = false;
+    const size_t end = ClassEnd(at);
+    for (bool first = true; i < end; first = false) {
+      if (pattern[i] == ']' && !first) break;
+      if (i + 2 < end && pattern[i + 1] == '-') {
+        hit |= c >= pattern[i] && c <= pattern[i + 2];
+        i += 3;
+      } else {
+        hit |= c == pattern[i];
+        ++i;
+      }
+    }
+    return hit != negate;
+  };
+  while (n < name.size()) {
+    if (p < pattern.size() && pattern[p] == '*') {
+      star = p++;
+      mark = n;
+    } else if (p < pattern.size() && pattern[p] == '?') {
+      ++p, ++n;
+    } else if (p < pattern.size() && pattern[p] == '[' && ClassEnd(p) < pattern.size()) {
+      if (!InClass(p, name[n])) {
+        if (star == std::string::npos) return false;
+        p = star + 1, n = ++mark;
+        continue;
+      }
+      p = ClassEnd(p) + 1, ++n;
+    } else if (p < pattern.size() && pattern[p] == name[n]) {
+      ++p, ++n;
+    } else if (star != std::string::npos) {
+      p = star + 1, n = ++mark;
+    } else {
+      return false;
+    }
+  }
+  while (p < pattern.size() && pattern[p] == '*') ++p;
+  return p == pattern.size();
 }
 
 void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
@@ -185,20 +266,21 @@ void Evaluate(const std::vector<std::unique_ptr<CostFunction>>& costs, const Eig
   }
 }
 
-// Priority order of the identifiability analysis: base, tool, the joints' DH errors, then
-// the error-motion harmonics (so a harmonic term that duplicates the geometry is the one held).
-std::vector<int> PriorityOrder(const RobotModel& robot, int num_parameters) {
+// Priority order of the identifiability analysis: base, tool, the points of a rigid body,
+// the joints' geometric errors, then the error-motion harmonics (so a harmonic term that
+// duplicates the geometry is the one held).
+std::vector<int> PriorityOrder(const Layout& L) {
   std::vector<int> order;
-  for (int k = 0; k < kBaseAndTool; ++k) order.push_back(BaseOffset(robot) + k);
-  for (int k = 0; k < BaseOffset(robot); ++k) order.push_back(k);
-  for (int k = ErrorMotionOffset(robot); k < num_parameters; ++k) order.push_back(k);
+  for (int k = L.base; k < L.error_motion; ++k) order.push_back(k);
+  for (int k = 0; k < L.base; ++k) order.push_back(k);
+  for (int k = L.error_motion; k < L.total; ++k) order.push_back(k);
   return order;
 }
 
 // Runs the analysis in priority order on a parameter list whose requested fixes are set.
-void AnalyzeInPriorityOrder(const RobotModel& robot, const Eigen::MatrixXd& J, double tol,
+void AnalyzeInPriorityOrder(const Layout& L, const Eigen::MatrixXd& J, double tol,
                             std::vector<CalibrationParameter>* params) {
-  const std::vector<int> order = PriorityOrder(robot, static_cast<int>(J.cols()));
+  const std::vector<int> order = PriorityOrder(L);
   Eigen::MatrixXd Jp(J.rows(), J.cols());
   std::vector<std::string> names;
   std::vector<CalibrationParameter> permuted;
@@ -225,37 +307,37 @@ void CheckMeasurements(const RobotModel& robot, const std::vector<RobotMeasureme
     if (!robot.WithinLimits(m.q, &why))
       Throw(who, ": measurement ", i + 1, at, ": ", why, "; remove the measurement or correct the joint limits");
     if (!m.p_meas.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite position");
+    for (const Vec3& p : m.other_points)
+      if (!p.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite point");
+    if (m.NumPoints() != ms[0].NumPoints())
+      Throw(who, ": measurement ", i + 1, at, " has ", m.NumPoints(), " points but measurement 1 has ",
+            ms[0].NumPoints(), "; every measurement measures the same points");
     if (m.R_meas_tool.has_value() != six)
       Throw(who, ": measurement ", i + 1, " is ", m.R_meas_tool ? "6-D" : "3-D", " but measurement 1 is ",
             six ? "6-D" : "3-D", "; give orientations for all measurements or for none");
   }
 }
 
-Pose ParsePoseNode(const YAML::Node& n, const std::string& where) {
-  for (const char* k : {"x", "y", "z", "qw", "qx", "qy", "qz"})
-    if (!n[k]) Throw(where, ": pose is missing '", k, "'");
-  const Eigen::Quaterniond q(n["qw"].as<double>(), n["qx"].as<double>(), n["qy"].as<double>(),
-                             n["qz"].as<double>());
-  if (std::abs(q.norm() - 1.0) > 1e-3) Throw(where, ": pose quaternion has norm ", q.norm(), ", expected 1");
-  return Pose::FromQuaternion(q.normalized(), Vec3(n["x"].as<double>(), n["y"].as<double>(), n["z"].as<double>()));
-}
-
-std::vector<double> ReadList(const YAML::Node& n, const std::string& where) {
-  if (!n.IsSequence()) Throw(where, " must be a list of numbers");
-  std::vector<double> v;
-  for (const auto& e : n) {
-    const double d = e.as<double>();
-    if (!std::isfinite(d)) Throw(where, " has a non-finite number");
-    v.push_back(d);
+// Where points 2..K of a rigid body start in the tool frame: their mean offset from point 1
+// over the measurements, turned into the tool frame the nominal model and the starting
+// registration give.
+std::vector<Vec3> StartingPoints(const RobotModel& robot, const Pose& T_meas_base,
+                                 const std::vector<RobotMeasurement>& ms) {
+  const int K = NumPointsOf(ms);
+  std::vector<Vec3> p(K - 1, Vec3::Zero());
+  for (const auto& m : ms) {
+    const Mat3 R_meas_tool = T_meas_base.R * robot.T_base_tool(m.q).R;
+    for (int k = 1; k < K; ++k) p[k - 1] += R_meas_tool.transpose() * (m.other_points[k - 1] - m.p_meas);
   }
-  return v;
+  for (auto& v : p) v /= static_cast<double>(ms.size());
+  return p;
 }
 
 // Whitened Jacobian rows of hypothetical measurements at the given poses (measured values
 // are the model's own predictions: only the Jacobian matters), over all parameters.
 Eigen::MatrixXd PoseJacobian(const RobotModel& robot, const Pose& T_meas_base,
                              const std::vector<Eigen::VectorXd>& poses, bool six_dof,
-                             const RobotCalibrationOptions& options) {
+                             const RobotCalibrationOptions& options, const std::vector<Vec3>& points0 = {}) {
   std::vector<std::unique_ptr<CostFunction>> costs;
   for (size_t i = 0; i < poses.size(); ++i) {
     std::string why;
@@ -264,12 +346,13 @@ Eigen::MatrixXd PoseJacobian(const RobotModel& robot, const Pose& T_meas_base,
     m.q = poses[i];
     const Pose T = T_meas_base * robot.T_base_tool(m.q);
     m.p_meas = T.t;
+    for (const Vec3& p : points0) m.other_points.push_back(T * p);
     if (six_dof) m.R_meas_tool = T.R;
-    costs.push_back(MakeCost(robot, T_meas_base, m, options));
+    costs.push_back(MakeCost(robot, T_meas_base, m, options, points0));
   }
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
-  Evaluate(costs, Eigen::VectorXd::Zero(NumParameters(robot, options)), &r, &J);
+  Evaluate(costs, Eigen::VectorXd::Zero(Layout(robot, options, 1 + points0.size()).total), &r, &J);
   return J;
 }
 
@@ -278,7 +361,8 @@ Eigen::MatrixXd PoseJacobian(const RobotModel& robot, const Pose& T_meas_base,
 // the redundancies that hold for any pose set.
 std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& robot, const Pose& T_meas_base,
                                                            bool six_dof, const RobotCalibrationOptions& options,
-                                                           const RobotCalibrationResult& requested) {
+                                                           const RobotCalibrationResult& requested,
+                                                           const std::vector<Vec3>& points0) {
   Rng rng(20260101);
   std::vector<Eigen::VectorXd> poses;
   for (int k = 0; k < 60; ++k) {
@@ -290,14 +374,14 @@ std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& rob
     }
     poses.push_back(q);
   }
-  const Eigen::MatrixXd J = PoseJacobian(robot, T_meas_base, poses, six_dof, options);
+  const Eigen::MatrixXd J = PoseJacobian(robot, T_meas_base, poses, six_dof, options, points0);
   std::vector<CalibrationParameter> params = requested.parameters;
   for (auto& p : params)
-    if (p.reason != "fixed by request" && p.reason.rfind("DH parameters not estimated", 0) != 0) {
+    if (!p.requested) {
       p.fixed = false;
       p.reason.clear();
     }
-  AnalyzeInPriorityOrder(robot, J, options.identifiability_tolerance, &params);
+  AnalyzeInPriorityOrder(Layout(robot, options, 1 + points0.size()), J, options.identifiability_tolerance, &params);
   return params;
 }
 
@@ -325,25 +409,24 @@ std::vector<const CalibrationParameter*> RobotCalibrationResult::Fixed() const {
   return f;
 }
 
-std::vector<std::string> CalibrationParameterNames(const RobotModel& robot, const RobotCalibrationOptions& options) {
-  std::vector<std::string> names;
-  std::vector<std::string> joint;
-  for (int i = 0; i < robot.NumJoints(); ++i) {
-    std::ostringstream s;
-    if (robot.Joints()[i].name.empty()) s << 'J' << i + 1;
-    else s << robot.Joints()[i].name;
-    joint.push_back(s.str());
-  }
-  auto joint_name = [&](int i) { return joint[i]; };
-  for (int i = 0; i < robot.NumJoints(); ++i)
-    for (const char* p : {".theta_offset", ".d", ".a", ".alpha"}) names.push_back(joint_name(i) + p);
+std::vector<std::string> CalibrationParameterNames(const RobotModel& robot, const RobotCalibrationOptions& options,
+                                                   int num_points) {
+  std::vector<std::string> names = GeometryParameterNames(robot);
   for (const char* f : {"base", "tool"})
     for (const char* c : {".rx", ".ry", ".rz", ".x", ".y", ".z"}) names.push_back(std::string(f) + c);
-  for (int i = 0; i < robot.NumJoints(); ++i)
+  for (int k = 2; k <= num_points; ++k)
+    for (const char* c : {".x", ".y", ".z"}) names.push_back("point" + std::to_string(k) + c);
+  for (int i = 0; i < robot.NumJoints(); ++i) {
+    std::string joint = robot.Joints()[i].name;
+    if (joint.empty()) {
+      joint = std::to_string(i + 1);  // (GCC 12 -Wrestrict misfires on "J" + ...)
+      joint.insert(joint.begin(), 'J');
+    }
     for (int h = 1; h <= HarmonicsOf(options, i); ++h)
       for (const char* sc : {".sin.", ".cos."})
         for (const char* c : {"rx", "ry", "rz", "x", "y", "z"})
-          names.push_back(joint_name(i) + ".em" + std::to_string(h) + sc + c);
+          names.push_back(joint + ".em" + std::to_string(h) + sc + c);
+  }
   return names;
 }
 
@@ -374,28 +457,17 @@ RobotModel WithErrorMotionErrors(const RobotModel& robot, const std::vector<int>
   return robot.WithJoints(joints);
 }
 
-RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta) {
-  if (delta.size() != kParamsPerJoint * robot.NumJoints())
-    Throw("WithDhErrors: ", delta.size(), " DH errors given, robot '", robot.Name(), "' needs ",
-          kParamsPerJoint * robot.NumJoints());
-  std::vector<Joint> joints = robot.Joints();
-  for (size_t i = 0; i < joints.size(); ++i) {
-    joints[i].theta_offset += delta[4 * i];
-    joints[i].d += delta[4 * i + 1];
-    joints[i].a += delta[4 * i + 2];
-    joints[i].alpha += delta[4 * i + 3];
-  }
-  return robot.WithJoints(joints);
-}
-
 std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_meas_base,
-                                        const std::vector<RobotMeasurement>& measurements) {
+                                        const std::vector<RobotMeasurement>& measurements,
+                                        const std::vector<Vec3>& points_tool) {
   CheckMeasurements(robot, measurements, "PredictionErrors");
   std::vector<PoseError> e;
   for (const auto& m : measurements) {
     const Pose T = T_meas_base * robot.T_base_tool(m.q);
     PoseError pe;
     pe.dp = T.t - m.p_meas;
+    for (size_t k = 0; k < m.other_points.size() && k < points_tool.size(); ++k)
+      pe.other_dp.push_back(T * points_tool[k] - m.other_points[k]);
     if (m.R_meas_tool) pe.rotation_rad = RotationAngle(*m.R_meas_tool, T.R);
     e.push_back(pe);
   }
@@ -430,6 +502,21 @@ ErrorStats Summarize(const std::vector<PoseError>& errors) {
   return s;
 }
 
+ErrorStats SummarizePoint(const std::vector<PoseError>& errors, int k, const std::vector<int>& rows) {
+  std::vector<PoseError> one;
+  const auto Add = [&](const PoseError& e) {
+    if (k > 0 && k - 1 >= static_cast<int>(e.other_dp.size())) return;
+    PoseError p;
+    p.dp = e.Point(k);
+    one.push_back(p);
+  };
+  if (rows.empty())
+    for (const auto& e : errors) Add(e);
+  else
+    for (int i : rows) Add(errors.at(i));
+  return Summarize(one);
+}
+
 Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements) {
   CheckMeasurements(robot, measurements, "robot calibration (starting registration)");
   const int n = static_cast<int>(measurements.size());
@@ -461,11 +548,12 @@ Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasuremen
   return T;
 }
 
-RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_meas_base_guess,
+RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_meas_base_guess,
                                       const std::vector<RobotMeasurement>& measurements,
                                       const RobotCalibrationOptions& options) {
   std::string why;
   if (!options.IsValid(&why)) Throw("robot calibration options: ", why);
+  RobotModel robot = robot_in;  // its tool becomes the registered one below
   CheckMeasurements(robot, measurements, "robot calibration");
   if (!options.error_motion_harmonics.empty()) {
     if (static_cast<int>(options.error_motion_harmonics.size()) != robot.NumJoints())
@@ -476,47 +564,85 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
         Throw("robot calibration: error_motion_harmonics asks for harmonics of joint ", i + 1,
               ", which is prismatic; error motion is for revolute joints (give 0 for it)");
   }
-  const int np = NumParameters(robot, options);
-  const std::vector<std::string> names = CalibrationParameterNames(robot, options);
+  const int K = NumPointsOf(measurements);
+  const Layout L(robot, options, K);
+  const int np = L.total;
+  const std::vector<std::string> names = CalibrationParameterNames(robot, options, K);
+  const bool six = measurements[0].R_meas_tool.has_value();
 
   RobotCalibrationResult result;
   result.parameters.resize(np);
   for (int k = 0; k < np; ++k) {
     result.parameters[k].name = names[k];
-    result.parameters[k].angle = IsAngle(robot, k);
+    result.parameters[k].angle = IsAngle(robot, L, k);
   }
+  const auto Hold = [&](int k, const std::string& reason) {
+    auto& p = result.parameters[k];
+    if (p.fixed) return;
+    p.fixed = true;
+    p.requested = true;
+    p.reason = reason;
+  };
   for (const std::string& f : options.fixed) {
     const auto it = std::find(names.begin(), names.end(), f);
     if (it == names.end())
       Throw("robot calibration: fixed parameter '", f, "' is not one of the ", np, " parameters of robot '",
             robot.Name(), "' (names like ", names[0], ", base.x, tool.rz)");
-    auto& p = result.parameters[it - names.begin()];
-    p.fixed = true;
-    p.reason = "fixed by request";
+    Hold(static_cast<int>(it - names.begin()), "fixed by request");
+  }
+  for (const std::string& pattern : options.estimate_only) {
+    bool any = false;
+    for (int k = 0; k < np; ++k) any |= (L.IsGeometry(k) || L.IsErrorMotion(k)) && GlobMatch(pattern, names[k]);
+    if (!any)
+      Throw("robot calibration: --estimate '", pattern, "' matches none of the geometric parameters of robot '",
+            robot.Name(), "' (names like ", names[0], ", ", names[std::min<int>(1, np - 1)], ")");
   }
   for (int k = 0; k < np; ++k) {
-    auto& p = result.parameters[k];
-    const bool dh = k < BaseOffset(robot) || k >= ErrorMotionOffset(robot), base = k >= BaseOffset(robot) && k < ToolOffset(robot),
-               tool = k >= ToolOffset(robot) && k < ErrorMotionOffset(robot);
-    if (p.fixed) continue;
-    if ((dh && !options.estimate_dh) || (base && !options.estimate_base) || (tool && !options.estimate_tool)) {
-      p.fixed = true;
-      p.reason = dh ? "DH parameters not estimated (registration only)" : "fixed by request";
+    const bool model = L.IsGeometry(k) || L.IsErrorMotion(k);
+    if (model && !options.estimate_dh) Hold(k, "geometry not estimated (registration only)");
+    if (L.IsBase(k) && !options.estimate_base) Hold(k, "fixed by request");
+    if ((L.IsTool(k) || L.IsPoint(k)) && !options.estimate_tool) Hold(k, "fixed by request");
+    if (model && !options.estimate_only.empty()) {
+      bool match = false;
+      for (const std::string& pattern : options.estimate_only) match |= GlobMatch(pattern, names[k]);
+      if (!match) Hold(k, "not among the estimated parameters (--estimate)");
     }
+    // Points measured without an orientation: the points' own offsets carry the tool's rotation.
+    if (K > 1 && !six && L.IsTool(k) && k - L.tool < 3)
+      Hold(k, "the points' offsets in the tool frame carry the tool's rotation (points measured, no orientation)");
   }
 
+  Pose base0 = T_meas_base_guess;
+  std::vector<Vec3> points0 = StartingPoints(robot, base0, measurements);
+  const std::vector<Vec3> points_guess = points0;
+  // The registration first, with the geometry nominal: the geometry's identifiability is
+  // judged, and its solve started, where the nominal model fits the data, not at a starting
+  // guess (a tool point there may sit on a joint's axis and hide that joint's terms).
+  bool geometry_free = false;
+  for (int k = 0; k < np; ++k) geometry_free |= (L.IsGeometry(k) || L.IsErrorMotion(k)) && !result.parameters[k].fixed;
+  if (geometry_free && (options.estimate_base || options.estimate_tool)) {
+    RobotCalibrationOptions reg = options;
+    reg.estimate_dh = false;
+    reg.error_motion_harmonics.clear();
+    reg.estimate_only.clear();
+    reg.progress = nullptr;
+    const RobotCalibrationResult first = CalibrateRobot(robot, base0, measurements, reg);
+    base0 = first.T_meas_base;
+    robot.SetT_flange_tool(first.robot.T_flange_tool());
+    points0 = first.points_tool;
+  }
   std::vector<std::unique_ptr<CostFunction>> costs;
-  for (const auto& m : measurements) costs.push_back(MakeCost(robot, T_meas_base_guess, m, options));
+  for (const auto& m : measurements) costs.push_back(MakeCost(robot, base0, m, options, points0));
   Eigen::VectorXd x = Eigen::VectorXd::Zero(np);
   Eigen::VectorXd r;
   Eigen::MatrixXd J;
   Evaluate(costs, x, &r, &J);
-  AnalyzeInPriorityOrder(robot, J, options.identifiability_tolerance, &result.parameters);
+  AnalyzeInPriorityOrder(L, J, options.identifiability_tolerance, &result.parameters);
 
   std::vector<int> free, held;
   for (int k = 0; k < np; ++k) (result.parameters[k].fixed ? held : free).push_back(k);
   const int nr = static_cast<int>(r.size());
-  const int dim = measurements[0].R_meas_tool ? 6 : 3;
+  const int dim = 3 * K + (six ? 3 : 0);
   if (free.empty())
     Throw("robot calibration: every parameter is fixed; nothing to identify (allow DH, base or tool estimation)");
   if (nr <= static_cast<int>(free.size()))
@@ -528,7 +654,7 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
     // The same analysis on well-spread poses tells structural redundancies (fixed there
     // too) from ones this pose set causes.
     const std::vector<CalibrationParameter> reference =
-        ReferenceIdentifiability(robot, T_meas_base_guess, measurements[0].R_meas_tool.has_value(), options, result);
+        ReferenceIdentifiability(robot, base0, six, options, result, points0);
     std::vector<std::string> weak;
     for (int k = 0; k < np; ++k)
       if (result.parameters[k].fixed && !reference[k].fixed) weak.push_back(names[k]);
@@ -542,7 +668,8 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
         double lo = measurements[0].q[i], hi = lo;
         for (const auto& m : measurements) lo = std::min(lo, m.q[i]), hi = std::max(hi, m.q[i]);
         const bool rev = robot.Joints()[i].type == JointType::kRevolute;
-        s << (i ? ", " : " ") << names[kParamsPerJoint * i].substr(0, names[kParamsPerJoint * i].find('.')) << " "
+        const std::string& jn = names[robot.GeometryParamsPerJoint() * i];
+        s << (i ? ", " : " ") << jn.substr(0, jn.find('.')) << " "
           << std::fixed << std::setprecision(rev ? 1 : 4) << (rev ? (hi - lo) * 180.0 / kPi : hi - lo)
           << (rev ? " deg" : " m");
       }
@@ -610,16 +737,16 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot, const Pose& T_mea
     }
 
   // Calibrated model and registration.
-  RobotModel calibrated = WithErrorMotionErrors(WithDhErrors(robot, x.head(BaseOffset(robot))),
-                                                options.error_motion_harmonics,
-                                                x.tail(np - ErrorMotionOffset(robot)));
-  const Vec3 ub = x.segment<3>(BaseOffset(robot)), tb = x.segment<3>(BaseOffset(robot) + 3);
-  const Vec3 uu = x.segment<3>(ToolOffset(robot)), tu = x.segment<3>(ToolOffset(robot) + 3);
-  result.T_meas_base = Pose{ExpSO3(ub) * T_meas_base_guess.R, T_meas_base_guess.t + tb};
+  RobotModel calibrated = WithErrorMotionErrors(WithGeometryErrors(robot, x.head(L.base)),
+                                                options.error_motion_harmonics, x.tail(np - L.error_motion));
+  const Vec3 ub = x.segment<3>(L.base), tb = x.segment<3>(L.base + 3);
+  const Vec3 uu = x.segment<3>(L.tool), tu = x.segment<3>(L.tool + 3);
+  result.T_meas_base = Pose{ExpSO3(ub) * base0.R, base0.t + tb};
   calibrated.SetT_flange_tool(Pose{ExpSO3(uu) * robot.T_flange_tool().R, robot.T_flange_tool().t + tu});
   result.robot = calibrated;
-  result.errors_before = PredictionErrors(robot, T_meas_base_guess, measurements);
-  result.errors_after = PredictionErrors(result.robot, result.T_meas_base, measurements);
+  for (int k = 1; k < K; ++k) result.points_tool.push_back(points0[k - 1] + x.segment<3>(L.points + 3 * (k - 1)));
+  result.errors_before = PredictionErrors(robot_in, T_meas_base_guess, measurements, points_guess);
+  result.errors_after = PredictionErrors(result.robot, result.T_meas_base, measurements, result.points_tool);
   return result;
 }
 
@@ -651,8 +778,8 @@ CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_b
     }
     const RobotCalibrationResult c = CalibrateRobot(robot, T_meas_base_guess, train, cal);
     const RobotCalibrationResult b = CalibrateRobot(robot, T_meas_base_guess, train, reg);
-    const auto ec = PredictionErrors(c.robot, c.T_meas_base, test);
-    const auto eb = PredictionErrors(b.robot, b.T_meas_base, test);
+    const auto ec = PredictionErrors(c.robot, c.T_meas_base, test, c.points_tool);
+    const auto eb = PredictionErrors(b.robot, b.T_meas_base, test, b.points_tool);
     for (size_t k = 0; k < test_index.size(); ++k) {
       cv.calibrated[test_index[k]] = ec[k];
       cv.nominal[test_index[k]] = eb[k];
@@ -666,16 +793,24 @@ namespace {
 std::vector<int> KeptColumns(const RobotModel& robot, const Eigen::MatrixXd& J, const RobotCalibrationOptions& o) {
   std::vector<CalibrationParameter> params(J.cols());
   const auto names = CalibrationParameterNames(robot, o);
+  const Layout L(robot, o, 1);
   for (size_t k = 0; k < params.size(); ++k) {
     params[k].name = names[k];
-    params[k].angle = IsAngle(robot, static_cast<int>(k));
+    params[k].angle = IsAngle(robot, L, static_cast<int>(k));
   }
   for (const auto& f : o.fixed)
     for (auto& p : params)
       if (p.name == f) p.fixed = true;
-  for (int k = 0; k < static_cast<int>(params.size()); ++k)
-    if (!o.estimate_dh && (k < BaseOffset(robot) || k >= ErrorMotionOffset(robot))) params[k].fixed = true;
-  AnalyzeInPriorityOrder(robot, J, o.identifiability_tolerance, &params);
+  for (int k = 0; k < static_cast<int>(params.size()); ++k) {
+    const bool model = L.IsGeometry(k) || L.IsErrorMotion(k);
+    if (model && !o.estimate_dh) params[k].fixed = true;
+    if (model && !o.estimate_only.empty()) {
+      bool match = false;
+      for (const std::string& pattern : o.estimate_only) match |= GlobMatch(pattern, names[k]);
+      if (!match) params[k].fixed = true;
+    }
+  }
+  AnalyzeInPriorityOrder(L, J, o.identifiability_tolerance, &params);
   std::vector<int> kept;
   for (size_t k = 0; k < params.size(); ++k)
     if (!params[k].fixed) kept.push_back(static_cast<int>(k));
@@ -743,99 +878,6 @@ std::vector<int> SelectPoses(const RobotModel& robot, const Pose& T_meas_base,
     M += Jb.transpose() * Jb;
   }
   return chosen;
-}
-
-std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path& path) {
-  const std::string source = "measurement file " + path.string();
-  YAML::Node root;
-  try {
-    root = YAML::Load(ReadTextFile(path));
-  } catch (const YAML::Exception& e) {
-    Throw(source, ": not valid YAML: ", e.what());
-  }
-  std::vector<RobotMeasurement> out;
-  try {
-    if (root.IsMap() && root["measurements"]) {
-      const YAML::Node list = root["measurements"];
-      if (!list.IsSequence() || list.size() == 0) Throw(source, ": 'measurements' must be a non-empty list");
-      for (size_t i = 0; i < list.size(); ++i) {
-        const YAML::Node e = list[i];
-        const std::string where = source + " measurement " + std::to_string(i + 1) + " (line " +
-                                  std::to_string(e.Mark().line + 1) + ")";
-        RobotMeasurement m;
-        std::vector<double> q;
-        if (e["q_rad"]) {
-          q = ReadList(e["q_rad"], where + " q_rad");
-        } else if (e["q_deg"]) {
-          q = ReadList(e["q_deg"], where + " q_deg");
-          for (double& v : q) v *= kPi / 180.0;
-        } else {
-          Throw(where, ": missing 'q_rad' (or 'q_deg'), the joint values");
-        }
-        m.q = Eigen::Map<Eigen::VectorXd>(q.data(), static_cast<int>(q.size()));
-        if (!e["position_m"]) Throw(where, ": missing 'position_m' [x, y, z]");
-        const auto p = ReadList(e["position_m"], where + " position_m");
-        if (p.size() != 3) Throw(where, ": position_m must have 3 numbers, has ", p.size());
-        m.p_meas = Vec3(p[0], p[1], p[2]);
-        if (e["quaternion_wxyz"]) {
-          const auto v = ReadList(e["quaternion_wxyz"], where + " quaternion_wxyz");
-          if (v.size() != 4) Throw(where, ": quaternion_wxyz must have 4 numbers");
-          const Eigen::Quaterniond qq(v[0], v[1], v[2], v[3]);
-          if (std::abs(qq.norm() - 1.0) > 1e-3) Throw(where, ": quaternion_wxyz has norm ", qq.norm(), ", expected 1");
-          m.R_meas_tool = qq.normalized().toRotationMatrix();
-        }
-        m.source = where;
-        out.push_back(m);
-      }
-    } else if (root.IsMap() && root.size() > 0) {
-      for (const auto& kv : root) {
-        const std::string where = source + " entry '" + kv.first.as<std::string>() + "' (line " +
-                                  std::to_string(kv.first.Mark().line + 1) + ")";
-        const YAML::Node e = kv.second;
-        if (!e.IsMap() || !e["pose"] || !e["target_joints"])
-          Throw(where, ": expected 'pose' and 'target_joints' (industrial_calibration layout) or a top-level "
-                       "'measurements' list (mcms layout)");
-        if (e["camera_joints"] && e["camera_joints"].size() > 0)
-          Throw(where, ": camera_joints is not empty; only a static measuring system is supported");
-        const auto q = ReadList(e["target_joints"], where + " target_joints");
-        RobotMeasurement m;
-        m.q = Eigen::Map<const Eigen::VectorXd>(q.data(), static_cast<int>(q.size()));
-        const Pose T = ParsePoseNode(e["pose"], where);
-        m.p_meas = T.t;
-        m.R_meas_tool = T.R;
-        m.source = where;
-        out.push_back(m);
-      }
-    } else {
-      Throw(source, ": expected a 'measurements' list or a map of industrial_calibration measurements");
-    }
-  } catch (const YAML::Exception& e) {
-    Throw(source, ": ", e.what());
-  }
-  return out;
-}
-
-void WriteRobotMeasurements(const std::filesystem::path& path, const std::vector<RobotMeasurement>& ms) {
-  YAML::Emitter out;
-  out.SetDoublePrecision(17);
-  out << YAML::BeginMap << YAML::Key << "measurements" << YAML::Value << YAML::BeginSeq;
-  for (const auto& m : ms) {
-    out << YAML::Flow << YAML::BeginMap;
-    out << YAML::Key << "q_rad" << YAML::Value << YAML::Flow
-        << std::vector<double>(m.q.data(), m.q.data() + m.q.size());
-    out << YAML::Key << "position_m" << YAML::Value << YAML::Flow
-        << std::vector<double>{m.p_meas.x(), m.p_meas.y(), m.p_meas.z()};
-    if (m.R_meas_tool) {
-      Eigen::Quaterniond q(*m.R_meas_tool);
-      if (q.w() < 0) q.coeffs() *= -1.0;
-      out << YAML::Key << "quaternion_wxyz" << YAML::Value << YAML::Flow
-          << std::vector<double>{q.w(), q.x(), q.y(), q.z()};
-    }
-    out << YAML::EndMap;
-  }
-  out << YAML::EndSeq << YAML::EndMap;
-  const std::string text = std::string(out.c_str()) + "\n";
-  WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
 }
 
 }  // namespace mcms

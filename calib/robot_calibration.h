@@ -11,12 +11,18 @@
 // and a measurement is the measured position p_meas of the tool (target) origin and,
 // for 6-D measurements, its orientation R_meas_tool.
 //
+// A measurement of K >= 3 points of one rigid body (calib/robot_measurements.h) predicts
+// each: point 1 at the tool origin, point k at T_flange_tool * p_k with p_k unknown.
+//
 // Parameter vector (SI: rad and m), in this order; `CalibrationParameterNames` gives the
-// names used in reports and in RobotCalibrationOptions::fixed:
-//   per joint i (name J):  J.theta_offset, J.d, J.a, J.alpha      (errors added to the DH table)
+// names used in reports and in RobotCalibrationOptions::fixed / estimate_only:
+//   per joint i (name J): the geometric error model of model/joint.h:
+//          DH   J.theta_offset, J.d, J.a, J.alpha      (errors added to the DH table)
+//          URDF J.offset, J.x, J.y, J.z, J.rx, J.ry, J.rz  (zero offset, placement error)
 //   base:  base.rx, base.ry, base.rz (rotation, left perturbation in the meas frame:
 //          R = Exp(r) R_hat), base.x, base.y, base.z (translation in the meas frame)
 //   tool:  tool.rx, tool.ry, tool.rz (R = Exp(r) R_hat in the flange frame), tool.x, tool.y, tool.z
+//   points 2..K of a rigid body: point<k>.x, .y, .z (errors of p_k in the tool frame)
 //   then, for each joint i with RobotCalibrationOptions::error_motion_harmonics[i] = H > 0,
 //   for h = 1..H: J.em<h>.sin.{rx,ry,rz,x,y,z}, J.em<h>.cos.{rx,ry,rz,x,y,z}
 //          (errors added to the joint's error motion, model/robot_model.h: a model
@@ -25,7 +31,9 @@
 //
 // Identifiability: the Jacobian of the whitened residuals w.r.t. all parameters is
 // evaluated at the starting values, each column scaled to unit norm, and the columns are
-// taken greedily in a fixed priority order (base, tool, then the joints from the base out);
+// taken greedily in a fixed priority order (base, tool, points, then the joints from the
+// base out; a rank-revealing QR in that order, as FIGAROH and Khalil reduce to the base
+// parameters);
 // a column whose distance from the span of the columns already taken is below
 // `identifiability_tolerance` is held at its starting value, and the report names the
 // kept parameters it is (numerically) a combination of. With the base and the tool first,
@@ -43,37 +51,15 @@
 
 #include <Eigen/Core>
 
-#include "model/robot_model.h"
+#include "calib/robot_measurements.h"
 #include "core/pose_math.h"
+#include "model/robot_model.h"
 
 namespace ceres {
 class CostFunction;
 }
 
 namespace mcms {
-
-// One measurement: joint values and the measured tool (target) position in the meas frame,
-// with the measured orientation for 6-D measurements.
-struct RobotMeasurement {
-  Eigen::VectorXd q;
-  Vec3 p_meas = Vec3::Zero();
-  std::optional<Mat3> R_meas_tool;
-  // Where it came from, for error messages ("file.yaml measurement 5 (line 23)"); empty
-  // for measurements made in code.
-  std::string source;
-};
-
-// Measurement files (YAML). Two layouts are read:
-//  (1) mcms:   measurements:
-//                - {q_rad: [..] | q_deg: [..], position_m: [x, y, z],
-//                   quaternion_wxyz: [w, x, y, z]   (optional: 6-D measurement)}
-//  (2) ROS-Industrial industrial_calibration's kinematic measurements: a map of
-//      id -> {camera_joints: [], target_joints: [..], pose: {x, y, z, qw, qx, qy, qz}}
-//      (the pose is T_camera_target; the target chain is the robot; camera_joints must be empty).
-// InputError naming the file, the entry and the field on bad input.
-std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path& path);
-// Writes layout (1), atomically, 17 significant digits.
-void WriteRobotMeasurements(const std::filesystem::path& path, const std::vector<RobotMeasurement>& m);
 
 struct RobotCalibrationOptions {
   // One standard deviation of the measurement noise per axis: position (m) and
@@ -90,6 +76,10 @@ struct RobotCalibrationOptions {
   bool estimate_tool = true;
   // Parameter names (see the header comment) held at their starting value by request.
   std::vector<std::string> fixed;
+  // When not empty: only the geometric and error-motion parameters whose names match one of
+  // these patterns (shell globs: "arm_[2-6]_joint.offset", "*.offset") are estimated, with
+  // the registration (base, tool, points); the others are held at their starting value.
+  std::vector<std::string> estimate_only;
   // Relative distance (0..1) of a scaled Jacobian column from the span of the columns
   // kept before it below which the parameter counts as not identifiable.
   double identifiability_tolerance = 1e-6;
@@ -107,12 +97,16 @@ struct RobotCalibrationOptions {
   bool IsValid(std::string* why) const;
 };
 
+// Whether `name` matches the shell glob `pattern` (*, ?, [..]).
+bool GlobMatch(const std::string& pattern, const std::string& name);
+
 struct CalibrationParameter {
   std::string name;
   double initial = 0.0;   // starting value of the error parameter (0 for the DH errors)
   double estimate = 0.0;  // identified value (= initial when fixed)
   double sigma = 0.0;     // standard deviation (0 when fixed)
   bool fixed = false;
+  bool requested = false; // fixed by request (fixed, estimate_only, registration only), not by the analysis
   bool angle = false;     // rad (an angle) or m (a length): how reports print it
   std::string reason;     // why it was fixed; empty when estimated
 };
@@ -124,9 +118,12 @@ struct CorrelatedPair {
 
 // Prediction error of one measurement: predicted minus measured, in the meas frame.
 struct PoseError {
-  Vec3 dp = Vec3::Zero();                 // m
+  Vec3 dp = Vec3::Zero();                 // m, point 1
+  std::vector<Vec3> other_dp;             // m, points 2..K of a rigid body
   std::optional<double> rotation_rad;     // angle of R_pred R_meas^T (6-D only)
   double position() const { return dp.norm(); }
+  // Point k (0-based).
+  const Vec3& Point(int k) const { return k == 0 ? dp : other_dp[k - 1]; }
 };
 
 struct ErrorStats {
@@ -134,10 +131,13 @@ struct ErrorStats {
   std::optional<double> mean_rotation_rad, rms_rotation_rad, max_rotation_rad;
 };
 ErrorStats Summarize(const std::vector<PoseError>& errors);
+// The same for point k (0-based) of a rigid body, over the rows `rows` (empty: all).
+ErrorStats SummarizePoint(const std::vector<PoseError>& errors, int k, const std::vector<int>& rows = {});
 
 struct RobotCalibrationResult {
   RobotModel robot;       // calibrated DH table and tool
   Pose T_meas_base;       // calibrated registration
+  std::vector<Vec3> points_tool;  // points 2..K of the rigid body in the tool frame (empty: one point)
   std::vector<CalibrationParameter> parameters;  // all of the layout, in its order
   // Covariance of the free parameters (SI), in the order of `free_parameters`.
   Eigen::MatrixXd covariance;
@@ -154,29 +154,30 @@ struct RobotCalibrationResult {
   std::vector<const CalibrationParameter*> Fixed() const;
 };
 
-// Names of the parameters in the layout order (4n + 12, plus the error-motion terms that
-// `options` asks for).
+// Names of the parameters in the layout order (the geometric parameters, 12, 3 (K - 1) for
+// K points of a rigid body, then the error-motion terms that `options` asks for).
 // The calibration's cost of one measurement: one parameter block of the layout above (all
 // parameters, errors relative to the starting values), 3 or 6 residuals whitened by the
-// options' sigmas; base0 is the starting T_meas_base, the tool starts at the robot's.
-// Exposed so that its derivatives can be checked against numeric ones.
+// options' sigmas; base0 is the starting T_meas_base, the tool starts at the robot's, the
+// points 2..K of a rigid body at points0 (tool frame). Exposed so that its derivatives can
+// be checked against numeric ones.
 std::unique_ptr<ceres::CostFunction> MakeRobotMeasurementCost(const RobotModel& robot, const Pose& base0,
                                                                const RobotMeasurement& m,
-                                                               const RobotCalibrationOptions& options);
-int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOptions& options);
+                                                               const RobotCalibrationOptions& options,
+                                                               const std::vector<Vec3>& points0 = {});
+int NumCalibrationParameters(const RobotModel& robot, const RobotCalibrationOptions& options, int num_points = 1);
 
 std::vector<std::string> CalibrationParameterNames(const RobotModel& robot,
-                                                   const RobotCalibrationOptions& options = {});
+                                                   const RobotCalibrationOptions& options = {}, int num_points = 1);
 // The model with error-motion errors added: `harmonics` as in the options, delta with
 // 12 values per harmonic (sin then cos, [rx ry rz x y z]) in joint order.
 RobotModel WithErrorMotionErrors(const RobotModel& robot, const std::vector<int>& harmonics,
                                  const Eigen::VectorXd& delta);
-// The model with DH errors added: delta has 4n values [theta_offset, d, a, alpha] per joint.
-RobotModel WithDhErrors(const RobotModel& robot, const Eigen::VectorXd& delta);
-
-// Predicted T_meas_tool for each measurement compared with the measurement.
+// Predicted T_meas_tool for each measurement compared with the measurement; for a rigid body
+// every point (points 2..K at points_tool in the tool frame).
 std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_meas_base,
-                                        const std::vector<RobotMeasurement>& measurements);
+                                        const std::vector<RobotMeasurement>& measurements,
+                                        const std::vector<Vec3>& points_tool = {});
 
 // A starting registration when none is known: the rigid transform (Umeyama/Kabsch) that
 // best maps the nominal tool positions T_base_tool(q_i).t onto the measured positions.
@@ -184,7 +185,11 @@ std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_m
 Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements);
 
 // Identifies the parameters (see the header comment). `robot` holds the nominal DH table
-// and the starting tool; `T_meas_base_guess` the starting registration.
+// and the starting tool; `T_meas_base_guess` the starting registration; the points 2..K of a
+// rigid body start where the nominal model and the first rows put them. With geometric
+// parameters to estimate, the registration (base, tool, points) is fitted first with the
+// geometry nominal, and the identifiability analysis and the solve start from there; the
+// base and tool parameters are then corrections of that registration.
 // InputError: joint counts differ from the robot's, joint values out of limits, mixed 3-D
 // and 6-D measurements, too few measurements for the free parameters, parameters that
 // these poses cannot separate but other poses would (require_pose_identifiability), or a

@@ -3,12 +3,17 @@
 #include <numbers>
 #include <chrono>
 #include <cstdio>
+#include <map>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
+#include "calib/robot_validation.h"
 #include "core/error.h"
 #include "core/io.h"
-#include "core/svg_plot.h"
 #include "core/output_folder.h"
+#include "core/svg_plot.h"
+#include "model/urdf.h"
 
 namespace mcms {
 
@@ -20,6 +25,61 @@ std::string ValueText(const CalibrationParameter& p, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, p.angle ? "%+.5f deg" : "%+.4f mm", p.angle ? v / kDeg : v * 1e3);
   return buf;
+}
+
+// Only the points `keep` (1-based) of every measurement.
+std::vector<RobotMeasurement> KeepPoints(const RobotLog& log, const std::vector<int>& keep, const char* option) {
+  std::vector<RobotMeasurement> out = log.rows;
+  if (keep.empty()) return out;
+  const int K = log.NumPoints();
+  for (int k : keep)
+    if (k < 1 || k > K)
+      Throw("calib-robot: ", option, " ", k, ": ", log.source.string(), " has ", K, K == 1 ? " point" : " points",
+            " per row; give numbers from 1 to ", K);
+  if (keep.size() == 2) Throw("calib-robot: ", option, " gives 2 points; give one point or at least 3");
+  for (auto& m : out) {
+    std::vector<Vec3> all{m.p_meas};
+    all.insert(all.end(), m.other_points.begin(), m.other_points.end());
+    m.p_meas = all[keep[0] - 1];
+    m.other_points.clear();
+    for (size_t i = 1; i < keep.size(); ++i) m.other_points.push_back(all[keep[i] - 1]);
+  }
+  return out;
+}
+
+// Rows x points errors of a model on measurements.
+std::vector<std::vector<Vec3>> ErrorRows(const std::vector<PoseError>& e) {
+  std::vector<std::vector<Vec3>> rows;
+  for (const auto& pe : e) {
+    std::vector<Vec3> r{pe.dp};
+    r.insert(r.end(), pe.other_dp.begin(), pe.other_dp.end());
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+// Per joint of a URDF: its estimated parameters with sigma, for the comment beside its <origin>.
+std::map<std::string, std::string> JointComments(const RobotModel& robot, const RobotCalibrationResult& r) {
+  std::map<std::string, std::string> c;
+  const auto names = GeometryParameterNames(robot);
+  const int s = robot.GeometryParamsPerJoint();
+  for (int j = 0; j < robot.NumJoints(); ++j) {
+    std::ostringstream o;
+    o << "mcms calib-robot: corrections folded into this origin (SI, 1 sigma):";
+    int listed = 0;
+    for (int k = 0; k < s; ++k) {
+      const CalibrationParameter& p = r.parameters[s * j + k];
+      if (p.fixed) continue;
+      char b[160];
+      std::snprintf(b, sizeof b, " %s %+.6g +- %.2g %s", names[s * j + k].substr(names[s * j + k].rfind('.') + 1).c_str(),
+                    p.estimate, p.sigma, p.angle ? "rad" : "m");
+      o << b << ";";
+      ++listed;
+    }
+    if (!listed) o << " none estimated";
+    c[robot.Joints()[j].name] = o.str();
+  }
+  return c;
 }
 }  // namespace
 
@@ -52,22 +112,49 @@ std::string ErrorStatsText(const ErrorStats& s) {
 }
 
 std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
-  if (job.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml");
+  if (job.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml (or ROBOT.urdf)");
   // Refuse outputs that are inputs, and unwritable outputs, before the solve, not after it.
+  std::vector<std::filesystem::path> inputs{job.measurements, job.robot};
+  inputs.insert(inputs.end(), job.validate.begin(), job.validate.end());
   RequireOutputsSpareInputs({{job.output, "calib-robot -o"},
                              {job.report, "calib-robot --report"},
+                             {job.json, "calib-robot --json"},
                              {job.plot, "calib-robot --plot"},
                              {job.plot.empty() ? std::filesystem::path() : JointPlotPath(job.plot), "calib-robot --plot"}},
-                            {job.measurements, job.robot});
-  RobotModel robot = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot);
+                            inputs);
+  if (job.robot.empty() && (!job.chain.base_link.empty() || !job.chain.tip_link.empty()))
+    Throw("calib-robot: --base-link and --tip-link pick a chain of a URDF robot; give it with --robot");
+  RobotModel robot = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot, job.chain);
   if (job.tool_guess) robot.SetT_flange_tool(*job.tool_guess);
   RequireWritableFile(job.output, "-o");
   if (!job.report.empty()) RequireWritableFile(job.report, "--report");
+  if (!job.json.empty()) RequireWritableFile(job.json, "--json");
   if (!job.plot.empty()) {
     RequireWritableFile(job.plot, "--plot");
     RequireWritableFile(JointPlotPath(job.plot), "--plot");
   }
-  const std::vector<RobotMeasurement> ms = ReadRobotMeasurements(job.measurements);
+  std::string out_ext = job.output.extension().string();
+  for (auto& c : out_ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const bool write_urdf = out_ext == ".urdf" || (robot.Urdf() && out_ext != ".yaml" && out_ext != ".yml");
+  const RobotLog log = ReadRobotLog(job.measurements, robot);
+  const std::vector<RobotMeasurement> ms = KeepPoints(log, job.points, "--points");
+  std::vector<RobotLog> validate;
+  for (const auto& v : job.validate) {
+    RobotLog vl = ReadRobotLog(v, robot);
+    if (vl.NumPoints() != log.NumPoints() || vl.six_dof() != log.six_dof())
+      Throw("calib-robot: --validate ", v.string(), " measures ", vl.NumPoints(), " point(s)",
+            vl.six_dof() ? " with an orientation" : "", " but ", job.measurements.string(), " measures ",
+            log.NumPoints(), log.six_dof() ? " with an orientation" : "",
+            "; a frozen model is scored on the same kind of measurement");
+    validate.push_back(std::move(vl));
+  }
+  std::vector<std::string> reading_notes;
+  {
+    std::vector<const RobotLog*> logs{&log};
+    for (const auto& v : validate) logs.push_back(&v);
+    robot = CoverReadings(robot, logs, &reading_notes);
+    for (const RobotLog* l : logs) CheckRobotLogPlausible(*l, robot);
+  }
   const auto say = [&](const std::string& line) {
     if (job.progress) job.progress(line);
   };
@@ -76,6 +163,7 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   opt.position_sigma_m = job.position_sigma_m;
   opt.rotation_sigma_rad = job.rotation_sigma_rad;
   opt.fixed = job.fixed;
+  opt.estimate_only = job.estimate_only;
   opt.max_iterations = job.max_iterations;
   opt.estimate_dh = !job.registration_only;
   opt.error_motion_harmonics = job.error_motion_harmonics;
@@ -109,6 +197,22 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   reg.progress = nullptr;
   const RobotCalibrationResult nominal = CalibrateRobot(robot, guess, ms, reg);
 
+  // Other sessions, frozen: the registered nominal model and the calibrated one.
+  std::vector<SessionScore> scores;
+  for (const RobotLog& v : validate) {
+    const std::vector<RobotMeasurement> vm = KeepPoints(v, job.points, "--points");
+    SessionScore sc;
+    sc.log = v.source.string();
+    sc.rows = static_cast<int>(v.rows.size());
+    sc.group_of_row = PostureGroups(log, v);
+    sc.models.push_back(ScoreModel("registration",
+                                   ErrorRows(PredictionErrors(nominal.robot, nominal.T_meas_base, vm, nominal.points_tool)),
+                                   sc.group_of_row));
+    sc.models.push_back(ScoreModel(
+        "geometry", ErrorRows(PredictionErrors(r.robot, r.T_meas_base, vm, r.points_tool)), sc.group_of_row));
+    scores.push_back(sc);
+  }
+
   std::optional<CrossValidation> cv;
   if (job.folds >= 2) {
     if (job.folds > static_cast<int>(ms.size()))
@@ -122,8 +226,19 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   std::ostringstream rep;
   rep << "# mcms calib-robot report\n";
   rep << "robot: " << robot.Name() << " (" << robot.NumJoints() << " joints)\n";
-  rep << "measurements: " << ms.size() << " (" << (ms[0].R_meas_tool ? "6-D poses" : "3-D positions") << ") from "
-      << job.measurements.string() << "\n";
+  if (const UrdfSource* u = robot.Urdf())
+    rep << "chain: " << u->base_link << " -> " << u->tip_link << " (URDF " << job.robot.string() << ")\n";
+  const int K = ms[0].NumPoints();
+  rep << "measurements: " << ms.size() << " ("
+      << (ms[0].R_meas_tool ? std::string("6-D poses")
+                            : K > 1 ? std::to_string(K) + " points of a rigid body" : std::string("3-D positions"))
+      << ") from " << job.measurements.string() << "\n";
+  if (!log.ignored_columns.empty()) {
+    rep << "columns not used:";
+    for (const auto& c : log.ignored_columns) rep << " " << c;
+    rep << "\n";
+  }
+  for (const auto& n : reading_notes) rep << "note: " << n << "\n";
   rep << "solver: " << (r.converged ? "converged" : "did NOT converge") << " after " << r.iterations
       << " iterations; variance factor " << r.variance_factor << "; observability index " << r.observability << "\n";
   rep << "T_meas_base: " << PoseText(r.T_meas_base) << "\n";
@@ -135,6 +250,11 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     rep << "held out (" << job.folds << "-fold), nominal DH: " << ErrorStatsText(Summarize(cv->nominal)) << "\n";
     rep << "held out (" << job.folds << "-fold), calibrated: " << ErrorStatsText(Summarize(cv->calibrated)) << "\n";
   }
+  if (K > 1)
+    for (int k = 0; k < K; ++k)
+      rep << "point " << k + 1 << ", calibrated: RMS " << SummarizePoint(r.errors_after, k).rms_position_m * 1e3
+          << " mm, max " << SummarizePoint(r.errors_after, k).max_position_m * 1e3 << " mm\n";
+  rep << ValidationText(scores);
   rep << "parameters (identified error, 1 sigma):\n";
   for (const auto& p : r.parameters) {
     if (p.fixed) continue;
@@ -150,6 +270,37 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   // Everything computed: write the outputs, the robot model last, so that a failed
   // report or plot leaves no model behind (each file is written atomically).
   if (!job.report.empty()) WriteFileAtomically(job.report, [&](std::ostream& o) { o << report; });
+  if (!job.json.empty()) {
+    nlohmann::json j;
+    j["robot"] = robot.Name();
+    j["measurements"] = job.measurements.string();
+    j["rows"] = ms.size();
+    j["points"] = K;
+    j["converged"] = r.converged;
+    j["variance_factor"] = r.variance_factor;
+    const auto Stats = [](const std::vector<PoseError>& e) {
+      nlohmann::json a = nlohmann::json::array();
+      const int k_max = e.empty() ? 0 : 1 + static_cast<int>(e.front().other_dp.size());
+      for (int k = 0; k < k_max; ++k) {
+        const ErrorStats st = SummarizePoint(e, k);
+        a.push_back({{"point", k + 1}, {"rms_mm", st.rms_position_m * 1e3}, {"max_mm", st.max_position_m * 1e3}});
+      }
+      return a;
+    };
+    j["residuals"] = {{"registration", Stats(nominal.errors_after)}, {"geometry", Stats(r.errors_after)}};
+    nlohmann::json params = nlohmann::json::array();
+    for (const auto& p : r.parameters)
+      params.push_back({{"name", p.name},
+                        {"estimate", p.estimate},
+                        {"sigma", p.sigma},
+                        {"fixed", p.fixed},
+                        {"unit", p.angle ? "rad" : "m"},
+                        {"reason", p.reason}});
+    j["parameters"] = params;
+    j["validation"] = ValidationJson(scores);
+    const std::string text = j.dump(2) + "\n";
+    WriteFileAtomically(job.json, [&](std::ostream& o) { o << text; });
+  }
   if (!job.plot.empty()) {
     Plot plot;
     plot.title = "Position error per measurement";
@@ -175,11 +326,12 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     for (int j = 0; j < robot.NumJoints(); ++j) {
       Plot pj;
       pj.title = "joint " + std::to_string(j + 1);
-      pj.x_label = "q" + std::to_string(j + 1) + " (deg)";
+      const bool rev = robot.Joints()[j].type == JointType::kRevolute;
+      pj.x_label = "q" + std::to_string(j + 1) + (rev ? " (deg)" : " (mm)");
       pj.y_label = "position error (mm)";
       for (const PlotSeries& s : plot.series) {
         PlotSeries sj = s;
-        for (size_t i = 0; i < sj.x.size() && i < ms.size(); ++i) sj.x[i] = ms[i].q[j] / kDeg;
+        for (size_t i = 0; i < sj.x.size() && i < ms.size(); ++i) sj.x[i] = rev ? ms[i].q[j] / kDeg : ms[i].q[j] * 1e3;
         pj.series.push_back(sj);
       }
       joints.push_back(pj);
@@ -187,7 +339,10 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     plot.WriteSvg(job.plot);
     WritePlotGridSvg(JointPlotPath(job.plot), joints, 3);
   }
-  r.robot.Write(job.output);
+  if (write_urdf)
+    WriteUrdf(job.output, r.robot, JointComments(robot, r));
+  else
+    r.robot.Write(job.output);
   return report;
 }
 

@@ -17,9 +17,20 @@
 namespace mcms {
 
 struct RobotCalibrationJob {
-  std::filesystem::path measurements;   // YAML (calib/robot_calibration.h ReadRobotMeasurements)
-  std::filesystem::path robot;          // robot description; empty = the built-in default
-  std::filesystem::path output;         // calibrated robot YAML (required)
+  std::filesystem::path measurements;   // CSV or YAML (calib/robot_measurements.h ReadRobotLog)
+  std::filesystem::path robot;          // robot description (YAML or URDF); empty = the built-in default
+  ChainSelection chain;                 // of a URDF robot
+  // Calibrated robot (required): a URDF (.urdf, or whenever the robot was read from one: the
+  // corrections folded into the joints' <origin>, each joint's parameters with sigma in a
+  // comment beside it) or a YAML description.
+  std::filesystem::path output;
+  std::filesystem::path json;           // machine-readable report (optional)
+  // Points of a rigid body to use (1-based; empty = every point of the file).
+  std::vector<int> points;
+  // Only these geometric parameters are estimated (globs, RobotCalibrationOptions::estimate_only).
+  std::vector<std::string> estimate_only;
+  // Other sessions in the same measuring frame, scored with the fitted models frozen.
+  std::vector<std::filesystem::path> validate;
   // optional; with `plot` also the errors against each joint angle (JointPlotPath(plot))
   std::filesystem::path report, plot;
   std::optional<Pose> base_guess;       // T_meas_base; default: rigid fit of nominal tool positions

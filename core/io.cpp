@@ -144,6 +144,13 @@ CsvTable ReadCsv(const fs::path& path) {
   return t;
 }
 
+std::string CsvQuoted(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string q = "\"";
+  for (char c : text) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
 bool CsvTable::HasColumn(const std::string& name) const {
   for (const auto& h : header)
     if (h == name) return true;

@@ -43,6 +43,9 @@ struct CsvTable {
   double Number(size_t row, int column) const;
 };
 CsvTable ReadCsv(const std::filesystem::path& path);
+// A CSV cell: the text as is, or in double quotes (inner quotes doubled) when it holds a
+// comma, a quote or a line break.
+std::string CsvQuoted(const std::string& text);
 
 // Progress on stderr for long runs: "label: 37/120 frames (31%)", throttled to a few
 // updates per second, silent when quiet.

@@ -158,7 +158,7 @@ Mat6 ModelCovariance(const RobotCalibrationResult& cal, const Eigen::VectorXd& q
     if (index < 4 * nj) {
       Eigen::VectorXd delta = Eigen::VectorXd::Zero(4 * nj);
       delta[index] = step;
-      p.robot = WithDhErrors(cal.robot, delta);
+      p.robot = WithGeometryErrors(cal.robot, delta);
     } else if (index < 4 * nj + 6) {
       const int i = index - 4 * nj;
       Vec6 d = Vec6::Zero();
@@ -379,7 +379,11 @@ Iso9283Experiment RunIso9283Experiment(const Iso9283ExperimentOptions& o) {
       const auto m = camera.Measure(truth.Tool(qa), goal, pick);
       if (!m) continue;
       const Eigen::VectorXd qe = qa + JointNoise(pick, nj, enc_sigma);
-      meas.push_back({qe, m->T_rig_target.t, m->T_rig_target.R});
+      RobotMeasurement rm;
+      rm.q = qe;
+      rm.p_meas = m->T_rig_target.t;
+      rm.R_meas_tool = m->T_rig_target.R;
+      meas.push_back(rm);
       const Mat6 enc = TransformPoseCovariance(nominal.robot.PoseCovariance(*qc, Q_enc), nominal.T_rig_base,
                                                nominal.robot.T_base_tool(*qc), Pose::Identity());
       pos_var += (m->cov + enc).bottomRightCorner<3, 3>().trace() / 3;

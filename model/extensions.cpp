@@ -57,7 +57,7 @@ int Extension::NumParameters() const {
   switch (effect) {
     case Effect::kThermalDrift: return variant == 0 ? 2 : 1;
     case Effect::kErrorMotion: return kErrorMotionParamsPerHarmonic * variant;
-    case Effect::kGeometry: return kDhParamsPerJoint * variant;
+    case Effect::kGeometry: return variant;
     case Effect::kGravityCompliance: return variant == 0 ? 1 : variant;
     case Effect::kCameraMoved: return 6;
     case Effect::kPrincipalPoint:
@@ -85,14 +85,13 @@ std::vector<std::string> Extension::ParameterNames() const {
     }
     case Effect::kLinkTwist: return {"delta_rad"};
     case Effect::kGeometry: {
+      // The robot's own names: GeometryParameterNames (model/robot_model.h).
       std::vector<std::string> names;
-      for (int j = 1; j <= variant; ++j)
-        for (const char* f : {"theta_offset", "d", "a", "alpha"}) {
-          std::string name = std::to_string(j);  // (GCC 12 -Wrestrict misfires on "J" + ...)
-          name.insert(name.begin(), 'J');
-          name.append(".").append(f);
-          names.push_back(name);
-        }
+      for (int k = 1; k <= variant; ++k) {
+        std::string name = std::to_string(k);  // (GCC 12 -Wrestrict misfires on "g" + ...)
+        name.insert(0, "geometry_");
+        names.push_back(name);
+      }
       return names;
     }
     case Effect::kThermalDrift:
@@ -147,6 +146,18 @@ std::string Extension::Where(const std::vector<std::string>& camera_names) const
   return "";
 }
 
+std::string Extension::Where(const RobotModel& robot) const {
+  const bool joint = Info(effect).sensor == SensorKind::kRobot && effect != Effect::kThermalDrift &&
+                     effect != Effect::kGeometry && effect != Effect::kLinkLength && effect != Effect::kLinkTwist;
+  if (joint && robot.Convention() == ChainConvention::kUrdf && index >= 0 && index < robot.NumJoints() &&
+      !robot.Joints()[index].name.empty())
+    return robot.Joints()[index].name;
+  if (effect == Effect::kGeometry && robot.Convention() == ChainConvention::kUrdf) return "URDF chain";
+  return Where();
+}
+
+std::string Extension::Label(const RobotModel& robot) const { return std::string(Name(effect)) + " at " + Where(robot); }
+
 std::string Extension::Label(const std::vector<std::string>& camera_names) const {
   return std::string(Name(effect)) + " at " + Where(camera_names);
 }
@@ -168,6 +179,9 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
             std::to_string(robot->NumJoints()) + " joints");
       if (effect == Effect::kLinkLength && variant != 0 && variant != 1) bad("variant must be 0 (a) or 1 (d)");
       if (effect == Effect::kErrorMotion && variant < 1) bad("needs at least one harmonic");
+      if ((effect == Effect::kLinkLength || effect == Effect::kLinkTwist) &&
+          robot->Convention() == ChainConvention::kUrdf)
+        bad("is a DH term; a URDF joint's lengths and twists are in its placement (geometry)");
       if (effect == Effect::kErrorMotion && robot->Joints()[index].type != JointType::kRevolute)
         bad("error motion is for revolute joints");
       if (effect == Effect::kGravityCompliance && variant != 0 && variant != 2 * robot->NumJoints() + 1)
@@ -175,7 +189,9 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
       break;
     case Effect::kGeometry:
       if (!robot) bad("needs a robot");
-      if (variant != robot->NumJoints()) bad("variant must be the robot's number of joints");
+      if (variant != robot->NumGeometryParameters())
+        bad("variant must be the robot's number of geometric parameters (" +
+            std::to_string(robot->NumGeometryParameters()) + ")");
       break;
     case Effect::kThermalDrift:
       if (variant != 0 && variant != 1) bad("variant must be 0 (warm-up in time) or 1 (linear in temperature)");
@@ -200,11 +216,9 @@ constexpr double kStandardGravity = 9.80665;
 // link k (1-based; moved by joints 1..k).
 void AddPointTorque(const RobotModel& robot, const std::vector<Pose>& frames, int k, const Vec3& p, const Vec3& f,
                     double scale, Eigen::Ref<Eigen::VectorXd> tau) {
-  const bool standard = robot.Convention() == DhConvention::kStandard;
   for (int i = 0; i < k && i < robot.NumJoints(); ++i) {
-    const Pose& F = standard ? frames[i] : frames[i + 1];
-    const Vec3 z = F.R.col(2);
-    tau[i] += scale * (robot.Joints()[i].type == JointType::kRevolute ? z.cross(p - F.t).dot(f) : z.dot(f));
+    const JointAxis ax = robot.AxisOf(frames, i);
+    tau[i] += scale * (robot.Joints()[i].type == JointType::kRevolute ? ax.w.cross(p - ax.o).dot(f) : ax.w.dot(f));
   }
 }
 
@@ -231,14 +245,17 @@ Eigen::MatrixXd GravityLever(const RobotModel& robot, const Eigen::VectorXd& q) 
   const std::vector<Pose> frames = robot.LinkFrames(q);
   const Vec3 g(0.0, 0.0, -kStandardGravity);
   const int n = robot.NumJoints();
-  const bool standard = robot.Convention() == DhConvention::kStandard;
+  const bool standard = robot.Convention() == ChainConvention::kStandard;
   Eigen::MatrixXd L = Eigen::MatrixXd::Zero(n, 2 * n + 1);
   for (int k = 1; k <= n; ++k) {
     AddPointTorque(robot, frames, k, frames[k].t, g, 1.0, L.col(k - 1));
     // The corner of link k's DH path: standard o_{k-1} + d_k z_{k-1} (on link k); modified
-    // o_{k-1} + a_k x_{k-1} (fixed to link k-1).
+    // o_{k-1} + a_k x_{k-1} (fixed to link k-1); URDF: the middle of the straight link from
+    // o_{k-1} to o_k (fixed to link k-1).
     const Joint& j = robot.Joints()[k - 1];
-    if (standard) {
+    if (robot.Convention() == ChainConvention::kUrdf) {
+      AddPointTorque(robot, frames, k - 1, 0.5 * (frames[k - 1].t + frames[k].t), g, 1.0, L.col(n + k - 1));
+    } else if (standard) {
       const double d = j.type == JointType::kRevolute ? j.d : j.d + q[k - 1];
       AddPointTorque(robot, frames, k, frames[k - 1] * Vec3(0.0, 0.0, d), g, 1.0, L.col(n + k - 1));
     } else {
@@ -254,13 +271,10 @@ Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorX
   const std::vector<Pose> frames = robot.LinkFrames(q);
   const Vec3 p = frames.back().t;
   const Vec3 force(0.0, 0.0, -kG);
-  const bool standard = robot.Convention() == DhConvention::kStandard;
   Eigen::VectorXd tau(robot.NumJoints());
   for (int i = 0; i < robot.NumJoints(); ++i) {
-    // Joint i turns about z of frame i-1 (standard) or of frame i (modified).
-    const Pose& F = standard ? frames[i] : frames[i + 1];
-    const Vec3 z = F.R.col(2);
-    tau[i] = robot.Joints()[i].type == JointType::kRevolute ? z.cross(p - F.t).dot(force) : z.dot(force);
+    const JointAxis ax = robot.AxisOf(frames, i);
+    tau[i] = robot.Joints()[i].type == JointType::kRevolute ? ax.w.cross(p - ax.o).dot(force) : ax.w.dot(force);
   }
   return tau;
 }

@@ -67,8 +67,10 @@ std::optional<Effect> EffectFromName(std::string_view name);
 //           camera effects; the ball for target_geometry; unused (-1) otherwise.
 //  variant: link_length 0 = a, 1 = d; thermal_drift 0 = exponential warm-up in time,
 //           1 = linear in temperature; error_motion = the number of harmonics (>= 1);
-//           geometry = the robot's number of joints n (4 n parameters: [dtheta, dd, da,
-//           dalpha] per joint, added to the DH table); gravity_compliance 0 = the joint's
+//           geometry = the robot's number of geometric parameters (RobotModel::
+//           NumGeometryParameters: the error model of model/joint.h, per joint DH [dtheta,
+//           dd, da, dalpha] or URDF [offset, x, y, z, rx, ry, rz]); link_length and link_twist
+//           are DH terms (a URDF joint's are in its placement); gravity_compliance 0 = the joint's
 //           compliance (rad per N m) times the gravity torque of the robot's own masses
 //           and the payload (MeasurementContext::gravity_torque), 2 n + 1 = lumped masses:
 //           compliance x mass (rad kg / (N m)) at each link frame's origin o_1..o_n, at
@@ -91,6 +93,10 @@ struct Extension {
   std::string Where(const std::vector<std::string>& camera_names = {}) const;
   // "joint_offset at joint 2".
   std::string Label(const std::vector<std::string>& camera_names = {}) const;
+  // The same for a robot effect of `robot`: a URDF chain's joints by their names
+  // ("backlash at arm_6_joint"), a DH table's by number.
+  std::string Where(const RobotModel& robot) const;
+  std::string Label(const RobotModel& robot) const;
   // InputError when the index does not fit the robot (joints, links) or the variant is
   // unknown; num_cameras / num_balls bound the camera and ball indices (0 = unchecked).
   void Check(const RobotModel* robot, int num_cameras = 0, int num_balls = 0) const;
@@ -131,9 +137,9 @@ Eigen::VectorXd GravityTorque(const RobotModel& robot, const Eigen::VectorXd& q,
 Eigen::MatrixXd GravityLever(const RobotModel& robot, const Eigen::VectorXd& q);
 
 // ---- robot units ------------------------------------------------------------------
-// Adds the effect of `e` with parameters p to the joint corrections dq (n) and the DH
-// corrections dh (4 n: [dtheta, dd, da, dalpha] per joint). error_motion is not handled
-// here (ChainCorrections::error_motion carries it).
+// Adds the effect of `e` with parameters p to the joint corrections dq (n) and the geometric
+// corrections dh (RobotModel::NumGeometryParameters, model/joint.h's layout). error_motion is
+// not handled here (ChainCorrections::error_motion carries it).
 template <typename T>
 void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p, const Eigen::VectorXd& q,
                          const MeasurementContext& c, T* dq, T* dh) {
@@ -153,10 +159,14 @@ void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p
       // q_link = q_encoder - b/2 sign(last move), b >= 0.
       if (c.move_direction.size() > i) dq[i] -= 0.5 * p[0] * c.move_direction[i];
       break;
-    case Effect::kLinkLength: dh[kDhParamsPerJoint * i + (e.variant == 0 ? 2 : 1)] += p[0]; break;
-    case Effect::kLinkTwist: dh[kDhParamsPerJoint * i + 3] += p[0]; break;
+    case Effect::kLinkLength:
+      if (robot.Convention() != ChainConvention::kUrdf) dh[kDhParamsPerJoint * i + (e.variant == 0 ? 2 : 1)] += p[0];
+      break;
+    case Effect::kLinkTwist:
+      if (robot.Convention() != ChainConvention::kUrdf) dh[kDhParamsPerJoint * i + 3] += p[0];
+      break;
     case Effect::kGeometry:
-      for (int k = 0; k < kDhParamsPerJoint * robot.NumJoints(); ++k) dh[k] += p[k];
+      for (int k = 0; k < robot.NumGeometryParameters(); ++k) dh[k] += p[k];
       break;
     case Effect::kThermalDrift: {
       // Every link length grows by the same relative amount s.
@@ -167,10 +177,16 @@ void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p
       } else {
         s = p[0] * (std::isfinite(c.temperature_c) ? c.temperature_c - c.reference_temperature_c : 0.0);
       }
+      const int g = robot.GeometryParamsPerJoint();
       for (int k = 0; k < robot.NumJoints(); ++k) {
         const Joint& j = robot.Joints()[k];
-        dh[kDhParamsPerJoint * k + 1] += s * j.d;
-        dh[kDhParamsPerJoint * k + 2] += s * j.a;
+        if (robot.Convention() == ChainConvention::kUrdf) {
+          const Vec3 grow = j.origin.R.transpose() * j.origin.t;  // as UniformGrowth
+          for (int a = 0; a < 3; ++a) dh[g * k + 1 + a] += s * grow[a];
+        } else {
+          dh[g * k + 1] += s * j.d;
+          dh[g * k + 2] += s * j.a;
+        }
       }
       break;
     }
@@ -195,7 +211,7 @@ template <typename T>
 PoseT<T> ExtendedFlangeT(const RobotModel& robot, const std::vector<Extension>& ext, T const* const* params,
                          const Eigen::VectorXd& q, const MeasurementContext& c) {
   const int n = robot.NumJoints();
-  std::vector<T> dq(n, T(0)), dh(kDhParamsPerJoint * n, T(0));
+  std::vector<T> dq(n, T(0)), dh(robot.NumGeometryParameters(), T(0));
   std::vector<int> harmonics(n, 0);
   std::vector<T> em;
   // Error motion: the blocks of the error_motion extensions, joint by joint.
@@ -211,7 +227,7 @@ PoseT<T> ExtendedFlangeT(const RobotModel& robot, const std::vector<Extension>& 
   for (int i = 0; i < n; ++i)
     for (int m = 0; m < kErrorMotionParamsPerHarmonic * harmonics[i]; ++m) em.push_back(em_of[i][m]);
   ChainCorrections<T> cc;
-  cc.dh = dh.data();
+  cc.geometry = dh.data();
   cc.dq = dq.data();
   cc.error_motion = em.empty() ? nullptr : em.data();
   cc.error_motion_harmonics = harmonics;

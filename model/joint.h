@@ -1,12 +1,14 @@
-// One joint of a serial robot and its link transform: the Denavit-Hartenberg convention,
-// the joint's DH parameters, limits, encoder noise, error motion and the mass of the link
-// it moves (model/robot_model.h holds the chain), with the link transform templated on the
-// scalar (double or ceres::Jet), so that evaluation, calibration and the audit's
-// extensions share one definition.
+// One joint of a serial robot and its link transform, in one of two descriptions: a
+// Denavit-Hartenberg table (standard or modified) or a URDF placement (origin and axis, as
+// ROS describes robots), with the joint's limits, encoder noise, error motion and the mass
+// of the link it moves (model/robot_model.h holds the chain). The link transform and its
+// geometric error model are templated on the scalar (double or ceres::Jet), so that
+// evaluation, calibration and the audit's extensions share one definition.
 //
 // Conventions (docs/conventions.md): SI units, T_a_b maps b coordinates to a; standard DH
 // T = E(q) Rz(theta) Tz(d) Tx(a) Rx(alpha); modified DH T = Rx(alpha) Tx(a) E(q) Rz(theta)
-// Tz(d), with E(q) the joint's error motion.
+// Tz(d); URDF T = origin G A E(q) A^T M(axis, q), with E(q) the joint's error motion, G
+// the placement's geometric error and A a rotation taking z to the axis.
 #pragma once
 
 #include <cmath>
@@ -21,7 +23,7 @@
 
 namespace mcms {
 
-// Which DH convention the link transforms follow.
+// How the link transforms are described.
 //  kStandard (Denavit-Hartenberg 1955, as in Spong): link i is
 //      T_{i-1,i} = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i),
 //    joint i turns about the z axis of frame i-1.
@@ -29,8 +31,12 @@ namespace mcms {
 //      T_{i-1,i} = Rx(alpha_i) Tx(a_i) Rz(theta_i) Tz(d_i),
 //    where (alpha_i, a_i) here are Craig's alpha_{i-1}, a_{i-1} stored with joint i;
 //    joint i turns about the z axis of frame i.
-// In both, the last link frame n is the flange.
-enum class DhConvention { kStandard, kModified };
+//  kUrdf (ROS): link i is
+//      T_{i-1,i} = origin_i * Rot(axis_i, q_i)   (revolute)   or   origin_i * Trans(q_i axis_i)
+//    with frame i the joint's child link frame, origin_i its placement in frame i-1 (the
+//    fixed joints before it folded in) and axis_i its unit axis in frame i.
+// In all, the last link frame n is the flange.
+enum class ChainConvention { kStandard, kModified, kUrdf };
 
 enum class JointType { kRevolute, kPrismatic };
 
@@ -67,6 +73,10 @@ struct Joint {
   // that deflects compliant joints (model/extensions.h GravityTorque).
   double mass_kg = std::numeric_limits<double>::quiet_NaN();
   Vec3 com_m = Vec3::Zero();
+  // URDF placement (ChainConvention::kUrdf; the DH parameters above are then 0, but for
+  // theta_offset (revolute) and d (prismatic), which offset the joint's zero as in DH).
+  Pose origin;
+  Vec3 axis = Vec3::UnitZ();
 };
 
 // A rigid transform with scalar T, as Pose is for double.
@@ -78,7 +88,26 @@ struct PoseT {
   static PoseT FromPose(const Pose& p) { return PoseT{p.R.cast<T>(), p.t.cast<T>()}; }
 };
 
+// The geometric error model of a joint (what calibration identifies and the audit's
+// `geometry` fits), per joint in this order:
+//   DH:   [dtheta, dd, da, dalpha]    added to the DH table (rad, m); the zero offset is
+//                                     dtheta (revolute) or dd (prismatic);
+//   URDF: [offset, x, y, z, rx, ry, rz]  the joint's zero offset (rad, or m for a prismatic
+//                                     joint), then a small placement error G = [Exp(r), t]
+//                                     right after its origin, in the joint frame (the
+//                                     component of r or t along the axis duplicates the
+//                                     offset). Translations before rotations, as FIGAROH
+//                                     orders them: the identifiability analysis keeps the
+//                                     first of a redundant group.
 constexpr int kDhParamsPerJoint = 4;
+constexpr int kUrdfParamsPerJoint = 7;
+constexpr int GeometryParamsPerJoint(ChainConvention c) {
+  return c == ChainConvention::kUrdf ? kUrdfParamsPerJoint : kDhParamsPerJoint;
+}
+// Index of the zero offset in a joint's geometric error block.
+constexpr int OffsetParameter(ChainConvention c, JointType type) {
+  return c == ChainConvention::kUrdf || type == JointType::kRevolute ? 0 : 1;
+}
 constexpr int kErrorMotionParamsPerHarmonic = 12;
 
 // Error motion vector xi(q) = [rx ry rz x y z] of joint j at value q: the joint's own
@@ -100,28 +129,61 @@ void ErrorMotionT(const Joint& j, double q, int h_est, const T* em, T xi[6]) {
 }
 
 // Link transform T_{i-1,i} of joint j at joint value q (the nominal value; `dq` is added to
-// it inside), with the DH corrections `dh` (4 values or null) and error motion `xi` (6
-// values or null = the joint's own error motion only if `own_error_motion`).
+// it inside), with the geometric errors `geometry` (GeometryParamsPerJoint values or null)
+// and error motion `xi` (6 values or null = none).
 template <typename T>
-PoseT<T> LinkTransformT(DhConvention convention, const Joint& j, const T& q, const T* dh, const T* xi) {
+PoseT<T> LinkTransformT(ChainConvention convention, const Joint& j, const T& q, const T* geometry, const T* xi) {
   using M3 = Eigen::Matrix<T, 3, 3>;
   using V3 = Eigen::Matrix<T, 3, 1>;
   const bool rev = j.type == JointType::kRevolute;
+  if (convention == ChainConvention::kUrdf) {
+    // origin G A E A^T M(axis, q + offset)
+    PoseT<T> L = PoseT<T>::FromPose(j.origin);
+    T value = q + T(rev ? j.theta_offset : j.d);
+    if (geometry) {
+      value += geometry[0];
+      PoseT<T> G;
+      ceres::AngleAxisToRotationMatrix(geometry + 4, G.R.data());
+      G.t << geometry[1], geometry[2], geometry[3];
+      L = L * G;
+    }
+    if (xi) {
+      // The error motion acts in the joint's axis frame A (z along the axis).
+      const Vec3 a = j.axis;
+      const Vec3 helper = std::abs(a.z()) < 0.9 ? Vec3::UnitZ() : Vec3::UnitX();
+      Mat3 A;
+      A.col(2) = a;
+      A.col(0) = helper.cross(a).normalized();
+      A.col(1) = a.cross(A.col(0));
+      M3 Re;
+      ceres::AngleAxisToRotationMatrix(xi, Re.data());
+      const M3 Ac = A.cast<T>();
+      L = L * PoseT<T>{Ac * Re * Ac.transpose(), Ac * V3(xi[3], xi[4], xi[5])};
+    }
+    PoseT<T> M;
+    if (rev) {
+      const T aa[3] = {T(j.axis.x()) * value, T(j.axis.y()) * value, T(j.axis.z()) * value};
+      ceres::AngleAxisToRotationMatrix(aa, M.R.data());
+    } else {
+      M.t = j.axis.cast<T>() * value;
+    }
+    return L * M;
+  }
   T theta = T(j.theta_offset) + (rev ? q : T(0));
   T d = T(j.d) + (rev ? T(0) : q);
   T a = T(j.a);
   T alpha = T(j.alpha);
-  if (dh) {
-    theta += dh[0];
-    d += dh[1];
-    a += dh[2];
-    alpha += dh[3];
+  if (geometry) {
+    theta += geometry[0];
+    d += geometry[1];
+    a += geometry[2];
+    alpha += geometry[3];
   }
   using std::cos;
   using std::sin;
   const T ct = cos(theta), st = sin(theta), ca = cos(alpha), sa = sin(alpha);
   PoseT<T> L;
-  if (convention == DhConvention::kStandard) {
+  if (convention == ChainConvention::kStandard) {
     // Rz(theta) Tz(d) Tx(a) Rx(alpha)
     L.R << ct, -st * ca, st * sa, st, ct * ca, -ct * sa, T(0), sa, ca;
     L.t << a * ct, a * st, d;
@@ -134,7 +196,7 @@ PoseT<T> LinkTransformT(DhConvention convention, const Joint& j, const T& q, con
   M3 Re;
   ceres::AngleAxisToRotationMatrix(xi, Re.data());  // column-major, as Eigen stores
   const V3 te(xi[3], xi[4], xi[5]);
-  if (convention == DhConvention::kStandard) return PoseT<T>{Re, te} * L;
+  if (convention == ChainConvention::kStandard) return PoseT<T>{Re, te} * L;
   // A E A^-1 L with A = [Rx(alpha), (a, 0, 0)]: E acts in the joint's axis frame.
   M3 Ra;
   Ra << T(1), T(0), T(0), T(0), ca, -sa, T(0), sa, ca;

@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/io.h"
 #include "model/joint.h"
+#include "model/urdf.h"
 
 namespace mcms {
 
@@ -130,15 +131,18 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
   std::string name;
   if (root["name"]) name = root["name"].as<std::string>();
 
-  if (!root["convention"]) in.Fail(root, "missing key 'convention' (standard_dh or modified_dh)");
+  if (!root["convention"]) in.Fail(root, "missing key 'convention' (standard_dh, modified_dh or urdf)");
   const std::string conv = root["convention"].as<std::string>();
-  DhConvention convention;
+  ChainConvention convention;
   if (conv == "standard_dh")
-    convention = DhConvention::kStandard;
+    convention = ChainConvention::kStandard;
   else if (conv == "modified_dh")
-    convention = DhConvention::kModified;
+    convention = ChainConvention::kModified;
+  else if (conv == "urdf")
+    convention = ChainConvention::kUrdf;
   else
-    in.Fail(root["convention"], "convention '", conv, "' is not standard_dh or modified_dh");
+    in.Fail(root["convention"], "convention '", conv, "' is not standard_dh, modified_dh or urdf");
+  const bool urdf = convention == ChainConvention::kUrdf;
 
   double scale = 1.0;
   double sigma_revolute = 0.0, sigma_prismatic = 0.0;
@@ -183,11 +187,17 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
   for (size_t i = 0; i < list.size(); ++i) {
     const YAML::Node jn = list[i];
     const std::string where = "joint " + std::to_string(i + 1);
-    in.CheckKeys(jn,
-                 {"name", "type", "a_m", "d_m", "alpha_rad", "alpha_deg", "theta_offset_rad", "theta_offset_deg",
-                  "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m",
-                  "error_motion", "mass_kg", "com_m"},
-                 where);
+    if (urdf)
+      in.CheckKeys(jn,
+                   {"name", "type", "origin_xyz_m", "origin_rpy_rad", "axis", "limits_rad", "limits_deg", "limits_m",
+                    "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m", "error_motion", "mass_kg", "com_m"},
+                   where);
+    else
+      in.CheckKeys(jn,
+                   {"name", "type", "a_m", "d_m", "alpha_rad", "alpha_deg", "theta_offset_rad", "theta_offset_deg",
+                    "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg",
+                    "encoder_sigma_m", "error_motion", "mass_kg", "com_m"},
+                   where);
     Joint j;
     if (jn["name"]) j.name = jn["name"].as<std::string>();
     const std::string label = j.name.empty() ? where : where + " (" + j.name + ")";
@@ -201,18 +211,31 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
         in.Fail(jn["type"], label, ": type '", type, "' is not revolute or prismatic");
     }
     const bool revolute = j.type == JointType::kRevolute;
-    for (const char* key : {"a_m", "d_m"})
-      if (!jn[key]) in.Fail(jn, label, ": missing key '", key, "'");
-    j.a = in.Number(jn["a_m"], label + " a_m");
-    j.d = in.Number(jn["d_m"], label + " d_m");
-    if (auto n = in.OneOf(jn, "alpha", kAngleUnits, &scale, label))
-      j.alpha = in.Number(*n, label + " alpha") * scale;
-    else
-      in.Fail(jn, label, ": missing key 'alpha_rad' (or 'alpha_deg')");
-    if (auto n = in.OneOf(jn, "theta_offset", kAngleUnits, &scale, label))
-      j.theta_offset = in.Number(*n, label + " theta_offset") * scale;
-    else
-      in.Fail(jn, label, ": missing key 'theta_offset_rad' (or 'theta_offset_deg')");
+    if (urdf) {
+      // origin_xyz_m, origin_rpy_rad (URDF's fixed-axis roll, pitch, yaw) and axis.
+      for (const char* key : {"origin_xyz_m", "origin_rpy_rad", "axis"})
+        if (!jn[key]) in.Fail(jn, label, ": missing key '", key, "'");
+      const auto xyz = in.Numbers(jn["origin_xyz_m"], 3, label + " origin_xyz_m");
+      const auto rpy = in.Numbers(jn["origin_rpy_rad"], 3, label + " origin_rpy_rad");
+      const auto ax = in.Numbers(jn["axis"], 3, label + " axis");
+      j.origin = Pose{RotationOfRpy(Vec3(rpy[0], rpy[1], rpy[2])), Vec3(xyz[0], xyz[1], xyz[2])};
+      const Vec3 axis(ax[0], ax[1], ax[2]);
+      if (!(axis.norm() > 1e-9)) in.Fail(jn["axis"], label, ": axis must not be zero");
+      j.axis = axis.normalized();
+    } else {
+      for (const char* key : {"a_m", "d_m"})
+        if (!jn[key]) in.Fail(jn, label, ": missing key '", key, "'");
+      j.a = in.Number(jn["a_m"], label + " a_m");
+      j.d = in.Number(jn["d_m"], label + " d_m");
+      if (auto n = in.OneOf(jn, "alpha", kAngleUnits, &scale, label))
+        j.alpha = in.Number(*n, label + " alpha") * scale;
+      else
+        in.Fail(jn, label, ": missing key 'alpha_rad' (or 'alpha_deg')");
+      if (auto n = in.OneOf(jn, "theta_offset", kAngleUnits, &scale, label))
+        j.theta_offset = in.Number(*n, label + " theta_offset") * scale;
+      else
+        in.Fail(jn, label, ": missing key 'theta_offset_rad' (or 'theta_offset_deg')");
+    }
 
     const auto& value_units = revolute ? kAngleUnits : kLengthUnits;
     const char* wrong_unit = revolute ? "m" : "rad";
@@ -270,7 +293,7 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
 
 }  // namespace
 
-RobotModel::RobotModel(std::string name, DhConvention convention, std::vector<Joint> joints,
+RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector<Joint> joints,
                        const Pose& T_flange_tool)
     : name_(std::move(name)), convention_(convention), joints_(std::move(joints)), T_flange_tool_(T_flange_tool) {
   const std::string who = "robot '" + name_ + "'";
@@ -279,6 +302,11 @@ RobotModel::RobotModel(std::string name, DhConvention convention, std::vector<Jo
     const Joint& j = joints_[i];
     for (double v : {j.a, j.alpha, j.d, j.theta_offset})
       if (!std::isfinite(v)) Throw(who, ": ", JointLabel(joints_, i), " has a non-finite DH parameter");
+    if (!j.origin.R.allFinite() || !j.origin.t.allFinite() ||
+        (j.origin.R.transpose() * j.origin.R - Mat3::Identity()).norm() > 1e-9 || j.origin.R.determinant() < 0)
+      Throw(who, ": ", JointLabel(joints_, i), " origin must be a finite rigid transform");
+    if (!j.axis.allFinite() || std::abs(j.axis.norm() - 1.0) > 1e-9)
+      Throw(who, ": ", JointLabel(joints_, i), " axis must be a unit vector");
     if (std::isnan(j.lower) || std::isnan(j.upper) || !(j.lower < j.upper))
       Throw(who, ": ", JointLabel(joints_, i), " needs limits lower < upper");
     if (!(j.encoder_sigma >= 0) || !std::isfinite(j.encoder_sigma))
@@ -315,6 +343,7 @@ bool RobotModel::HasMasses() const {
 RobotModel RobotModel::WithJoints(std::vector<Joint> joints) const {
   RobotModel m(name_, convention_, std::move(joints), T_flange_tool_);
   m.tool_mass_ = tool_mass_;
+  m.urdf_ = urdf_;
   return m;
 }
 
@@ -329,7 +358,11 @@ RobotModel RobotModel::Default() {
   return model;
 }
 
-RobotModel RobotModel::Read(const std::filesystem::path& path) {
+RobotModel RobotModel::Read(const std::filesystem::path& path, const ChainSelection& chain) {
+  if (IsUrdfFile(path)) return ReadUrdf(path, chain);
+  if (!chain.base_link.empty() || !chain.tip_link.empty())
+    Throw("robot file ", path.string(), ": --base-link and --tip-link pick a chain of a URDF; this is a YAML "
+          "description, whose joints are the chain");
   return Parse(ReadTextFile(path), "robot file " + path.string());
 }
 
@@ -359,7 +392,9 @@ std::string RobotModel::ToYaml() const {
   out << YAML::BeginMap;
   out << YAML::Key << "name" << YAML::Value << name_;
   out << YAML::Key << "convention" << YAML::Value
-      << (convention_ == DhConvention::kStandard ? "standard_dh" : "modified_dh");
+      << (convention_ == ChainConvention::kStandard   ? "standard_dh"
+          : convention_ == ChainConvention::kModified ? "modified_dh"
+                                                      : "urdf");
   if (T_flange_tool_.R != Mat3::Identity() || T_flange_tool_.t != Vec3::Zero() || tool_mass_.mass_kg > 0) {
     // The quaternion is written from the rotation matrix; reading it back reproduces
     // the matrix to rounding (1e-16), not bit for bit.
@@ -382,10 +417,25 @@ std::string RobotModel::ToYaml() const {
     out << YAML::Flow << YAML::BeginMap;
     out << YAML::Key << "name" << YAML::Value << j.name;
     out << YAML::Key << "type" << YAML::Value << TypeName(j.type);
-    out << YAML::Key << "d_m" << YAML::Value << j.d;
-    out << YAML::Key << "a_m" << YAML::Value << j.a;
-    out << YAML::Key << "alpha_rad" << YAML::Value << j.alpha;
-    out << YAML::Key << "theta_offset_rad" << YAML::Value << j.theta_offset;
+    if (convention_ == ChainConvention::kUrdf) {
+      // The joint's zero offset folded into its origin (the URDF form has none).
+      Pose motion;
+      if (rev)
+        motion.R = Eigen::AngleAxisd(j.theta_offset, j.axis).toRotationMatrix();
+      else
+        motion.t = j.d * j.axis;
+      const Pose o = j.origin * motion;
+      const Vec3 rpy = RpyOf(o.R);
+      out << YAML::Key << "origin_xyz_m" << YAML::Value << YAML::Flow << std::vector<double>{o.t.x(), o.t.y(), o.t.z()};
+      out << YAML::Key << "origin_rpy_rad" << YAML::Value << YAML::Flow << std::vector<double>{rpy.x(), rpy.y(), rpy.z()};
+      out << YAML::Key << "axis" << YAML::Value << YAML::Flow
+          << std::vector<double>{j.axis.x(), j.axis.y(), j.axis.z()};
+    } else {
+      out << YAML::Key << "d_m" << YAML::Value << j.d;
+      out << YAML::Key << "a_m" << YAML::Value << j.a;
+      out << YAML::Key << "alpha_rad" << YAML::Value << j.alpha;
+      out << YAML::Key << "theta_offset_rad" << YAML::Value << j.theta_offset;
+    }
     if (std::isfinite(j.lower) || std::isfinite(j.upper)) {
       // An open side is written as YAML's .inf / -.inf.
       out << YAML::Key << (rev ? "limits_rad" : "limits_m") << YAML::Value << YAML::Flow
@@ -419,7 +469,7 @@ void RobotModel::Write(const std::filesystem::path& path) const {
   WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
 }
 
-bool RobotModel::WithinLimits(const Eigen::VectorXd& q, std::string* why) const {
+bool RobotModel::WithinLimits(const Eigen::VectorXd& q, std::string* why, double slack_share) const {
   std::ostringstream s;
   if (q.size() != NumJoints()) {
     s << "robot '" << name_ << "' has " << NumJoints() << " joints, got " << q.size() << " joint values";
@@ -430,12 +480,13 @@ bool RobotModel::WithinLimits(const Eigen::VectorXd& q, std::string* why) const 
         s << "robot '" << name_ << "': " << JointLabel(joints_, i) << " value is not finite";
         break;
       }
-      if (q[i] < j.lower) {
+      const double slack = std::isfinite(j.upper - j.lower) ? slack_share * (j.upper - j.lower) : 0.0;
+      if (q[i] < j.lower - slack) {
         s << "robot '" << name_ << "': " << JointLabel(joints_, i) << " = " << JointValueText(j, q[i])
           << " is below its lower limit " << JointValueText(j, j.lower);
         break;
       }
-      if (q[i] > j.upper) {
+      if (q[i] > j.upper + slack) {
         s << "robot '" << name_ << "': " << JointLabel(joints_, i) << " = " << JointValueText(j, q[i])
           << " is above its upper limit " << JointValueText(j, j.upper);
         break;
@@ -484,19 +535,28 @@ Eigen::Matrix<double, 6, Eigen::Dynamic> RobotModel::Jacobian(const Eigen::Vecto
   const Vec3 p_end = end == EndFrame::kTool ? (F.back() * T_flange_tool_).t : F.back().t;
   Eigen::Matrix<double, 6, Eigen::Dynamic> J(6, NumJoints());
   for (int i = 0; i < NumJoints(); ++i) {
-    // Standard DH: joint i turns about z of frame i-1; modified DH: about z of frame i
-    // (its origin lies on that axis, since Rz(theta) Tz(d) keep to it).
-    const Pose& axis_frame = convention_ == DhConvention::kStandard ? F[i] : F[i + 1];
-    const Vec3 w = axis_frame.R.col(2);
+    const JointAxis ax = AxisOf(F, i);
     if (joints_[i].type == JointType::kRevolute) {
-      J.block<3, 1>(0, i) = w;
-      J.block<3, 1>(3, i) = w.cross(p_end - axis_frame.t);
+      J.block<3, 1>(0, i) = ax.w;
+      J.block<3, 1>(3, i) = ax.w.cross(p_end - ax.o);
     } else {
       J.block<3, 1>(0, i).setZero();
-      J.block<3, 1>(3, i) = w;
+      J.block<3, 1>(3, i) = ax.w;
     }
   }
   return J;
+}
+
+JointAxis RobotModel::AxisOf(const std::vector<Pose>& F, int i) const {
+  // Standard DH: joint i turns about z of frame i-1; modified DH: about z of frame i (its
+  // origin lies on that axis, since Rz(theta) Tz(d) keep to it); URDF: about frame i's own
+  // axis through its origin (origin * M(axis, q) keeps it).
+  switch (convention_) {
+    case ChainConvention::kStandard: return {F[i].R.col(2), F[i].t};
+    case ChainConvention::kModified: return {F[i + 1].R.col(2), F[i + 1].t};
+    case ChainConvention::kUrdf: return {F[i + 1].R * joints_[i].axis, F[i + 1].t};
+  }
+  return {};
 }
 
 Eigen::MatrixXd RobotModel::EncoderCovariance() const {
@@ -524,6 +584,73 @@ Mat6 RobotModel::PoseCovariance(const Eigen::VectorXd& q, const Eigen::MatrixXd&
 
 Mat6 RobotModel::PoseCovariance(const Eigen::VectorXd& q, EndFrame end) const {
   return PoseCovariance(q, EncoderCovariance(), end);
+}
+
+std::vector<std::string> GeometryParameterNames(const RobotModel& robot) {
+  static const char* const kDh[kDhParamsPerJoint] = {"theta_offset", "d", "a", "alpha"};
+  static const char* const kUrdf[kUrdfParamsPerJoint] = {"offset", "x", "y", "z", "rx", "ry", "rz"};
+  std::vector<std::string> names;
+  for (int i = 0; i < robot.NumJoints(); ++i) {
+    std::string joint = robot.Joints()[i].name;
+    if (joint.empty()) {
+      joint = std::to_string(i + 1);  // (GCC 12 -Wrestrict misfires on "J" + ...)
+      joint.insert(joint.begin(), 'J');
+    }
+    for (int k = 0; k < robot.GeometryParamsPerJoint(); ++k)
+      names.push_back(joint + "." + (robot.Convention() == ChainConvention::kUrdf ? kUrdf[k] : kDh[k]));
+  }
+  return names;
+}
+
+bool GeometryParameterIsAngle(const RobotModel& robot, int k) {
+  const int s = robot.GeometryParamsPerJoint(), t = k % s;
+  if (robot.Convention() != ChainConvention::kUrdf) return t == 0 || t == 3;
+  if (t == 0) return robot.Joints()[k / s].type == JointType::kRevolute;
+  return t >= 4;
+}
+
+RobotModel WithGeometryErrors(const RobotModel& robot, const Eigen::VectorXd& delta) {
+  const int s = robot.GeometryParamsPerJoint();
+  if (delta.size() != robot.NumGeometryParameters())
+    Throw("WithGeometryErrors: ", delta.size(), " geometric errors given, robot '", robot.Name(), "' needs ",
+          robot.NumGeometryParameters());
+  std::vector<Joint> joints = robot.Joints();
+  for (size_t i = 0; i < joints.size(); ++i) {
+    Joint& j = joints[i];
+    const double* e = delta.data() + s * i;
+    if (robot.Convention() == ChainConvention::kUrdf) {
+      // origin G M(offset): the same transform the error model applies (model/joint.h).
+      const Pose G{ExpSO3(Vec3(e[4], e[5], e[6])), Vec3(e[1], e[2], e[3])};
+      Pose motion;
+      if (j.type == JointType::kRevolute)
+        motion.R = Eigen::AngleAxisd(e[0], j.axis).toRotationMatrix();
+      else
+        motion.t = e[0] * j.axis;
+      j.origin = j.origin * G * motion;
+    } else {
+      j.theta_offset += e[0];
+      j.d += e[1];
+      j.a += e[2];
+      j.alpha += e[3];
+    }
+  }
+  return robot.WithJoints(joints);
+}
+
+Eigen::VectorXd UniformGrowth(const RobotModel& robot) {
+  const int s = robot.GeometryParamsPerJoint();
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(robot.NumGeometryParameters());
+  for (int i = 0; i < robot.NumJoints(); ++i) {
+    const Joint& j = robot.Joints()[i];
+    if (robot.Convention() == ChainConvention::kUrdf) {
+      // The origin's translation (parent frame) grows: in the joint frame R^T t.
+      g.segment<3>(s * i + 1) = j.origin.R.transpose() * j.origin.t;
+    } else {
+      g[s * i + 1] = j.d;
+      g[s * i + 2] = j.a;
+    }
+  }
+  return g;
 }
 
 }  // namespace mcms

@@ -20,7 +20,10 @@ are kept (bash ignores them). Commands written inline in the prose (synopses lik
 
 A block that cannot run in a test (set-up, builds, clusters, long benchmarks, fuzzing) is
 marked in the page by an HTML comment on the line(s) before it, `<!-- not run: REASON -->`;
-it is listed as not run with the reason, never silently skipped.
+it is listed as not run with the reason, never silently skipped. A block that reads real data
+(../shared/data, as from the checkout) is marked `<!-- needs data: NAME -->`: it runs when
+that data set is present ($MCMS_DATA_DIR or ../shared/data beside the checkout; the page's
+folder sees it at ../shared/data) and is listed as not run, "real data not present", when not.
 
 How they run: each page in its own fresh folder (one bash session; every block starts in
 the page's folder and a `cd` carries over to the rest of its block), which holds a copy of
@@ -48,6 +51,12 @@ SHELL_INFO = {"sh", "bash", "shell", "console"}
 COMMAND_START = re.compile(r"^(\w+=\S*\s+)*(mcms|cd|cp|python3|/usr/bin/python3|cmp|diff|ls|\./scripts/\S*|"
                            r"\./build/\S*|build/\S*|examples/\S*)(\s|$)")
 NOT_RUN = re.compile(r"^\s*<!--\s*not run:\s*(.*?)\s*-->\s*$")
+NEEDS_DATA = re.compile(r"^\s*<!--\s*needs data:\s*(\S+)\s*-->\s*$")
+
+
+def data_root():
+    """The real data: $MCMS_DATA_DIR, or ../shared/data beside the checkout."""
+    return os.environ.get("MCMS_DATA_DIR") or os.path.join(os.path.dirname(ROOT), "shared", "data")
 
 
 class Block:
@@ -93,6 +102,13 @@ def blocks(page, section=None):
         m = NOT_RUN.match(l)
         if m:
             pending, prev_blank = m.group(1), True
+            i += 1
+            continue
+        m = NEEDS_DATA.match(l)
+        if m:
+            if not os.path.isdir(os.path.join(data_root(), m.group(1))):
+                pending = f"real data not present: {os.path.join(data_root(), m.group(1))}"
+            prev_blank = True
             i += 1
             continue
         fence = re.match(r"^(```+|~~~+)\s*(\S*)", l)
@@ -151,6 +167,10 @@ mcms audit --help \\
 <!-- not run: a marked block -->
 
     mcms no-such-command
+
+<!-- needs data: no-such-data-set -->
+
+    mcms audit robot ../shared/data/no-such-data-set/log.csv
 """,
     "bad.md": """# Bad
 
@@ -173,7 +193,8 @@ def say(*args):
 
 def self_test(argv):
     """Runs this script on SELF_TEST_PAGES: the good page must pass with 2 commands ok and
-    1 not run; the bad one must fail, name the failing command and stop there."""
+    2 not run (one marked, one whose real data is absent); the bad one must fail, name the
+    failing command and stop there."""
     me = os.path.abspath(__file__)
     with tempfile.TemporaryDirectory(prefix="mcms_docs_self_") as tmp:
         paths = {}
@@ -184,8 +205,9 @@ def self_test(argv):
         bad = subprocess.run([sys.executable, me, *argv, paths["bad.md"]], capture_output=True, text=True)
     print(good.stdout + good.stderr + bad.stdout + bad.stderr)
     problems = []
-    if good.returncode != 0 or "2 commands ok, 0 reused, 1 not run, 0 failed" not in good.stdout:
-        problems.append(f"the good page should pass with 2 commands ok and 1 not run (exit {good.returncode})")
+    if good.returncode != 0 or "2 commands ok, 0 reused, 2 not run, 0 failed" not in good.stdout \
+            or "real data not present" not in good.stdout:
+        problems.append(f"the good page should pass with 2 commands ok and 2 not run (exit {good.returncode})")
     if bad.returncode != 1 or not re.search(r"^FAIL .*mcms no-such-command", bad.stdout, re.M) \
             or "1 commands ok, 0 reused, 0 not run, 1 failed" not in bad.stdout or "not reached  bad.md:5" not in bad.stdout:
         problems.append(f"the bad page should fail at its 2nd command and stop (exit {bad.returncode})")
@@ -281,6 +303,11 @@ def main():
         if start == 0:
             shutil.copytree(examples, os.path.join(folder, "examples"))
             os.symlink(build, os.path.join(folder, "build"))
+        # The real data where the docs say it is: ../shared/data from the page's folder.
+        shared = os.path.join(work_root, "shared")
+        if os.path.isdir(data_root()) and not os.path.exists(shared):
+            os.makedirs(shared)
+            os.symlink(os.path.abspath(data_root()), os.path.join(shared, "data"))
         # Not-run blocks are listed where they stand; runnable commands run in one bash session.
         for b in bs:
             if b.not_run or page in skipped:

@@ -19,6 +19,7 @@ packages=(
   ccache  # a rebuild after a small change recompiles only what changed (Ceres and OpenCV headers are slow)
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
+  liburdfdom-dev  # robots as ROS describes them (model/urdf.h): urdfdom, with TinyXML and console_bridge
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   libisal-dev  # the PNG frame reader (vision/image_file.h): ISA-L inflate and CRC-32
   libspng-dev  # bench_throughput's comparison row of PNG readers (skipped without it)

@@ -27,7 +27,7 @@ inline RobotModel Positioner(const Pose& tool) {
   j[1].theta_offset = -std::numbers::pi / 2;
   j[1].lower = -2 * std::numbers::pi;
   j[1].upper = 2 * std::numbers::pi;
-  return RobotModel("two-axis positioner", DhConvention::kStandard, j, tool);
+  return RobotModel("two-axis positioner", ChainConvention::kStandard, j, tool);
 }
 
 // A pose of pose_initial_guesses.yaml: {x, y, z, qw, qx, qy, qz}.

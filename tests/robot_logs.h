@@ -55,14 +55,12 @@ inline RobotTruth MakeTruth(const RobotModel& nominal, Rng& rng, const std::vect
                             const RobotLogSpec& spec) {
   RobotTruth t{nominal, {}, {}, {}, hidden, spec};
   if (spec.dh_length_sigma_m > 0 || spec.dh_angle_sigma_rad > 0) {
-    Eigen::VectorXd d(4 * nominal.NumJoints());
-    for (int j = 0; j < nominal.NumJoints(); ++j) {
-      d[4 * j] = rng.Normal(0, spec.dh_angle_sigma_rad);
-      d[4 * j + 1] = rng.Normal(0, spec.dh_length_sigma_m);
-      d[4 * j + 2] = rng.Normal(0, spec.dh_length_sigma_m);
-      d[4 * j + 3] = rng.Normal(0, spec.dh_angle_sigma_rad);
-    }
-    t.robot = WithDhErrors(nominal, d);
+    // Every geometric parameter of the error model (a DH table's a, d, alpha, theta; a URDF
+    // joint's offset and placement) off by its sigma, lengths and angles in the model's order.
+    Eigen::VectorXd d(nominal.NumGeometryParameters());
+    for (int k = 0; k < d.size(); ++k)
+      d[k] = rng.Normal(0, GeometryParameterIsAngle(nominal, k) ? spec.dh_angle_sigma_rad : spec.dh_length_sigma_m);
+    t.robot = WithGeometryErrors(nominal, d);
   }
   t.T_meas_base = Pose{ExpSO3(Vec3(0.05, -0.1, 2.0) + 0.02 * Vec3(rng.Normal(), rng.Normal(), rng.Normal())),
                        Vec3(1.8, -0.4, 0.3) + 0.05 * Vec3(rng.Normal(), rng.Normal(), rng.Normal())};
@@ -113,7 +111,7 @@ inline void AppendRows(const RobotTruth& truth, const std::vector<Eigen::VectorX
     const double scale = 1.0 + spec.heteroscedastic * ((F.R * truth.tool_t + F.t).norm() - 1.0);
     const Vec3 e = scale * Vec3(rng.Normal() * spec.noise_mm[0], rng.Normal() * spec.noise_mm[1],
                                 rng.Normal() * spec.noise_mm[2]);
-    RobotLogRow r;
+    RobotMeasurement r;
     r.time_s = c.time_s;
     r.q = q;
     r.p_meas = p + truth.noise_frame * e * 1e-3;

@@ -241,11 +241,12 @@ TEST(AppCalibRobot, BadInputIsRefusedWithoutOutput) {
        Join({entries[0], entries[1], entries[2]}),
        "",
        {"3 measurements do not identify", "Add measurements"}},
-      // The same pose 20 times: nothing separates base and tool (a singular problem).
+      // The same measurement 20 times: refused as duplicated rows before any fit (they would
+      // count one measurement 20 times; nothing would separate base and tool).
       {"singular",
        Repeated(entries[0], 20),
        " --registration-only",
-       {"20 measurements do not identify", "tool.x", "Joint ranges covered", "move every joint"}},
+       {"measurement 2 ('copy1', line", "repeats", "measurement 1 ('copy0'", "exactly"}},
       // One harmonic count for a two-joint robot.
       {"error_motion_count",
        Join(entries),

@@ -211,7 +211,7 @@ TEST(Positioner, FindsInjectedErrorMotion) {
   em[4] = 3e-4;         // em1.sin.y: radial once per revolution
   em[12 + 2] = 1.5e-4;  // em2.sin.rz: angular positioning error twice per revolution
   em[12 + 5] = 2e-4;    // em2.sin.z: axial error motion twice per revolution
-  const RobotModel truth = WithErrorMotionErrors(WithDhErrors(nominal, dh), {0, 2}, em);
+  const RobotModel truth = WithErrorMotionErrors(WithGeometryErrors(nominal, dh), {0, 2}, em);
   const Pose T_meas_base{ExpSO3(Vec3(0.3, -0.2, 0.1)), Vec3(0.5, -0.3, 1.4)};
   Rng rng(11);
   std::vector<RobotMeasurement> ms;

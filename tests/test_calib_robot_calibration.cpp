@@ -48,7 +48,7 @@ Truth MakeTruth(uint64_t seed) {
     t.dh_errors[4 * i + 2] = sign() * 0.5e-3;
     t.dh_errors[4 * i + 3] = sign() * 0.05 * kDeg;
   }
-  t.actual = WithDhErrors(nominal, t.dh_errors);
+  t.actual = WithGeometryErrors(nominal, t.dh_errors);
   // Tool error: 1 mm and 0.5 deg.
   t.actual.SetT_flange_tool(
       Pose{ExpSO3(Vec3(0.3, -0.2, 0.3) * kDeg) * nominal.T_flange_tool().R, nominal.T_flange_tool().t + Vec3(1e-3, -0.7e-3, 0.8e-3)});
@@ -193,9 +193,9 @@ TEST(RobotCalibration, ModifiedDhRobotCalibrates) {
   j[2].a = 0.4;
   for (auto& x : j) x.lower = -2.5, x.upper = 2.5;
   Truth t;
-  t.nominal = RobotModel("mdh3", DhConvention::kModified, j, Pose{Mat3::Identity(), Vec3(0.3, 0.0, 0.05)});
+  t.nominal = RobotModel("mdh3", ChainConvention::kModified, j, Pose{Mat3::Identity(), Vec3(0.3, 0.0, 0.05)});
   t.dh_errors = Eigen::VectorXd::Constant(12, 0.4e-3);
-  t.actual = WithDhErrors(t.nominal, t.dh_errors);
+  t.actual = WithGeometryErrors(t.nominal, t.dh_errors);
   t.T_meas_base = Pose{ExpSO3(Vec3(0.1, 0.2, -0.3)), Vec3(1.0, 0.5, 0.2)};
   Rng rng(31);
   const auto fit = Measure(t, RandomPoses(t.nominal, 50, rng), false, kNoise, 0, rng);
@@ -267,7 +267,7 @@ TEST(RobotCalibration, ErrorMotionSameInSolverAndModelForBothConventions) {
   // error motion separately; with noise-free 6-D measurements of a robot that has it, the
   // fit must reproduce the measurements to rounding through RobotModel, in both DH
   // conventions, and the error-motion terms it estimates must be the injected ones.
-  for (const DhConvention conv : {DhConvention::kStandard, DhConvention::kModified}) {
+  for (const ChainConvention conv : {ChainConvention::kStandard, ChainConvention::kModified}) {
     std::vector<Joint> j(3);
     j[0].d = 0.3;
     j[1].alpha = -std::numbers::pi / 2;
@@ -293,7 +293,7 @@ TEST(RobotCalibration, ErrorMotionSameInSolverAndModelForBothConventions) {
     // injected 1e-4 leaves ~1e-8 (second order); a mismatch between the two
     // implementations would leave the error motion's own size, ~1e-4 rad and 5e-5 m.
     const ErrorStats s = Summarize(r.errors_after);
-    EXPECT_LT(s.max_position_m, 1e-7) << (conv == DhConvention::kStandard ? "standard" : "modified");
+    EXPECT_LT(s.max_position_m, 1e-7) << (conv == ChainConvention::kStandard ? "standard" : "modified");
     EXPECT_LT(*s.max_rotation_rad, 1e-7);
     const ErrorStats s0 = Summarize(r.errors_before);
     EXPECT_GT(s0.max_position_m, 2e-5);

@@ -47,7 +47,7 @@ TEST(CalibRobotGradients, StandardDhPosesWithErrorMotion) {
 
 TEST(CalibRobotGradients, ModifiedDhPosesWithErrorMotion) {
   const RobotModel kr5 = RobotModel::Default();
-  const RobotModel modified("modified", DhConvention::kModified, kr5.Joints(), kr5.T_flange_tool());
+  const RobotModel modified("modified", ChainConvention::kModified, kr5.Joints(), kr5.T_flange_tool());
   ExpectCostMatchesNumericDerivatives(modified, true, {1, 0, 0, 0, 0, 0});
 }
 

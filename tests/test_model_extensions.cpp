@@ -69,7 +69,7 @@ TEST(ModelExtensions, EveryRobotUnitMatchesNumericDerivatives) {
   std::vector<Extension> units = RobotExtensions();
   // The geometric units of the audit and lumped-mass compliance.
   units.push_back({Effect::kLinkTwist, 2, 0});
-  units.push_back({Effect::kGeometry, -1, 6});
+  units.push_back({Effect::kGeometry, -1, 24});
   units.push_back({Effect::kGravityCompliance, 1, 13});
   for (const Extension& e : units) {
     SCOPED_TRACE(e.Label());
@@ -144,7 +144,7 @@ TEST(ModelExtensions, RobotUnitsMeanWhatTheirNamesSay) {
     joints[k].a += dh[4 * k + 2];
     joints[k].alpha += dh[4 * k + 3];
   }
-  EXPECT_LT(BoxMinus(flange({Effect::kGeometry, -1, 6}, dhv), robot.WithJoints(joints).T_base_flange(q)).norm(), 1e-12);
+  EXPECT_LT(BoxMinus(flange({Effect::kGeometry, -1, 24}, dhv), robot.WithJoints(joints).T_base_flange(q)).norm(), 1e-12);
   // Thermal growth scales every length: the flange moves outwards, rotation unchanged.
   const Pose warm = flange({Effect::kThermalDrift, -1, 1}, {1e-4});  // 11 K above 20 C
   const Pose nominal = robot.T_base_flange(q);
@@ -334,7 +334,7 @@ TEST(ModelExtensions, CatalogNamesAreUniqueAndRoundTrip) {
 }
 
 TEST(ModelKinematics, TemplatedChainEqualsTheRobotModel) {
-  for (DhConvention conv : {DhConvention::kStandard, DhConvention::kModified}) {
+  for (ChainConvention conv : {ChainConvention::kStandard, ChainConvention::kModified}) {
     RobotModel robot = RobotModel::Default();
     std::vector<Joint> joints = robot.Joints();
     joints[2].error_motion_sin = {(Vec6() << 1e-4, -2e-4, 3e-5, 1e-5, 2e-5, -3e-5).finished()};
@@ -348,7 +348,7 @@ TEST(ModelKinematics, TemplatedChainEqualsTheRobotModel) {
     dh[4 * 1 + 2] = 2e-3;  // a2
     dh[4 * 4 + 3] = 1e-3;  // alpha5
     ChainCorrections<double> c;
-    c.dh = dh.data();
+    c.geometry = dh.data();
     std::vector<Joint> changed = joints;
     changed[1].a += 2e-3;
     changed[4].alpha += 1e-3;

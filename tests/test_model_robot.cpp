@@ -42,7 +42,7 @@ using test::ErrorOf;
 TEST(RobotModel, Kr5ArcAtZeroPose) {
   const RobotModel robot = RobotModel::Default();
   EXPECT_EQ(robot.NumJoints(), 6);
-  EXPECT_EQ(robot.Convention(), DhConvention::kStandard);
+  EXPECT_EQ(robot.Convention(), ChainConvention::kStandard);
   const Pose T = robot.T_base_flange(Eigen::VectorXd::Zero(6));
   // Hand-derived from the table: shoulder at (0.18, 0, 0.4), upper arm 0.6 up, elbow offset
   // 0.12 up, forearm 0.62 forward, flange 0.115 further; flange z along base x.
@@ -92,7 +92,7 @@ std::vector<Joint> ScaraJoints() {
 }
 
 TEST(RobotModel, PrismaticJointJacobian) {
-  for (DhConvention c : {DhConvention::kStandard, DhConvention::kModified}) {
+  for (ChainConvention c : {ChainConvention::kStandard, ChainConvention::kModified}) {
     const RobotModel robot("scara", c, ScaraJoints(), Pose{ExpSO3(Vec3(0.1, 0.2, 0)), Vec3(0, 0, 0.1)});
     Rng rng(3);
     for (int k = 0; k < 10; ++k) ExpectJacobianMatchesFk(robot, RandomInside(robot, rng), RobotModel::EndFrame::kTool);
@@ -115,7 +115,7 @@ TEST(RobotModel, ModifiedDhMatchesEquivalentStandardDh) {
   const Pose tool{ExpSO3(Vec3(-0.3, 0.1, 0.2)), Vec3(0.02, 0.0, 0.12)};
   RobotModel s = standard;
   s.SetT_flange_tool(tool);
-  const RobotModel modified("kr5 modified", DhConvention::kModified, mj, T_last * tool);
+  const RobotModel modified("kr5 modified", ChainConvention::kModified, mj, T_last * tool);
   Rng rng(11);
   for (int k = 0; k < 20; ++k) {
     const Eigen::VectorXd q = RandomInside(standard, rng);
@@ -203,7 +203,7 @@ TEST(RobotModel, WriteReadRoundTrip) {
 
   std::vector<Joint> joints = ScaraJoints();
   joints[3].lower = -std::numeric_limits<double>::infinity();  // an open limit survives as -.inf
-  const RobotModel scara("scara with tool", DhConvention::kModified, joints,
+  const RobotModel scara("scara with tool", ChainConvention::kModified, joints,
                          Pose{ExpSO3(Vec3(0.3, -0.2, 0.1)), Vec3(0.01, 0.02, 0.3)});
   scara.Write(dir / "scara.yaml");
   ExpectSameRobot(scara, RobotModel::Read(dir / "scara.yaml"));
@@ -271,14 +271,14 @@ TEST(RobotModel, BadFilesAreNamed) {
 TEST(RobotModel, ConstructorRejectsBadParameters) {
   std::vector<Joint> j = ScaraJoints();
   j[1].a = NAN;
-  EXPECT_THROW(RobotModel("x", DhConvention::kStandard, j), InputError);
-  EXPECT_THROW(RobotModel("x", DhConvention::kStandard, {}), InputError);
+  EXPECT_THROW(RobotModel("x", ChainConvention::kStandard, j), InputError);
+  EXPECT_THROW(RobotModel("x", ChainConvention::kStandard, {}), InputError);
   j = ScaraJoints();
   j[0].encoder_sigma = -1;
-  EXPECT_THROW(RobotModel("x", DhConvention::kStandard, j), InputError);
+  EXPECT_THROW(RobotModel("x", ChainConvention::kStandard, j), InputError);
   Pose bad;
   bad.R(0, 0) = 2.0;
-  EXPECT_THROW(RobotModel("x", DhConvention::kStandard, ScaraJoints(), bad), InputError);
+  EXPECT_THROW(RobotModel("x", ChainConvention::kStandard, ScaraJoints(), bad), InputError);
   const RobotModel r = RobotModel::Default();
   EXPECT_THROW(r.PoseCovariance(Eigen::VectorXd::Zero(6), Eigen::MatrixXd::Identity(5, 5)), InputError);
   EXPECT_THROW(r.PoseCovariance(Eigen::VectorXd::Zero(6), -Eigen::MatrixXd::Identity(6, 6)), InputError);

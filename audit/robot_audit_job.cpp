@@ -1,0 +1,153 @@
+#include <cstdio>
+#include <sstream>
+
+#include "audit/robot_audit.h"
+#include "audit/robot_audit_problem.h"
+#include "core/error.h"
+#include "core/io.h"
+#include "core/output_folder.h"
+#include "core/svg_plot.h"
+#include "model/urdf.h"
+
+namespace mcms {
+
+using robot_audit::PositionRms;
+
+void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, int num_joints) {
+  WriteFileAtomically(path, [&](std::ostream& os) {
+    os << "pair";
+    for (int j = 1; j <= num_joints; ++j) os << ",q" << j << "_rad";
+    os << ",x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,difference_mm,separation_sigma\n";
+    char b[64];
+    for (const auto& np : result.next_poses)
+      for (const auto& p : np.poses) {
+        os << '"' << np.a << " | " << np.b << '"';
+        for (int j = 0; j < p.q.size(); ++j) {
+          std::snprintf(b, sizeof b, ",%.9g", p.q[j]);
+          os << b;
+        }
+        for (const Vec3* v : {&p.p_meas_a, &p.p_meas_b})
+          for (int k = 0; k < 3; ++k) {
+            std::snprintf(b, sizeof b, ",%.9g", (*v)[k]);
+            os << b;
+          }
+        std::snprintf(b, sizeof b, ",%.6f,%.3f\n", (p.p_meas_a - p.p_meas_b).norm() * 1e3, p.separation_sigma);
+        os << b;
+      }
+  });
+}
+std::string RunRobotAuditJob(const RobotAuditJob& job) {
+  std::vector<std::filesystem::path> inputs{job.log, job.robot};
+  inputs.insert(inputs.end(), job.validate.begin(), job.validate.end());
+  RequireOutputsSpareInputs({{job.output_dir, "audit robot -o", true}, {job.json, "audit robot --json"}}, inputs);
+  if (!job.output_dir.empty())
+    RequireReplaceableFolder(job.output_dir, {"report.json"}, "audit robot", "audit robot -o");
+  if (!job.json.empty()) RequireWritableFile(job.json, "audit robot --json");
+  if (job.robot.empty() && (!job.chain.base_link.empty() || !job.chain.tip_link.empty()))
+    Throw("audit robot: --base-link and --tip-link pick a chain of a URDF robot; give it with --robot");
+  const RobotModel described = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot, job.chain);
+  const RobotLog log = ReadRobotLog(job.log, described);
+  std::vector<RobotLog> validate;
+  for (const auto& v : job.validate) validate.push_back(ReadRobotLog(v, described));
+  std::vector<const RobotLog*> logs{&log};
+  for (const auto& v : validate) logs.push_back(&v);
+  std::vector<std::string> reading_notes;
+  const RobotModel robot = CoverReadings(described, logs, &reading_notes);
+  RobotAuditResult r = AuditRobot(robot, log, job.options, validate);
+  r.report.notes.insert(r.report.notes.begin(), reading_notes.begin(), reading_notes.end());
+  std::ostringstream text;
+  text << "robot log " << job.log.string() << ": " << log.rows.size() << " measurements ("
+       << (log.NumPoints() >= 3 ? std::to_string(log.NumPoints()) + " points of a rigid body: its pose"
+                                : log.six_dof() ? std::string("6-D")
+                                                : std::string("3-D"))
+       << "), robot '" << robot.Name() << "'";
+  if (const UrdfSource* u = robot.Urdf()) text << " (URDF chain " << u->base_link << " -> " << u->tip_link << ", " << robot.NumJoints() << " joints)";
+  text << "\n";
+  if (!log.ignored_columns.empty()) {
+    text << "columns not used:";
+    for (const auto& c : log.ignored_columns) text << " " << c;
+    text << "\n";
+  }
+  const Eigen::MatrixXd& S = r.nominal.noise;
+  char buf[256];
+  std::snprintf(buf, sizeof buf,
+                "nominal model: position residual RMS %.4f mm; noise sigma x y z %.4f %.4f %.4f mm (fitted)\n",
+                PositionRms(r.nominal.residuals) * 1e3, std::sqrt(S(0, 0)) * 1e3, std::sqrt(S(1, 1)) * 1e3,
+                std::sqrt(S(2, 2)) * 1e3);
+  text << buf;
+  text << r.report.Text();
+  std::snprintf(buf, sizeof buf, "extended model: position residual RMS %.4f mm\n",
+                PositionRms(r.extended.residuals) * 1e3);
+  text << buf;
+  for (const auto& np : r.next_poses)
+    if (!np.poses.empty()) {
+      std::snprintf(buf, sizeof buf,
+                    "to tell [%s] from [%s]: measure the %zu poses of next_poses.csv (-o); the best "
+                    "separates them by %.1f sigma of the noise\n",
+                    np.a.c_str(), np.b.c_str(), np.poses.size(), np.poses.front().separation_sigma);
+      text << buf;
+    }
+  const std::string report = text.str();
+  if (!job.output_dir.empty()) {
+    WriteFolderAtomically(job.output_dir, {"report.json"}, "audit robot", "audit robot -o",
+                          [&](const std::filesystem::path& dir) {
+                            WriteFileAtomically(dir / "report.txt", [&](std::ostream& os) { os << report; });
+                            r.extended_robot.Write(dir / "robot.yaml");
+                            if (robot.Urdf()) {
+                              // The geometry (error motion has no place in a URDF; robot.yaml holds it).
+                              std::vector<Joint> joints = r.extended_robot.Joints();
+                              for (Joint& j : joints) j.error_motion_sin.clear(), j.error_motion_cos.clear();
+                              WriteUrdf(dir / "robot.urdf", r.extended_robot.WithJoints(joints));
+                            }
+                            if (!r.report.validation.empty())
+                              WriteFileAtomically(dir / "validation.csv", [&](std::ostream& os) {
+                                os << "log,row,group,model,point,dx_mm,dy_mm,dz_mm,distance_mm\n";
+                                char b[320];
+                                for (const SessionScore& sc : r.report.validation)
+                                  for (const ModelScore& m : sc.models)
+                                    for (size_t i = 0; i < m.errors.size(); ++i)
+                                      for (size_t k = 0; k < m.errors[i].size(); ++k) {
+                                        const Vec3& e = m.errors[i][k];
+                                        std::snprintf(b, sizeof b, "%s,%zu,%s,%s,%zu,%.6f,%.6f,%.6f,%.6f\n",
+                                                      CsvQuoted(sc.log).c_str(), i + 1, Name(sc.group_of_row[i]),
+                                                      m.model.c_str(), k + 1, e.x() * 1e3, e.y() * 1e3, e.z() * 1e3,
+                                                      e.norm() * 1e3);
+                                        os << b;
+                                      }
+                              });
+                            WriteFileAtomically(dir / "residuals.csv", [&](std::ostream& os) {
+                              os << "time_s,nominal_dx_mm,nominal_dy_mm,nominal_dz_mm,extended_dx_mm,extended_dy_mm,"
+                                    "extended_dz_mm\n";
+                              char b[256];
+                              for (size_t i = 0; i < log.rows.size(); ++i) {
+                                std::snprintf(b, sizeof b, "%.9g,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", log.rows[i].time_s,
+                                              r.nominal.residuals(i, 0) * 1e3, r.nominal.residuals(i, 1) * 1e3,
+                                              r.nominal.residuals(i, 2) * 1e3, r.extended.residuals(i, 0) * 1e3,
+                                              r.extended.residuals(i, 1) * 1e3, r.extended.residuals(i, 2) * 1e3);
+                                os << b;
+                              }
+                            });
+                            std::filesystem::create_directories(dir / "plots");
+                            int k = 0;
+                            for (const auto& pl : r.plots) {
+                              Plot p;
+                              p.title = pl.effect + ": residual of the model without it, along its direction";
+                              p.x_label = pl.covariate;
+                              p.y_label = "mm";
+                              PlotSeries a{"residual without the effect", pl.x, pl.residual_before, "#1f77b4", true};
+                              PlotSeries b{"the fitted effect", pl.x, pl.effect_size, "#d62728", true};
+                              for (auto& v : a.y) v *= 1e3;
+                              for (auto& v : b.y) v *= 1e3;
+                              p.series = {a, b};
+                              p.WriteSvg(dir / "plots" / ("effect" + std::to_string(++k) + ".svg"));
+                            }
+                            if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot.NumJoints());
+                            r.report.WriteJson(dir / "report.json");
+                          });
+  }
+  if (!job.json.empty()) r.report.WriteJson(job.json);
+  return report;
+}
+
+
+}  // namespace mcms

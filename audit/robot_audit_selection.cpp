@@ -1,0 +1,521 @@
+#include "audit/robot_audit_selection.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <numeric>
+#include <optional>
+
+#include "audit/model_selection.h"
+#include "calib/robot_calibration.h"
+#include "core/error.h"
+#include "core/random.h"
+
+namespace mcms::robot_audit {
+
+namespace {
+
+// A single geometric kind is offered when asked for by name, or with the whole geometry.
+bool GeometricKindWanted(const RobotAuditOptions& o, Effect e) {
+  return Wanted(o, e) || Wanted(o, Effect::kGeometry);
+}
+
+}  // namespace
+
+bool Wanted(const RobotAuditOptions& o, Effect e) {
+  return o.only.empty() || std::find(o.only.begin(), o.only.end(), Name(e)) != o.only.end();
+}
+bool GeometryWanted(const RobotAuditOptions& o) {
+  for (Effect e : {Effect::kGeometry, Effect::kJointOffset, Effect::kLinkLength, Effect::kLinkTwist})
+    if (Wanted(o, e)) return true;
+  return false;
+}
+
+// The blocks of theta and the candidates that free them: the geometric terms (stage 2)
+// and the rest of the catalog (stage 3).
+void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, std::vector<Option>* geometric,
+                std::vector<Option>* others, std::vector<std::string>* notes) {
+  const RobotModel& robot = *pb->robot;
+  const int n = pb->n;
+  std::vector<Extension>& B = pb->blocks;
+  B.push_back({Effect::kGeometry, -1, robot.NumGeometryParameters()});
+  pb->geometry = 0;
+  const bool masses = robot.HasMasses();
+  bool moves_both_ways = false;
+  for (int j = 0; j < n && !moves_both_ways; ++j) {
+    bool up = false, down = false;
+    for (const RowData& r : pb->rows) {
+      up |= r.c.move_direction[j] > 0;
+      down |= r.c.move_direction[j] < 0;
+    }
+    moves_both_ways = up && down;
+  }
+  for (int j = 0; j < n; ++j) {
+    if (robot.Joints()[j].type == JointType::kRevolute && Wanted(o, Effect::kErrorMotion))
+      B.push_back({Effect::kErrorMotion, j, 1});
+    if (Wanted(o, Effect::kJointScale)) B.push_back({Effect::kJointScale, j, 0});
+    if (Wanted(o, Effect::kGravityCompliance)) B.push_back({Effect::kGravityCompliance, j, masses ? 0 : 2 * n + 1});
+    if (Wanted(o, Effect::kBacklash) && moves_both_ways) B.push_back({Effect::kBacklash, j, 0});
+  }
+  if (Wanted(o, Effect::kBacklash) && !moves_both_ways)
+    notes->push_back("backlash not tested: no joint moves both ways in the log");
+  if (Wanted(o, Effect::kThermalDrift)) {
+    const double span = log.rows.back().time_s - log.rows.front().time_s;
+    if (!log.has_time)
+      notes->push_back("thermal_drift in time not tested: the log has no time column");
+    else if (span > 0)
+      B.push_back({Effect::kThermalDrift, -1, 0});
+    else
+      notes->push_back("thermal_drift in time not tested: the log has no time span");
+    if (log.has_temperature) B.push_back({Effect::kThermalDrift, -1, 1});
+  }
+  bool moving = false;
+  for (const auto& r : log.rows) moving |= r.qdot.size() > 0 && r.qdot.norm() > 0;
+  if (Wanted(o, Effect::kClockOffset) && moving) B.push_back({Effect::kClockOffset, -1, 0});
+
+  // Parameters.
+  pb->P = pb->NumBase();
+  for (const Extension& e : B) {
+    pb->offset.push_back(pb->P);
+    pb->P += e.NumParameters();
+  }
+  pb->theta0 = Eigen::VectorXd::Zero(pb->P);
+  pb->lower.assign(pb->P, -kInf);
+  for (size_t k = 0; k < B.size(); ++k) {
+    const std::vector<double> p0 = B[k].InitialParameters();
+    for (size_t j = 0; j < p0.size(); ++j) pb->theta0[pb->offset[k] + j] = p0[j];
+    // Physical bounds: no joint has a negative compliance or mass, nor a negative backlash.
+    if (B[k].effect == Effect::kGravityCompliance || B[k].effect == Effect::kBacklash)
+      for (int j = 0; j < B[k].NumParameters(); ++j) pb->lower[pb->offset[k] + j] = 0.0;
+    if (B[k].effect == Effect::kThermalDrift && B[k].variant == 0) pb->warmup = pb->offset[k];
+  }
+
+  // Geometric candidates: one term each of the geometry block (a DH table's offsets, lengths
+  // and twists; a URDF chain's zero offsets, its placements only all at once).
+  const int g0 = pb->offset[pb->geometry], s = robot.GeometryParamsPerJoint();
+  for (int j = 0; j < n; ++j) {
+    const bool rev = robot.Joints()[j].type == JointType::kRevolute;
+    const auto Add = [&](Extension e, int term) {
+      if (!GeometricKindWanted(o, e.effect)) return;
+      geometric->push_back({e.Label(robot), e, {g0 + s * j + term}, 0, true});
+    };
+    Add({Effect::kJointOffset, j, 0}, OffsetParameter(robot.Convention(), robot.Joints()[j].type));
+    if (robot.Convention() == ChainConvention::kUrdf) continue;
+    if (rev) Add({Effect::kLinkLength, j, 1}, 1);
+    Add({Effect::kLinkLength, j, 0}, 2);
+    Add({Effect::kLinkTwist, j, 0}, 3);
+  }
+  // The rest: a block each, error motion one axis's sine/cosine pair at a time.
+  for (size_t k = 1; k < B.size(); ++k) {
+    const Extension& e = B[k];
+    if (e.effect == Effect::kErrorMotion) {
+      // One kind of error motion at a time (ISO 230-7): tilt, angular, radial, axial, each
+      // a first-harmonic sine/cosine pair. A radial (or tilt) motion along x and one along
+      // y differ only by a part that turns with the joint, which is a DH change: the
+      // geometry holds it, so x (rx) stands for both.
+      static const std::pair<int, const char*> kKinds[4] = {{0, "tilt"}, {2, "angular"}, {3, "radial"}, {5, "axial"}};
+      for (const auto& [a, kind] : kKinds)
+        others->push_back({e.Label(robot) + " (" + kind + ")", e, {pb->offset[k] + a, pb->offset[k] + 6 + a}, 2, false});
+    } else if (e.effect == Effect::kThermalDrift && e.variant == 0) {
+      others->push_back({e.Label(robot) + " (warm-up)", e, {pb->offset[k]}, 0, false});  // the time constant is profiled
+    } else {
+      std::vector<int> t(e.NumParameters());
+      std::iota(t.begin(), t.end(), pb->offset[k]);
+      // Lumped masses: the tool point (the payload) first, then the link frames from the
+      // flange inward, so that of two points the data cannot tell apart the outer is kept.
+      if (e.effect == Effect::kGravityCompliance && e.variant > 0) std::reverse(t.begin(), t.end());
+      std::string key = e.Label(robot);
+      if (e.effect == Effect::kThermalDrift) key += " (temperature)";
+      others->push_back({key, e, t, 0, false});
+    }
+  }
+}
+
+// The registration and the tool of the nominal model by maximum likelihood (Ceres; the
+std::string GeometryName(const Problem& pb, int p) {
+  return GeometryParameterNames(*pb.robot).at(p - pb.offset[pb.geometry]);
+}
+
+Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& noise, double tol) {
+  const int nb = pb.NumBase(), g0 = pb.offset[pb.geometry], ng = pb.robot->NumGeometryParameters();
+  std::vector<int> cols;
+  std::vector<std::string> names;
+  static const char* kBase[6] = {"base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z"};
+  static const char* kTool[6] = {"tool.x", "tool.y", "tool.z", "tool.rx", "tool.ry", "tool.rz"};
+  for (int k = 0; k < 6; ++k) cols.push_back(k), names.push_back(kBase[k]);
+  for (int k = 0; k < pb.ts; ++k) cols.push_back(6 + k), names.push_back(kTool[k]);
+  for (int k = 0; k < ng; ++k)
+    cols.push_back(g0 + k), names.push_back(GeometryName(pb, g0 + k));
+  const Eigen::MatrixXd Li = WhiteningOf(noise);
+  Eigen::MatrixXd Jw(static_cast<Eigen::Index>(pb.N) * pb.m, cols.size());
+  for (size_t c = 0; c < cols.size(); ++c)
+    for (int i = 0; i < pb.N; ++i)
+      for (int a = 0; a < pb.m; ++a) {
+        double v = 0;
+        for (int b = 0; b <= a; ++b) v += Li(a, b) * pb.J[b](i, cols[c]);
+        Jw(static_cast<Eigen::Index>(i) * pb.m + a, c) = v;
+      }
+  std::vector<CalibrationParameter> params(cols.size());
+  for (size_t c = 0; c < cols.size(); ++c) params[c].name = names[c];
+  AnalyzeIdentifiability(Jw, names, tol, &params);
+  Identifiable id;
+  for (int k = 0; k < ng; ++k) {
+    const CalibrationParameter& p = params[nb + k];
+    if (p.fixed)
+      id.held.push_back({p.name, p.reason});
+    else
+      id.params.push_back(g0 + k);
+  }
+  return id;
+}
+
+// ---------------------------------------------------------------------------------
+// Greedy selection: screening, full fits, the selection rule
+
+// A candidate's identifiable terms on top of the current model and the chi-square its
+// linearised (unconstrained) fit removes, with the unconstrained estimates.
+struct Screened {
+  int option = -1;
+  std::vector<int> terms;
+  double gain = 0.0;
+  Eigen::VectorXd estimate, sigma;
+};
+
+std::vector<Screened> Screen(const Problem& pb, const FitResult& cur, const std::vector<Option>& opts,
+                             const std::vector<int>& open, double tol, std::vector<std::string>* not_identifiable) {
+  std::vector<int> C;
+  for (int oi : open)
+    for (int t : opts[oi].terms)
+      if (std::find(cur.free.begin(), cur.free.end(), t) == cur.free.end() &&
+          std::find(C.begin(), C.end(), t) == C.end())
+        C.push_back(t);
+  std::vector<Screened> out;
+  if (C.empty()) return out;
+  const std::vector<int> FC = Union(cur.free, C);
+  Eigen::VectorXd th = cur.theta;
+  if (pb.warmup >= 0 && std::find(C.begin(), C.end(), pb.warmup) != C.end() && th[pb.warmup] == 0.0)
+    th[pb.warmup + 1] = pb.time_span / 3.0;  // a representative warm-up for screening
+  const Columns cols(pb, FC, th);
+  const RowSet all = AllRows(pb);
+  const Eigen::MatrixXd W = cur.noise.inverse();
+  const Eigen::MatrixXd H = cols.Normal(all, W);
+  const Eigen::VectorXd g = cols.Gradient(all, W, cur.R);
+  const int nf = cur.free.size();
+  const Eigen::MatrixXd HffInv = InverseScaled(H.topLeftCorner(nf, nf));
+  const auto Pos = [&](int param) { return static_cast<int>(std::find(FC.begin(), FC.end(), param) - FC.begin()); };
+  for (int oi : open) {
+    std::vector<int> pos;
+    for (int t : opts[oi].terms)
+      if (std::find(cur.free.begin(), cur.free.end(), t) == cur.free.end()) pos.push_back(Pos(t));
+    if (pos.empty()) continue;
+    const Eigen::MatrixXd Hcf = H(pos, Eigen::seqN(0, nf));
+    const Eigen::MatrixXd S = H(pos, pos) - Hcf * HffInv * Hcf.transpose();
+    const Eigen::VectorXd h = g(pos) - Hcf * HffInv * g.head(nf);
+    // Identifiable terms: greedy, each against the model and the terms kept before it.
+    std::vector<int> keep;
+    for (size_t t = 0; t < pos.size(); ++t) {
+      double d = S(t, t);
+      if (!keep.empty()) {
+        const Eigen::MatrixXd Skk = S(keep, keep);
+        const Eigen::VectorXd skt = S(keep, Eigen::seqN(static_cast<int>(t), 1));
+        d -= skt.dot(SolveScaled(Skk, skt));
+      }
+      const double hn = H(pos[t], pos[t]);
+      if (hn > 0 && d > 0 && std::sqrt(d / hn) >= tol) keep.push_back(static_cast<int>(t));
+    }
+    if (keep.empty()) {
+      not_identifiable->push_back(opts[oi].key);
+      continue;
+    }
+    Screened s;
+    s.option = oi;
+    for (int k : keep) s.terms.push_back(FC[pos[k]]);
+    const Eigen::MatrixXd Sk = S(keep, keep);
+    const Eigen::MatrixXd Ski = InverseScaled(Sk);
+    const Eigen::VectorXd hk = h(keep);
+    s.gain = hk.dot(Ski * hk);
+    s.estimate = -Ski * hk;
+    s.sigma = Ski.diagonal().cwiseMax(0.0).cwiseSqrt();
+    out.push_back(s);
+  }
+  return out;
+}
+
+
+// The full fit of a candidate on top of `cur`.
+Tried FitCandidate(const Problem& pb, const FitResult& cur, int option, const std::vector<int>& terms) {
+  Tried t;
+  t.option = option;
+  t.terms = terms;
+  t.fit = FitProfiled(pb, Union(cur.free, terms), cur.theta, cur.noise, &t.tau_sigma);
+  return t;
+}
+
+
+
+// Greedy forward selection over every candidate, from `start`: single geometric terms,
+// the whole identifiable geometry (`geometry_terms`, offered as one candidate while the
+// data can hold it), and the non-geometric catalog. A non-geometric candidate must also
+// pass on top of the whole geometry (at the step's rate, without the Bonferroni factor):
+// an effect that only explains what some DH parameter would is not named (it would soak
+// up a geometric error). At most `max_singles` single geometric terms are named; beyond
+// them, only the whole geometry.
+SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts, const std::vector<int>& geometry_terms,
+                             const FitResult& start, const RobotAuditOptions& o, double alpha,
+                             std::set<std::string>* not_identifiable, std::vector<std::string>* notes,
+                             const std::function<void(const std::string&)>& say) {
+  SelectionResult res;
+  res.cur = start;
+  const double logN = std::log(static_cast<double>(pb.N));
+  std::set<int> taken;
+  int singles = 0, effects = 0;
+  const auto FreeAll = [&](const FitResult& f, const std::vector<int>& terms) {
+    for (int t : terms)
+      if (std::find(f.free.begin(), f.free.end(), t) == f.free.end()) return false;
+    return true;
+  };
+  for (int step = 0; step < o.max_geometric_terms + o.max_effects + 1; ++step) {
+    // Held-out gains of a step are scored under the current model's noise (CrossValidate).
+    res.cv_known = false;
+    const bool geometry_free = FreeAll(res.cur, geometry_terms);
+    std::vector<int> open;
+    for (size_t i = 0; i < opts.size(); ++i) {
+      const Option& op = opts[i];
+      if (taken.count(static_cast<int>(i))) continue;
+      if (op.geometric && op.tier == 0 && singles >= o.max_geometric_terms) continue;
+      if (!op.geometric && effects >= o.max_effects) continue;
+      if (op.geometric && geometry_free) continue;
+      open.push_back(static_cast<int>(i));
+    }
+    if (open.empty()) break;
+    say("step " + std::to_string(step + 1) + ": screening " + std::to_string(open.size()) + " candidates");
+    std::vector<std::string> ni;
+    std::vector<Screened> sc = Screen(pb, res.cur, opts, open, o.identifiability_tolerance, &ni);
+    if (step == 0)
+      for (const auto& k : ni) not_identifiable->insert(k);
+    const int M = static_cast<int>(sc.size());
+    if (sc.empty()) break;
+    std::sort(sc.begin(), sc.end(), [&](const Screened& a, const Screened& b) {
+      return a.gain - ParamCount(pb, a.terms) * logN > b.gain - ParamCount(pb, b.terms) * logN;
+    });
+    const auto Threshold = [&](int k) { return ChiSquareThreshold(k, alpha / M); };
+    // The whole geometry on top of the current model: the base of the confirmations.
+    std::optional<FitResult> with_geometry;
+    std::vector<Tried> tried;
+    std::vector<std::pair<double, std::string>> unconfirmed;  // BIC gain, note
+    for (size_t i = 0; i < sc.size() && static_cast<int>(tried.size()) < o.max_full_fits; ++i) {
+      const int k = ParamCount(pb, sc[i].terms);
+      const Option& op = opts[sc[i].option];
+      if (sc[i].gain < 0.3 * Threshold(k)) continue;
+      if (op.geometric && op.tier == 1 && !EnoughData(pb, static_cast<int>(res.cur.free.size()) + k)) continue;
+      Tried t = FitCandidate(pb, res.cur, sc[i].option, sc[i].terms);
+      t.lr = 2.0 * (t.fit.loglik - res.cur.loglik);
+      t.bic = BicGain(t.lr, k, logN);
+      char b[240];
+      std::snprintf(b, sizeof b, "step %d: %s: likelihood ratio %.1f (threshold %.1f), BIC gain %.1f", step + 1,
+                    op.key.c_str(), t.lr, Threshold(k), t.bic);
+      say(b);
+      // Confirmation on top of the whole geometry.
+      if (!op.geometric && !geometry_free && !geometry_terms.empty() && t.lr >= Threshold(k)) {
+        const std::vector<int> Fg = Union(res.cur.free, geometry_terms);
+        if (EnoughData(pb, static_cast<int>(Fg.size()) + k)) {
+          if (!with_geometry) with_geometry = FitModel(pb, Fg, res.cur.theta, res.cur.noise);
+          const Tried c = FitCandidate(pb, *with_geometry, sc[i].option, sc[i].terms);
+          const double lr = 2.0 * (c.fit.loglik - with_geometry->loglik);
+          if (ChiSquareSurvival(lr, k) >= alpha) {
+            std::snprintf(b, sizeof b,
+                          "%s: likelihood ratio %.1f on the model, but only %.1f on top of every identifiable DH "
+                          "parameter: what it explains, the geometry explains too; not named",
+                          op.key.c_str(), t.lr, lr);
+            say(b);
+            unconfirmed.push_back({t.bic, b});
+            continue;
+          }
+        }
+      }
+      tried.push_back(std::move(t));
+    }
+    // An unconfirmed candidate is worth a note only where it would have led the step.
+    const auto NoteUnconfirmed = [&](double named_bic) {
+      const auto top = std::max_element(unconfirmed.begin(), unconfirmed.end());
+      if (top != unconfirmed.end() && top->first > named_bic) notes->push_back(top->second);
+    };
+    if (tried.empty()) {
+      NoteUnconfirmed(-kInf);
+      break;
+    }
+    std::vector<SelectionCandidate> sel(tried.size());
+    for (size_t i = 0; i < tried.size(); ++i) {
+      sel[i].k = ParamCount(pb, tried[i].terms);
+      sel[i].lr = tried[i].lr;
+      sel[i].tier = opts[tried[i].option].tier;
+      sel[i].row_loglik.assign(tried[i].fit.row_ll.data(), tried[i].fit.row_ll.data() + pb.N);
+    }
+    SelectionRule rule;
+    rule.alpha = alpha;
+    rule.ln_n = logN;
+    rule.close_bic = 10.0;
+    const StepDecision dec = DecideStep(sel, M, rule, [&](int i) {
+      if (!res.cv_known) {
+        res.cur_cv = CrossValidate(pb, res.cur, res.cur.noise);
+        res.cv_known = true;
+      }
+      Tried& t = tried[i];
+      if (!t.cv_done) {
+        say("step " + std::to_string(step + 1) + ": cross-validating " + opts[t.option].key);
+        t.cv = CrossValidate(pb, t.fit, res.cur.noise);
+        t.cv_done = true;
+      }
+      sel[i].heldout_row_loglik.assign(t.cv.row_ll.data(), t.cv.row_ll.data() + pb.N);
+      return t.cv.loglik - res.cur_cv.loglik;
+    });
+    NoteUnconfirmed(dec.best >= 0 && dec.outcome != StepOutcome::kNoHeldoutGain ? sel[dec.best].bic_gain : -kInf);
+    if (dec.outcome == StepOutcome::kNothingPasses) break;
+    if (dec.outcome == StepOutcome::kNoHeldoutGain) {
+      char b[200];
+      std::snprintf(b, sizeof b,
+                    "%s passed the likelihood-ratio test on all data but did not gain held-out log-likelihood "
+                    "(%.1f): not named",
+                    opts[tried[dec.best].option].key.c_str(), sel[dec.best].heldout_gain);
+      notes->push_back(b);
+      break;
+    }
+    Tried& best = tried[dec.best];
+    Finding f;
+    f.option = best.option;
+    f.terms = best.terms;
+    f.lr = best.lr;
+    f.bic = best.bic;
+    f.ll_gain = best.cv.loglik - res.cur_cv.loglik;
+    f.rms_before = res.cur_cv.rms;
+    f.base_cv_loglik = res.cur_cv.loglik;
+    f.rms_after = best.cv.rms;
+    f.tau_sigma = best.tau_sigma;
+    f.undecided = dec.outcome == StepOutcome::kUndecided;
+    // The best is in the model; the others of an undecided group stay candidates: if one
+    // still earns its place on top of the best, it was not an alternative but a second
+    // effect (both then named, below).
+    taken.insert(best.option);
+    if (f.undecided)
+      for (int i : dec.group) f.group.push_back(tried[i]);
+    const Option& bo = opts[best.option];
+    if (bo.geometric && bo.tier == 0) ++singles;
+    if (!bo.geometric) ++effects;
+    // A candidate named now that stood in an earlier undecided group beside that group's
+    // best: both earn their places, so that group is decided.
+    if (!f.undecided)
+      for (Finding& g : res.findings)
+        if (g.undecided)
+          for (size_t m = 1; m < g.group.size(); ++m)
+            if (g.group[m].option == f.option) g.undecided = false;
+    res.findings.push_back(f);
+    res.cur = best.fit;
+    res.cur_cv = best.cv;
+  }
+  return res;
+}
+// Poses that best separate two fitted models: their predicted tool difference against
+// the noise, over poses drawn within the joint limits and near the logged ones.
+RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& log, const Tried& A, const Tried& B,
+                                            const std::string& la, const std::string& lb, int count) {
+  RobotAuditResult::NextPoses np;
+  np.a = la;
+  np.b = lb;
+  if (count <= 0) return np;
+  const RobotModel& robot = *pb.robot;
+  Rng rng(20261204);
+  const Eigen::MatrixXd Li = WhiteningOf(A.fit.noise);
+  const RowData& last = pb.rows.back();
+  struct Cand {
+    Eigen::VectorXd q;
+    double score;
+    Vec3 pa, pb;
+  };
+  std::vector<Cand> cands;
+  for (int k = 0; k < 4000; ++k) {
+    Eigen::VectorXd q = k % 2 ? log.rows[static_cast<int>(rng.Uniform() * pb.N) % pb.N].q : Eigen::VectorXd::Zero(pb.n);
+    const int redraw = k % 2 ? 1 + static_cast<int>(rng.Uniform() * 2) : pb.n;
+    for (int r = 0; r < redraw; ++r) {
+      const int j = k % 2 ? static_cast<int>(rng.Uniform() * pb.n) % pb.n : r;
+      const Joint& jt = robot.Joints()[j];
+      const double wide = jt.type == JointType::kRevolute ? std::numbers::pi : 1.0;
+      q[j] = rng.Uniform(std::max(jt.lower, -wide), std::min(jt.upper, wide));
+    }
+    RowData row;
+    row.q = q;
+    row.c = last.c;
+    row.c.move_direction = Eigen::VectorXd::Zero(pb.n);
+    row.c.joint_velocity.resize(0);
+    row.c.gravity_lever = GravityLever(robot, q);
+    row.c.gravity_lever.col(2 * pb.n) *= pb.payload_factor;
+    row.c.gravity_torque = robot.HasMasses() ? GravityTorque(robot, q, pb.payload)
+                                             : Eigen::VectorXd(GravityTorquePerKg(robot, q) * pb.payload_factor);
+    // B's prediction is the "measurement": A's residual is then the difference.
+    double e[6];
+    row.p.setZero();
+    row.R.setIdentity();
+    RowResidual(pb, row, B.fit.theta.data(), e);
+    const Vec3 pbv(e[0], e[1], e[2]);
+    row.p = pbv;
+    if (pb.six) {
+      // R_meas = R_pred_B: with R_meas = I the residual's rotation is Log(R_pred_B).
+      row.R = ExpSO3(Vec3(e[3], e[4], e[5]));
+    }
+    RowResidual(pb, row, A.fit.theta.data(), e);
+    Eigen::VectorXd d(pb.m);
+    for (int a = 0; a < pb.m; ++a) d[a] = e[a];
+    cands.push_back({q, (Li * d).squaredNorm(), pbv + Vec3(e[0], e[1], e[2]), pbv});
+  }
+  std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.score > b.score; });
+  for (const Cand& c : cands) {
+    bool far = true;
+    for (const auto& s : np.poses) far &= (s.q - c.q).cwiseAbs().maxCoeff() > 0.2;
+    if (!far) continue;
+    np.poses.push_back({c.q, c.pa, c.pb, std::sqrt(c.score)});
+    if (static_cast<int>(np.poses.size()) >= count) break;
+  }
+  return np;
+}
+
+// A physical bound the data push against (a negative compliance or backlash wanted on top
+// of the final model and the whole geometry): said in a note, not named.
+void NoteViolatedBounds(const Problem& pb, const std::vector<Option>& opts, const Identifiable& ident,
+                        const FitResult& fin, double alpha_selection, const RobotAuditOptions& o,
+                        AuditReport* rep_out) {
+  AuditReport& rep = *rep_out;
+  const bool has_geometry = Union(fin.free, ident.params).size() == fin.free.size();
+  const FitResult base = has_geometry ? fin : FitProfiled(pb, Union(fin.free, ident.params), fin.theta, fin.noise);
+  std::vector<int> bounded;
+  for (size_t i = 0; i < opts.size(); ++i) {
+    bool b = false, all_free = true;
+    for (int t : opts[i].terms) {
+      b |= std::isfinite(pb.lower[t]);
+      all_free &= std::find(base.free.begin(), base.free.end(), t) != base.free.end();
+    }
+    if (b && !all_free) bounded.push_back(static_cast<int>(i));
+  }
+  std::vector<std::string> ignored;
+  for (const Screened& sc : Screen(pb, base, opts, bounded, o.identifiability_tolerance, &ignored)) {
+    const int k = ParamCount(pb, sc.terms);
+    if (sc.gain < ChiSquareThreshold(k, alpha_selection / std::max<size_t>(1, opts.size()))) continue;
+    int worst = 0;
+    for (int j = 1; j < sc.estimate.size(); ++j)
+      if (sc.estimate[j] / std::max(1e-300, sc.sigma[j]) < sc.estimate[worst] / std::max(1e-300, sc.sigma[worst]))
+        worst = j;
+    if (!(sc.estimate[worst] < -3.0 * sc.sigma[worst])) continue;
+    const Option& op = opts[sc.option];
+    const auto names = op.ext.ParameterNames();
+    const int blk = std::upper_bound(pb.offset.begin(), pb.offset.end(), sc.terms[worst]) - pb.offset.begin() - 1;
+    const int pidx = std::min<int>(sc.terms[worst] - pb.offset[blk], names.size() - 1);
+    char nb[600];
+    std::snprintf(nb, sizeof nb,
+                  "%s: the data ask for a sign no joint can have (%s = %.3g +- %.2g without its bound at 0, "
+                  "likelihood ratio %.1f): held at 0 and not named; a counterbalance spring, masses in the robot "
+                  "file that are too large, or an effect the catalog lacks would do this",
+                  op.key.c_str(), names[pidx].c_str(), sc.estimate[worst], sc.sigma[worst], sc.gain);
+    rep.notes.push_back(nb);
+  }
+}
+
+}  // namespace mcms::robot_audit

@@ -1,0 +1,122 @@
+// Robot measurements: a robot's joint values and what an external instrument (a laser
+// tracker, the camera rig, a motion-capture system) measured of its tool at each, read
+// from one kind of file for `calib-robot` and the robot audit alike, with the checks that
+// catch another unit, a mistyped row or a body that is not rigid before any fit.
+//
+// A measurement is one of
+//  - a point: the position of one point fixed in the tool (the target), or
+//  - K >= 3 points of one rigid body fixed in the tool (motion capture's markers): their
+//    coordinates in the tool frame are unknown and fitted with the registration, or
+//  - a pose: a point and the tool's orientation.
+// Frames and units (docs/conventions.md): `meas` is the instrument's frame; metres,
+// radians (metres for a prismatic joint), seconds.
+#pragma once
+
+#include <cmath>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/pose_math.h"
+#include "model/robot_model.h"
+
+namespace mcms {
+
+struct RobotMeasurement {
+  Eigen::VectorXd q;
+  Vec3 p_meas = Vec3::Zero();        // the measured point (point 1 of a rigid body)
+  std::vector<Vec3> other_points;    // points 2..K of the same rigid body (empty: one point)
+  std::optional<Mat3> R_meas_tool;   // measured orientation of the tool (a pose)
+  double time_s = 0.0;
+  double temperature_c = std::nan("");
+  double payload_kg = std::nan("");
+  // Joint velocities at the measurement (empty = at rest): with them the audit tests a
+  // clock offset between the joint log and the instrument (`audit fusion`).
+  Eigen::VectorXd qdot;
+  int line = 0;        // 1-based line in the file (0: made in code)
+  std::string source;  // where it came from, for messages ("file.yaml measurement 5 (line 23)")
+  int NumPoints() const { return 1 + static_cast<int>(other_points.size()); }
+  // Point k (0-based) of the body.
+  const Vec3& Point(int k) const { return k == 0 ? p_meas : other_points[k - 1]; }
+};
+
+// Measurements in time order, from one file (one session).
+struct RobotLog {
+  std::filesystem::path source;
+  std::vector<RobotMeasurement> rows;
+  bool has_time = false, has_temperature = false, has_payload = false;
+  std::vector<std::string> ignored_columns;  // CSV columns the reader does not use
+  bool six_dof() const { return !rows.empty() && rows.front().R_meas_tool.has_value(); }
+  int NumPoints() const { return rows.empty() ? 0 : rows.front().NumPoints(); }
+  // "file line 12" (or "file row 3" for rows made in code).
+  std::string Where(size_t row) const;
+};
+
+// Reads a measurement file:
+//  - CSV, one row per measurement, columns (any order; unknown columns are ignored and
+//    listed in `ignored_columns`):
+//      time:    time_s, or t_start_robot and t_end_robot (the middle of the averaging window);
+//      joints:  q1_rad .. qN_rad (q<i>_deg, q<i>_m for a prismatic joint), or the robot's
+//               joint names (as its URDF names them), bare (rad, or m for a prismatic joint)
+//               or with _rad, _deg, _m;
+//      points:  x_m, y_m, z_m (one point), or x1, y1, z1, ..., xK, yK, zK (metres; also
+//               x1_m ...) for K points of one rigid body;
+//      pose:    qw, qx, qy, qz with one point (the tool's orientation);
+//      temperature_c, payload_kg;
+//  - or YAML: calib-robot's `measurements:` list or ROS-Industrial industrial_calibration's
+//    kinematic measurements (ReadRobotMeasurements), rows in order (the row index is the time).
+// InputError naming the file, the line and the column: missing or extra joint columns (a
+// URDF joint that is not in the chain, a chain joint not in the log), a duplicated column,
+// degrees under a radian header or millimetres under a metre header (CheckRobotLog), joint
+// values outside the robot's limits, time going backwards, non-finite cells, a quaternion
+// that is not unit, 2 points (give 1 or >= 3), points that are not one rigid body.
+RobotLog ReadRobotLog(const std::filesystem::path& path, const RobotModel& robot);
+
+// Checks a log made in code or read: joint counts, limits (a reading may pass one by
+// RobotModel::kLimitSlack of the joint's range; beyond, the likely unit is named when a
+// value would fit in another one), finite values, time order, all rows of one kind;
+// `min_rows` rows at least (0: no minimum).
+void CheckRobotLog(const RobotLog& log, const RobotModel& robot, int min_rows = 0);
+// The robot with each joint's limits widened to cover the readings of `logs` that pass them
+// (within the slack CheckRobotLog allows), so that its kinematics take every reading; what
+// was widened is said in `notes` (may be null).
+RobotModel CoverReadings(const RobotModel& robot, const std::vector<const RobotLog*>& logs,
+                         std::vector<std::string>* notes = nullptr);
+
+// The checks of a log's plausibility before any fit (each an InputError naming the file,
+// the row and the likely cause): a row measured far from all others (a mistyped row, one
+// row in millimetres), the same row twice, positions in another unit than metres or
+// mirrored axes (the best similarity between the nominal tool positions and the measured
+// ones has a scale far from 1 or needs a reflection), joints that do not move the tool,
+// points of one rigid body whose mutual distances vary beyond their noise.
+void CheckRobotLogPlausible(const RobotLog& log, const RobotModel& robot);
+
+// A rigid body measured by K >= 3 points in every row: its points in its own frame (origin
+// at their centroid, axes those of the meas frame at the first row, the mean shape over the
+// rows) and the body's pose T_meas_body in every row (least squares, Kabsch), with the RMS
+// distance of the row's points from the fitted shape.
+struct RigidBody {
+  std::vector<Vec3> points_body;
+  std::vector<Pose> T_meas_body;
+  std::vector<double> fit_rms_m;
+};
+RigidBody FitRigidBody(const RobotLog& log);
+// The poses of a rigid body of known shape (points_body, its own frame) in every row.
+RigidBody RigidBodyPoses(const RobotLog& log, const std::vector<Vec3>& points_body);
+
+// Per posture, how it relates to the postures of a fitted log (validation groups): repeated
+// (every joint within `tolerance` of some fitted row), new inside the fitted joint ranges,
+// or outside them (some joint beyond the fitted range).
+enum class PostureGroup { kRepeated, kNewInRange, kOutOfRange };
+const char* Name(PostureGroup g);
+std::vector<PostureGroup> PostureGroups(const RobotLog& fitted, const RobotLog& other, double tolerance = 0.01);
+
+// YAML measurement files alone (the two layouts above), without a robot to check against.
+std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path& path);
+// Writes calib-robot's layout, atomically, 17 significant digits (points 2..K not written).
+void WriteRobotMeasurements(const std::filesystem::path& path, const std::vector<RobotMeasurement>& m);
+
+}  // namespace mcms

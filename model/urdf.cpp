@@ -1,0 +1,451 @@
+#include "model/urdf.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <sstream>
+#include <vector>
+
+#include <console_bridge/console.h>
+#include <tinyxml.h>
+#include <urdf_parser/urdf_parser.h>
+
+#include "core/error.h"
+#include "core/io.h"
+
+namespace mcms {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// urdfdom reports why it rejects a file through console_bridge (to stderr by default):
+// collect its messages while parsing, so the error names them and nothing else is printed.
+class CollectingHandler : public console_bridge::OutputHandler {
+ public:
+  void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
+    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_WARN) messages.push_back(text);
+  }
+  std::vector<std::string> messages;
+};
+
+std::mutex& ParserMutex() {
+  static std::mutex m;  // console_bridge's handler is global
+  return m;
+}
+
+Pose ToPose(const urdf::Pose& p) {
+  const Eigen::Quaterniond q(p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z);
+  const double n = q.norm();
+  return Pose{(n > 0 ? Eigen::Quaterniond(q.coeffs() / n) : Eigen::Quaterniond::Identity()).toRotationMatrix(),
+              Vec3(p.position.x, p.position.y, p.position.z)};
+}
+
+// "a, b, c" of at most `max` names, then "and N more".
+std::string NameList(const std::vector<std::string>& names, size_t max = 24) {
+  std::string s;
+  for (size_t i = 0; i < names.size() && i < max; ++i) s += (i ? ", " : "") + names[i];
+  if (names.size() > max) s += ", and " + std::to_string(names.size() - max) + " more";
+  return s;
+}
+
+std::vector<std::string> LinkNames(const urdf::ModelInterface& m) {
+  std::vector<std::string> v;
+  for (const auto& [name, link] : m.links_) v.push_back(name);
+  return v;
+}
+
+bool Movable(const urdf::Joint& j) {
+  return j.type == urdf::Joint::REVOLUTE || j.type == urdf::Joint::CONTINUOUS || j.type == urdf::Joint::PRISMATIC;
+}
+
+const char* TypeText(int type) {
+  switch (type) {
+    case urdf::Joint::REVOLUTE: return "revolute";
+    case urdf::Joint::CONTINUOUS: return "continuous";
+    case urdf::Joint::PRISMATIC: return "prismatic";
+    case urdf::Joint::FLOATING: return "floating";
+    case urdf::Joint::PLANAR: return "planar";
+    case urdf::Joint::FIXED: return "fixed";
+    default: return "unknown";
+  }
+}
+
+// The leaves under `base` with the number of movable joints on their path.
+void Leaves(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& link, int movable,
+            std::vector<std::pair<int, std::string>>* out) {
+  if (link->child_joints.empty()) {
+    out->push_back({movable, link->name});
+    return;
+  }
+  for (const auto& cj : link->child_joints) {
+    const auto child = m.getLink(cj->child_link_name);
+    if (child) Leaves(m, child, movable + (Movable(*cj) ? 1 : 0), out);
+  }
+}
+
+// Mass and first moment (sum m p) of `link` and every link below it, in the frame T (frame
+// -> link), the joints below at zero; the subtree below `stop` (the chain's next movable
+// joint) is not included.
+void AddSubtree(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& link, const Pose& T,
+                const std::string& stop, const std::string& source, double* mass, Vec3* moment, bool* any) {
+  if (link->inertial) {
+    const double mk = link->inertial->mass;
+    if (!(std::isfinite(mk) && mk > 0))
+      Throw(source, ": link '", link->name, "' has an <inertial> mass of ", mk,
+            "; expected a positive mass in kg (leave out the <inertial> of a massless link)");
+    *mass += mk;
+    *moment += mk * (T * ToPose(link->inertial->origin).t);
+    *any = true;
+  }
+  for (const auto& cj : link->child_joints) {
+    if (cj->name == stop) continue;
+    const auto child = m.getLink(cj->child_link_name);
+    if (child) AddSubtree(m, child, T * ToPose(cj->parent_to_joint_origin_transform), stop, source, mass, moment, any);
+  }
+}
+
+std::string Num(double v) {
+  if (v == 0.0) v = 0.0;  // no "-0"
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
+std::string Triple(const Vec3& v) { return Num(v.x()) + " " + Num(v.y()) + " " + Num(v.z()); }
+
+// An XML comment may not hold "--".
+std::string CommentText(std::string s) {
+  for (size_t p; (p = s.find("--")) != std::string::npos;) s.replace(p, 2, "- -");
+  return " " + s + " ";
+}
+
+// Link frame i-1 to the joint's URDF frame of a DH joint (the DH link transform split in
+// the part before the joint's motion and the tail after it): see UrdfText's comment.
+struct DhSplit {
+  Pose origin, tail;
+};
+Pose Rz(double a) { return Pose{Eigen::AngleAxisd(a, Vec3::UnitZ()).toRotationMatrix(), Vec3::Zero()}; }
+Pose Rx(double a) { return Pose{Eigen::AngleAxisd(a, Vec3::UnitX()).toRotationMatrix(), Vec3::Zero()}; }
+Pose Tz(double d) { return Pose{Mat3::Identity(), Vec3(0, 0, d)}; }
+Pose Tx(double a) { return Pose{Mat3::Identity(), Vec3(a, 0, 0)}; }
+DhSplit SplitDh(ChainConvention c, const Joint& j) {
+  const bool rev = j.type == JointType::kRevolute;
+  if (c == ChainConvention::kStandard) {
+    // Rz(theta + q) Tz(d + q') Tx(a) Rx(alpha)
+    if (rev) return {Rz(j.theta_offset), Tz(j.d) * Tx(j.a) * Rx(j.alpha)};
+    return {Rz(j.theta_offset) * Tz(j.d), Tx(j.a) * Rx(j.alpha)};
+  }
+  // Rx(alpha) Tx(a) Rz(theta + q) Tz(d + q')
+  if (rev) return {Rx(j.alpha) * Tx(j.a) * Rz(j.theta_offset), Tz(j.d)};
+  return {Rx(j.alpha) * Tx(j.a) * Rz(j.theta_offset) * Tz(j.d), Pose::Identity()};
+}
+
+std::string XmlName(const std::string& s) {
+  std::string o;
+  for (char c : s) o += (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-') ? c : '_';
+  return o.empty() ? std::string("joint") : o;
+}
+
+std::string OriginXml(const Pose& T) {
+  return "<origin xyz=\"" + Triple(T.t) + "\" rpy=\"" + Triple(RpyOf(T.R)) + "\"/>";
+}
+
+std::string InertialXml(double mass, const Vec3& com) {
+  // The inertia tensor is not known from a DH table; a small positive one keeps parsers happy.
+  return "    <inertial>\n      <origin xyz=\"" + Triple(com) + "\" rpy=\"0 0 0\"/>\n      <mass value=\"" + Num(mass) +
+         "\"/>\n      <inertia ixx=\"1e-6\" ixy=\"0\" ixz=\"0\" iyy=\"1e-6\" iyz=\"0\" izz=\"1e-6\"/>\n    </inertial>\n";
+}
+
+// A new URDF of a DH chain.
+std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std::string>& comments) {
+  const int n = robot.NumJoints();
+  std::ostringstream x;
+  x << "<?xml version=\"1.0\"?>\n<!--" << CommentText("written by mcms from the " +
+                                                          std::string(robot.Convention() == ChainConvention::kStandard
+                                                                          ? "standard"
+                                                                          : "modified") +
+                                                          " DH table of robot '" + robot.Name() +
+                                                          "'; joint i's link frame sits on its axis, the DH frame "
+                                                          "follows it by the link's a, alpha (and d)")
+    << "-->\n";
+  x << "<robot name=\"" << XmlName(robot.Name()) << "\">\n";
+  const bool masses = robot.HasMasses();
+  x << "  <link name=\"base_link\"/>\n";
+  std::string parent = "base_link";
+  Pose tail;
+  std::set<std::string> used{"base_link", "tool"};
+  for (int i = 0; i < n; ++i) {
+    const Joint& j = robot.Joints()[i];
+    if (j.Harmonics() > 0)
+      Throw("robot '", robot.Name(), "': joint ", j.name, " has error motion, which a URDF cannot hold");
+    const DhSplit s = SplitDh(robot.Convention(), j);
+    std::string name = XmlName(j.name.empty() ? "joint_" + std::to_string(i + 1) : j.name);
+    while (used.count(name) || used.count(name + "_link")) name += "_";
+    used.insert(name);
+    const std::string link = name + "_link";
+    used.insert(link);
+    const Pose origin = tail * s.origin;
+    tail = s.tail;
+    x << "  <link name=\"" << link << "\">\n";
+    if (masses && j.mass_kg > 0) x << InertialXml(j.mass_kg, tail * j.com_m);
+    x << "  </link>\n";
+    const bool rev = j.type == JointType::kRevolute;
+    const bool open = !std::isfinite(j.lower) || !std::isfinite(j.upper);
+    x << "  <joint name=\"" << name << "\" type=\"" << (rev ? (open ? "continuous" : "revolute") : "prismatic")
+      << "\">\n";
+    if (const auto c = comments.find(j.name); c != comments.end())
+      x << "    <!--" << CommentText(c->second) << "-->\n";
+    x << "    <parent link=\"" << parent << "\"/>\n    <child link=\"" << link << "\"/>\n    " << OriginXml(origin)
+      << "\n    <axis xyz=\"0 0 1\"/>\n";
+    if (!rev || !open) {
+      // effort and velocity are not known from a DH table (0: not given).
+      const double lo = std::isfinite(j.lower) ? j.lower : -1e3, hi = std::isfinite(j.upper) ? j.upper : 1e3;
+      x << "    <limit lower=\"" << Num(lo) << "\" upper=\"" << Num(hi) << "\" effort=\"0\" velocity=\"0\"/>\n";
+    }
+    x << "  </joint>\n";
+    parent = link;
+  }
+  x << "  <link name=\"tool\">\n";
+  const ToolMass& tm = robot.Tool();
+  if (masses && tm.mass_kg > 0) x << InertialXml(tm.mass_kg, robot.T_flange_tool().Inverse() * tm.com_m);
+  x << "  </link>\n";
+  x << "  <joint name=\"tool_joint\" type=\"fixed\">\n    <parent link=\"" << parent
+    << "\"/>\n    <child link=\"tool\"/>\n    " << OriginXml(tail * robot.T_flange_tool()) << "\n  </joint>\n";
+  x << "</robot>\n";
+  return x.str();
+}
+
+}  // namespace
+
+Vec3 RpyOf(const Mat3& R) {
+  // R = Rz(y) Ry(p) Rx(r): R(2,0) = -sin p.
+  const double sp = std::clamp(-R(2, 0), -1.0, 1.0);
+  const double p = std::asin(sp);
+  double r, y;
+  if (std::abs(sp) < 1.0 - 1e-12) {
+    r = std::atan2(R(2, 1), R(2, 2));
+    y = std::atan2(R(1, 0), R(0, 0));
+  } else {
+    // Gimbal lock: only r -/+ y is defined; take y = 0.
+    y = 0.0;
+    r = std::atan2(-R(1, 2), R(1, 1));
+  }
+  return Vec3(r, p, y);
+}
+
+Mat3 RotationOfRpy(const Vec3& rpy) {
+  return (Eigen::AngleAxisd(rpy[2], Vec3::UnitZ()) * Eigen::AngleAxisd(rpy[1], Vec3::UnitY()) *
+          Eigen::AngleAxisd(rpy[0], Vec3::UnitX()))
+      .toRotationMatrix();
+}
+
+bool IsUrdfFile(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (ext == ".urdf") return true;
+  if (ext == ".yaml" || ext == ".yml") return false;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;
+  const std::string text = ReadTextFile(path);
+  const size_t p = text.find_first_not_of(" \t\r\n\xEF\xBB\xBF");
+  return p != std::string::npos && text[p] == '<' && text.find("<robot") != std::string::npos;
+}
+
+RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& chain) {
+  return ParseUrdf(ReadTextFile(path), "robot file " + path.string(), chain);
+}
+
+RobotModel ParseUrdf(const std::string& xml, const std::string& source, const ChainSelection& chain) {
+  urdf::ModelInterfaceSharedPtr model;
+  {
+    std::lock_guard<std::mutex> lock(ParserMutex());
+    CollectingHandler handler;
+    console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
+    console_bridge::useOutputHandler(&handler);
+    try {
+      model = urdf::parseURDF(xml);
+    } catch (const std::exception& e) {
+      handler.messages.push_back(e.what());
+      model.reset();
+    }
+    console_bridge::useOutputHandler(previous);
+    if (!model) {
+      std::string why;
+      for (const auto& m : handler.messages) why += (why.empty() ? "" : "; ") + m;
+      Throw(source, ": not a URDF that urdfdom can read: ", why.empty() ? std::string("(no reason given)") : why);
+    }
+  }
+  const urdf::ModelInterface& m = *model;
+  const auto root = m.getRoot();
+  if (!root) Throw(source, ": the URDF has no root link");
+  const std::string base = chain.base_link.empty() ? root->name : chain.base_link;
+  const auto base_link = m.getLink(base);
+  if (!base_link)
+    Throw(source, ": --base-link '", base, "' is not a link of the URDF (links: ", NameList(LinkNames(m)), ")");
+  std::string tip = chain.tip_link;
+  if (tip.empty()) {
+    std::vector<std::pair<int, std::string>> leaves;
+    Leaves(m, base_link, 0, &leaves);
+    int best = 0;
+    for (const auto& [c, name] : leaves) best = std::max(best, c);
+    std::vector<std::string> cands;
+    for (const auto& [c, name] : leaves)
+      if (c == best) cands.push_back(name);
+    std::sort(cands.begin(), cands.end());
+    if (best == 0) Throw(source, ": no movable joint below base link '", base, "'; give --base-link");
+    if (cands.size() != 1)
+      Throw(source, ": the tip of the chain is ambiguous: ", cands.size(), " links lie ", best,
+            " movable joints below '", base, "' (", NameList(cands), "); give --tip-link");
+    tip = cands.front();
+  }
+  auto link = m.getLink(tip);
+  if (!link) Throw(source, ": --tip-link '", tip, "' is not a link of the URDF (links: ", NameList(LinkNames(m)), ")");
+  // The joints from the base to the tip.
+  std::vector<urdf::JointConstSharedPtr> path;
+  std::vector<std::string> above;
+  while (link->name != base) {
+    above.push_back(link->name);
+    const auto pj = link->parent_joint;
+    if (!pj) {
+      Throw(source, ": no chain from base link '", base, "' to tip link '", tip, "': '", base,
+            "' is not above it (the links from the tip up to the root: ", NameList(above), ")");
+    }
+    path.push_back(pj);
+    link = m.getLink(pj->parent_link_name);
+    if (!link) Throw(source, ": joint '", pj->name, "' names a parent link '", pj->parent_link_name, "' that is missing");
+  }
+  std::reverse(path.begin(), path.end());
+
+  std::vector<Joint> joints;
+  std::vector<Pose> prefixes;
+  std::vector<std::string> child_links;
+  Pose prefix;
+  for (const auto& j : path) {
+    if (j->type == urdf::Joint::FIXED) {
+      prefix = prefix * ToPose(j->parent_to_joint_origin_transform);
+      continue;
+    }
+    if (!Movable(*j))
+      Throw(source, ": joint '", j->name, "' in the chain from '", base, "' to '", tip, "' is ", TypeText(j->type),
+            "; a serial chain takes revolute, continuous, prismatic and fixed joints");
+    if (j->mimic)
+      Throw(source, ": joint '", j->name, "' in the chain mimics joint '", j->mimic->joint_name,
+            "'; a mimic joint inside the chain is not supported (its value is not measured on its own)");
+    Joint jt;
+    jt.name = j->name;
+    jt.type = j->type == urdf::Joint::PRISMATIC ? JointType::kPrismatic : JointType::kRevolute;
+    const Vec3 axis(j->axis.x, j->axis.y, j->axis.z);
+    if (!(axis.norm() > 1e-9) || !axis.allFinite())
+      Throw(source, ": joint '", j->name, "' has a zero or non-finite <axis>; a movable joint needs a direction");
+    jt.axis = axis.normalized();
+    jt.origin = prefix * ToPose(j->parent_to_joint_origin_transform);
+    if (j->type != urdf::Joint::CONTINUOUS) {
+      if (!j->limits)
+        Throw(source, ": ", TypeText(j->type), " joint '", j->name, "' has no <limit>; give lower and upper");
+      jt.lower = j->limits->lower;
+      jt.upper = j->limits->upper;
+      if (!(jt.lower < jt.upper))
+        Throw(source, ": joint '", j->name, "' has limits lower ", jt.lower, " >= upper ", jt.upper,
+              "; give lower < upper");
+    } else {
+      jt.lower = -kInf;
+      jt.upper = kInf;
+    }
+    prefixes.push_back(prefix);
+    child_links.push_back(j->child_link_name);
+    joints.push_back(jt);
+    prefix = Pose::Identity();
+  }
+  if (joints.empty())
+    Throw(source, ": the chain from '", base, "' to '", tip, "' has no movable joint (only fixed ones)");
+  const Pose T_flange_tool = prefix;
+
+  // The links' masses: each joint's link carries everything rigidly attached to it.
+  bool any = false;
+  std::vector<double> mass(joints.size(), 0.0);
+  std::vector<Vec3> moment(joints.size(), Vec3::Zero());
+  for (size_t i = 0; i < joints.size(); ++i) {
+    const std::string stop = i + 1 < joints.size() ? joints[i + 1].name : std::string();
+    AddSubtree(m, m.getLink(child_links[i]), Pose::Identity(), stop, source, &mass[i], &moment[i], &any);
+  }
+  if (any)
+    for (size_t i = 0; i < joints.size(); ++i) {
+      joints[i].mass_kg = mass[i];
+      joints[i].com_m = mass[i] > 0 ? Vec3(moment[i] / mass[i]) : Vec3::Zero();
+    }
+
+  auto src = std::make_shared<UrdfSource>();
+  src->text = xml;
+  src->source = source;
+  src->base_link = base;
+  src->tip_link = tip;
+  src->prefix = prefixes;
+  for (const auto& [name, j] : m.joints_) src->all_joints.push_back(name);
+  RobotModel robot(m.getName().empty() ? tip : m.getName(), ChainConvention::kUrdf, joints, T_flange_tool);
+  robot.SetUrdf(src);
+  return robot;
+}
+
+std::string UrdfText(const RobotModel& robot, const std::map<std::string, std::string>& comments) {
+  for (const Joint& j : robot.Joints())
+    if (j.Harmonics() > 0)
+      Throw("robot '", robot.Name(), "': joint ", j.name, " has error motion, which a URDF cannot hold");
+  const UrdfSource* src = robot.Urdf();
+  if (robot.Convention() != ChainConvention::kUrdf) return DhChainUrdf(robot, comments);
+  if (!src) Throw("robot '", robot.Name(), "' was not read from a URDF; there is no URDF to write back");
+  TiXmlDocument doc;
+  doc.Parse(src->text.c_str());
+  if (doc.Error()) Throw(src->source, ": cannot be parsed again to write it back: ", doc.ErrorDesc());
+  TiXmlElement* root = doc.RootElement();
+  if (!root) Throw(src->source, ": no <robot> element");
+  std::map<std::string, int> index;
+  for (int i = 0; i < robot.NumJoints(); ++i) index[robot.Joints()[i].name] = i;
+  int written = 0;
+  for (TiXmlElement* je = root->FirstChildElement("joint"); je; je = je->NextSiblingElement("joint")) {
+    const char* name = je->Attribute("name");
+    if (!name) continue;
+    const auto it = index.find(name);
+    if (it == index.end()) continue;
+    const int i = it->second;
+    const Joint& j = robot.Joints()[i];
+    // The joint's own <origin>: the model's placement without the fixed joints folded in
+    // before it; the model's offset (theta_offset or d for a prismatic joint) folded in too.
+    Pose motion;
+    if (j.type == JointType::kRevolute)
+      motion.R = Eigen::AngleAxisd(j.theta_offset, j.axis).toRotationMatrix();
+    else
+      motion.t = j.d * j.axis;
+    const Pose own = src->prefix[i].Inverse() * j.origin * motion;
+    TiXmlElement* o = je->FirstChildElement("origin");
+    if (!o) {
+      TiXmlElement fresh("origin");
+      o = je->InsertEndChild(fresh)->ToElement();
+    }
+    o->SetAttribute("xyz", Triple(own.t));
+    o->SetAttribute("rpy", Triple(RpyOf(own.R)));
+    if (const auto c = comments.find(j.name); c != comments.end()) {
+      TiXmlComment comment(CommentText(c->second).c_str());
+      je->InsertBeforeChild(o, comment);
+    }
+    ++written;
+  }
+  if (written != robot.NumJoints())
+    Throw(src->source, ": ", robot.NumJoints() - written, " of the chain's joints were not found to write back");
+  TiXmlPrinter printer;
+  printer.SetIndent("  ");
+  doc.Accept(&printer);
+  return printer.Str();
+}
+
+void WriteUrdf(const std::filesystem::path& path, const RobotModel& robot,
+               const std::map<std::string, std::string>& comments) {
+  const std::string text = UrdfText(robot, comments);
+  WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
+}
+
+}  // namespace mcms

@@ -1,0 +1,54 @@
+// Robots as ROS describes them: a serial chain read from a URDF (Unified Robot Description
+// Format) with Debian's urdfdom, the ROS parser, and written back with the calibration's
+// corrections folded into the joints' <origin> elements.
+//
+// The chain runs from a base link to a tip link. Its movable joints (revolute, continuous,
+// prismatic) become the model's joints (ChainConvention::kUrdf, model/joint.h): joint i's
+// frame is its child link's frame, placed in joint i-1's frame by `origin` (the fixed
+// joints between the two folded in) and moved about or along `axis`. The fixed joints
+// after the last movable one make the tool transform T_flange_tool (flange = the last
+// movable joint's child link, tool = the tip link). Mimic, floating and planar joints
+// inside the chain are refused by name.
+//
+// The arm's weight comes from the links' <inertial> elements: each joint's link carries
+// every link rigidly attached to it, including the branches off the chain (a head on the
+// torso, the hand and fingers beyond the tip) with their own joints at zero, so that each
+// joint feels the whole subtree beyond it. A chain whose moving links have no inertial at
+// all has no masses (RobotModel::HasMasses false).
+#pragma once
+
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include "model/robot_model.h"
+
+namespace mcms {
+
+// Whether a robot file is a URDF (by its extension .urdf, or .xml / no known extension
+// with a <robot> root element).
+bool IsUrdfFile(const std::filesystem::path& path);
+
+// InputError naming the file and the element: a URDF urdfdom rejects (its own message
+// kept), an unknown base or tip link (the links listed), no chain between them (the
+// links on the tip's path listed), an ambiguous tip (the candidates listed), a mimic,
+// floating or planar joint in the chain, a zero axis, an inertial mass <= 0.
+RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& chain = {});
+RobotModel ParseUrdf(const std::string& xml, const std::string& source, const ChainSelection& chain = {});
+
+// The robot's URDF with every chain joint's <origin> set to the model's placement (for a
+// calibrated model: the corrections folded in, exactly: FK of the written file equals the
+// model's T_base_flange), every other element as it was. `comments` (joint name -> text)
+// are written as an XML comment before that joint's <origin>: the parameters with sigma.
+// For a robot not read from a URDF (a DH table), a new URDF of the chain: links
+// <joint>_link, the masses as inertials, the tool as a fixed joint to the link `tool`.
+// InputError for a robot with error motion (URDF cannot hold it).
+std::string UrdfText(const RobotModel& robot, const std::map<std::string, std::string>& comments = {});
+void WriteUrdf(const std::filesystem::path& path, const RobotModel& robot,
+               const std::map<std::string, std::string>& comments = {});
+
+// URDF's rpy (fixed axes: R = Rz(yaw) Ry(pitch) Rx(roll)) of a rotation, and back.
+Vec3 RpyOf(const Mat3& R);
+Mat3 RotationOfRpy(const Vec3& rpy);
+
+}  // namespace mcms
