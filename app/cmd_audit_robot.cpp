@@ -16,6 +16,7 @@ namespace {
 struct AuditRobotArgs {
   std::string log, robot, output, json, base_link, tip_link;
   std::vector<std::string> validate;
+  std::vector<int> points;
   std::vector<std::string> only;
   std::vector<double> base_guess;
   double false_alarm = 0.01;
@@ -30,6 +31,7 @@ int RunAuditRobot(const AuditRobotArgs& a) {
   job.output_dir = a.output;
   job.json = a.json;
   job.chain = {a.base_link, a.tip_link};
+  job.points = a.points;
   for (const auto& v : a.validate) job.validate.push_back(v);
   job.options.only = a.only;
   job.options.false_alarm = a.false_alarm;
@@ -84,6 +86,10 @@ std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit) {
   cmd->add_option("--base-link", args->base_link, "URDF: the chain's base link (default: the URDF's root)");
   cmd->add_option("--tip-link", args->tip_link,
                   "URDF: the chain's tip link, where the measured points are fixed (default: the unambiguous leaf)");
+  cmd->add_option("--points", args->points,
+                  "use only these points of a rigid body (1-based, e.g. 1 for FIGAROH's point-1 protocol; default: "
+                  "all, whose pose is then audited)")
+      ->delimiter(',');
   cmd->add_option("--validate", args->validate,
                   "another session measured in the same frame: scored with the fitted models (registration, "
                   "geometry, final) frozen, per point and posture group (repeatable)")

@@ -32,6 +32,7 @@
 
 #include "app/commands.h"
 #include "calib/robot_calibration_job.h"
+#include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
 
@@ -50,7 +51,7 @@ struct CalibRobotArgs {
   double position_sigma_mm = 0.05, rotation_sigma_deg = 0.05;
   int folds = 5;
   int max_iterations = 200;
-  bool registration_only = false, quiet = false;
+  bool registration_only = false, quiet = false, allow_poor_fit = false;
 };
 
 Pose PoseFromArgs(const std::vector<double>& v, const char* option) {
@@ -59,6 +60,8 @@ Pose PoseFromArgs(const std::vector<double>& v, const char* option) {
   for (size_t i = 0; i < v.size(); ++i)
     if (!std::isfinite(v[i]))
       Throw("calib-robot: ", option, " ", kNames[i], " is ", v[i], "; expected 7 finite numbers x y z qw qx qy qz");
+  for (int i = 0; i < 3; ++i)
+    CheckMagnitude(v[i], kMaxRobotLengthM, std::string("calib-robot: ") + option + " " + kNames[i], "m");
   const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
   if (std::abs(q.norm() - 1.0) > 1e-3) Throw("calib-robot: ", option, " quaternion has norm ", q.norm(), ", expected 1");
   return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
@@ -88,6 +91,7 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   job.rotation_sigma_rad = a.rotation_sigma_deg * kDeg;
   job.folds = a.folds;
   job.max_iterations = a.max_iterations;
+  job.allow_poor_fit = a.allow_poor_fit;
   job.registration_only = a.registration_only;
   if (!a.quiet) job.progress = [](const std::string& line) { std::fprintf(stderr, "calib-robot: %s\n", line.c_str()); };
   const std::string report = RunRobotCalibrationJob(job);
@@ -162,6 +166,10 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
       ->type_name("H1 H2 ..");
   sub->add_flag("--registration-only", args->registration_only, "Fit only base and tool, DH held nominal");
   sub->add_flag("--quiet", args->quiet, "No progress on stderr");
+  sub->add_flag("--allow-poor-fit", args->allow_poor_fit,
+                "Write a calibration that did not converge, misses the measurements by more than 2 % of the robot's "
+                "reach or fits worse than the nominal model registered, with a warning (default: refused, nothing "
+                "written)");
   return std::make_pair(sub, Runner([args] { return RunCalibRobot(*args); }));
 });
 

@@ -27,7 +27,9 @@ int RunConvertRobot(const ConvertRobotArgs& a) {
   if (ext != ".urdf" && ext != ".yaml" && ext != ".yml")
     Throw("convert-robot -o ", a.output, ": the output's extension says its form; give .urdf or .yaml");
   RequireWritableFile(a.output, "convert-robot -o");
-  const RobotModel robot = RobotModel::Read(a.input, {a.base_link, a.tip_link});
+  if (a.input.empty() && (!a.base_link.empty() || !a.tip_link.empty()))
+    Throw("convert-robot: --base-link and --tip-link pick a chain of a URDF robot; give it as ROBOT");
+  const RobotModel robot = a.input.empty() ? RobotModel::Default() : RobotModel::Read(a.input, {a.base_link, a.tip_link});
   if (ext == ".urdf")
     WriteUrdf(a.output, robot);
   else
@@ -43,7 +45,8 @@ const McmsCommand kConvertRobot([](CLI::App& app) {
       "Write a robot description in the other form: a DH table (YAML) as a URDF, or a URDF chain as YAML "
       "(convention: urdf); the forward kinematics are the same (masses as inertials; a URDF cannot hold error "
       "motion or encoder noise)");
-  sub->add_option("ROBOT", args->input, "robot description: YAML or URDF")->required()->check(CLI::ExistingFile);
+  sub->add_option("ROBOT", args->input, "robot description: YAML or URDF (default: the built-in KUKA KR 5 arc)")
+      ->check(CLI::ExistingFile);
   sub->add_option("-o,--output", args->output, "FILE.urdf or FILE.yaml")->required();
   sub->add_option("--base-link", args->base_link, "URDF input: the chain's base link (default: the root)");
   sub->add_option("--tip-link", args->tip_link, "URDF input: the chain's tip link (default: the unambiguous leaf)");

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <memory>
 
+#include "core/limits.h"
 #include "app/commands.h"
 #include "jobs/html_report.h"
 #include "jobs/demo.h"
@@ -43,7 +44,7 @@ McmsCommand demo_command([](CLI::App& app) {
   cmd->add_flag("--html,!--no-html", *html,
                 "write OUT/report.html, the run's self-contained HTML report (as `mcms report OUT`; the default), "
                 "or not (--no-html)");
-  cmd->add_option("--threads", args->threads, "render threads (default: the hardware's)")->check(CLI::Range(1, 1024));
+  cmd->add_option("--threads", args->threads, "render threads (default: the hardware's)")->check(CLI::Range(1, kMaxThreads));
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args, out, no_iso, html, camera_model] {
                           args->out = *out;

@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 
+#include "core/limits.h"
 #include "app/commands.h"
 #include "core/error.h"
 #include "jobs/html_report.h"
@@ -32,7 +33,7 @@ struct FovArgs {
   double gain = -1, read_noise = 0;
   double ball_dn = -1, background_dn = -1, blur_px = -1;
   double threshold_mm = 0.03;
-  int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int threads = ThreadsToUse(0);
   int simulate = 0, repeats = 30;
   uint64_t seed = 1;
   bool quiet = false;
@@ -140,7 +141,7 @@ const McmsCommand kFovMap([](CLI::App& app) {
   sub->add_option("--blur-px", a->blur_px, "optical blur sigma in px (default: the scenario's)")->check(CLI::NonNegativeNumber);
   sub->add_option("--threshold-mm", a->threshold_mm, "report the region where sigma_d is below this, mm (default 0.03)")
       ->check(CLI::PositiveNumber);
-  sub->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(CLI::PositiveNumber);
+  sub->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(CLI::Range(1, kMaxThreads));
   sub->add_option("--simulate", a->simulate, "Monte Carlo at N grid points (default 0: none)")->check(CLI::NonNegativeNumber);
   sub->add_option("--repeats", a->repeats, "rendered frames per Monte-Carlo point (default 30)")->check(CLI::Range(2, 100000));
   sub->add_option("--seed", a->seed, "random seed of the Monte Carlo (default 1)");

@@ -6,6 +6,7 @@
 #include <string>
 #include <thread>
 
+#include "core/limits.h"
 #include "app/commands.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -46,7 +47,7 @@ int RunRender(const RenderArgs& a) {
     s.T_rig_target.resize(static_cast<size_t>(a.frames));
   }
   if (a.seed) s.seed = *a.seed;
-  const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int threads = ThreadsToUse(a.threads);
   const ImageFileFormat format = ParseImageFileFormat(a.format, "render --format");
   RenderSequence(s, a.out, a.quiet, threads, format);
   if (!a.quiet)
@@ -78,7 +79,7 @@ const McmsCommand kRender([](CLI::App& app) {
       ->type_name("N");
   sub->add_option("--seed", args->seed, "Random seed, overriding the scenario's")->type_name("S");
   sub->add_option("--threads", args->threads, "Threads rendering frames (0 = all cores); the output does not depend on it")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0, kMaxThreads))
       ->type_name("N");
   sub->add_option("--format", args->format,
                   "Image files: png (compressed, the default), pgm (binary PGM) or tiff (uncompressed TIFF); "

@@ -5,6 +5,7 @@
 #include <memory>
 #include <thread>
 
+#include "core/limits.h"
 #include "app/commands.h"
 #include "app/tracking_options.h"
 #include "core/error.h"
@@ -29,7 +30,7 @@ void TrackerCli::Add(CLI::App* cmd) {
                   "frames (spread over the recording) from which the gain is measured when --gain is not given")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--threads", threads, "threads for reading images and detecting blobs (0 = all cores)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0, kMaxThreads));
   cmd->add_flag("--predicted-windows", predicted_windows,
                 "detect balls only in windows around the images the track predicts (about 1.4x the frame rate "
                 "of images in memory; the same poses where the windows hold every ball); the whole image every "
@@ -38,7 +39,7 @@ void TrackerCli::Add(CLI::App* cmd) {
 }
 
 int TrackerCli::Threads() const {
-  return threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  return ThreadsToUse(threads);
 }
 
 RecordingTrackerSettings TrackerCli::Settings() const {

@@ -52,6 +52,8 @@ void AuditReport::Merge(const AuditReport& o) {
   nominal_n = n;
   clean = clean && o.clean;
   tests.insert(tests.end(), o.tests.begin(), o.tests.end());
+  tests_after.insert(tests_after.end(), o.tests_after.begin(), o.tests_after.end());
+  tests_after_run += o.tests_after_run;
   for (AuditEffect e : o.effects) {
     if (e.rms_unit.empty() && o.rms_unit != rms_unit) e.rms_unit = o.rms_unit;
     effects.push_back(e);
@@ -78,6 +80,14 @@ std::string AuditReport::ToJson() const {
   for (const auto& t : tests)
     j["tests"].push_back(
         {{"name", t.name}, {"statistic", Number(t.statistic)}, {"p_value", Number(t.p_value)}, {"failed", t.failed}});
+  if (tests_after_run > 0) {
+    j["tests_after"] = nlohmann::json::array();
+    for (const auto& t : tests_after)
+      j["tests_after"].push_back({{"name", t.name},
+                                  {"statistic", Number(t.statistic)},
+                                  {"p_value", Number(t.p_value)},
+                                  {"failed", t.failed}});
+  }
   j["effects"] = nlohmann::json::array();
   for (const auto& e : effects) j["effects"].push_back(EffectJson(e));
   j["undecided"] = undecided;
@@ -131,6 +141,16 @@ std::string AuditReport::Text() const {
         o << " (held-out gain " << Fmt("%.1f", e.heldout_loglik_gain) << ", BIC gain " << Fmt("%.1f", e.bic_gain)
           << ")\n";
       }
+  }
+  if (tests_after_run > 0 && !effects.empty()) {
+    if (tests_after.empty())
+      o << "with the final model, every one of the " << tests_after_run << " residual tests passes\n";
+    else
+      o << "what remains unexplained: with the final model, " << tests_after.size() << " of the " << tests_after_run
+        << " residual tests still fail\n";
+    for (const auto& t : tests_after)
+      o << "  still failing: " << t.name << ": statistic " << Fmt("%.4g", t.statistic) << ", p "
+        << Fmt("%.3g", t.p_value) << "\n";
   }
   for (const auto& n : notes) o << "note: " << n << "\n";
   o << ValidationText(validation);

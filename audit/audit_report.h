@@ -6,7 +6,8 @@
 //    "effects": [{"name", "where", "parameters": {..}, "sigma": {..}, "heldout_rms_before",
 //                 "heldout_rms_after", "heldout_loglik_gain", "bic_gain"}],
 //    "undecided": [[name, name], ..], "undecided_effects": [[{effect}, ..], ..],
-//    "tests": [..], "notes": [..], "validation": [..] (calib/robot_validation.h; when scored)}
+//    "tests": [..], "tests_after": [..] (robot: still failing with the final model),
+//    "notes": [..], "validation": [..] (calib/robot_validation.h; when scored)}
 //   (an effect may also carry "held": {name: reason})
 // Units: parameters and sigmas in SI (rad, m, s, dimensionless factors); held-out RMS in
 // the unit the mode states in `rms_unit` (m for robot positions, px for cameras).
@@ -53,6 +54,11 @@ struct AuditReport {
   std::string rms_unit = "m";
   bool clean = true;            // no effect named and no test failed
   std::vector<AuditTest> tests;
+  // The robot audit: the same residual tests on the final model's residuals, those that
+  // still fail (what the catalog leaves unexplained); JSON "tests_after". `tests_after_run`
+  // counts the tests run (0 = not run).
+  std::vector<AuditTest> tests_after;
+  int tests_after_run = 0;
   std::vector<AuditEffect> effects;
   std::vector<std::vector<std::string>> undecided;  // groups of "name at where" labels
   // The same groups with each member's fitted size (parameters, sigma, gains), when the

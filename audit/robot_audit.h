@@ -63,89 +63,10 @@
 
 #include <Eigen/Core>
 
-#include "core/pose_math.h"
-#include "audit/audit_report.h"
-#include "calib/robot_measurements.h"
+#include "audit/robot_audit_types.h"
 #include "calib/robot_validation.h"
-#include "model/extensions.h"
-#include "model/robot_model.h"
 
 namespace mcms {
-
-// The audit needs at least this many measurements (the registration alone has 9
-// parameters; repeated poses over time show the noise). Logs are read by
-// calib/robot_measurements.h ReadRobotLog: one point, K >= 3 points of a rigid body (then
-// each row's measured pose of the body), or a pose per row.
-constexpr int kMinRobotMeasurements = 12;
-
-struct RobotAuditOptions {
-  // Designed probability that the audit calls a clean log not clean (any test failed or
-  // any effect named): split evenly between the residual tests and the selection.
-  double false_alarm = 0.01;
-  int folds = 5;          // k of the time-blocked cross-validation (>= 2)
-  int max_effects = 6;    // greedy steps at most for the non-geometric effects
-  int max_geometric_terms = 3;  // single geometric terms named before `geometry` says "all"
-  int max_full_fits = 8;  // candidates fitted in full per step (best by screening)
-  // Relative distance of a scaled Jacobian column from the span of those before it below
-  // which a parameter is not identifiable (as calib-robot's identifiability_tolerance).
-  double identifiability_tolerance = 1e-5;
-  // Poses proposed per undecided pair (next_poses).
-  int next_poses = 10;
-  // Restrict the catalog to these names (empty = every robot effect; "geometry" covers
-  // the single geometric terms too).
-  std::vector<std::string> only;
-  std::optional<Pose> base_guess;  // T_meas_base start; default: rigid fit (3-D) / mean (6-D)
-  double reference_temperature_c = 20.0;
-  // Joint values closer than this (rad or m, every joint), or than six times the jitter
-  // of two readings of the robot file's encoder_sigma, are the same pose (repeats), and a
-  // change no larger is not a move (backlash).
-  double repeat_tolerance = 1e-6;
-  std::function<void(const std::string&)> progress;
-  bool IsValid(std::string* why) const;
-};
-
-// One fitted model: the registration, the tool, the extensions with their parameters,
-// the noise covariance, and per-row residuals (predicted - measured; m, and rad).
-struct RobotAuditFit {
-  std::vector<Extension> extensions;
-  std::vector<std::vector<double>> parameters;  // one block per extension
-  std::vector<std::vector<double>> sigmas;      // standard deviations (0 = held)
-  Pose T_meas_base;
-  Pose T_flange_tool;
-  Eigen::MatrixXd noise;      // m x m, m = 3 or 6
-  Eigen::MatrixXd residuals;  // rows x m
-  double loglik = 0.0;
-};
-
-struct RobotAuditResult {
-  AuditReport report;
-  RobotAuditFit nominal, extended;
-  // The robot with what its description can hold applied (joint offsets, link lengths,
-  // error motion, registration-free); effects it cannot hold are listed in the report.
-  RobotModel extended_robot;
-  // For plots: per named effect, the covariate that exposed it, its values per row, and
-  // the residual before the effect along the effect's direction with the effect itself.
-  struct EffectPlot {
-    std::string effect, covariate;
-    std::vector<double> x, residual_before, effect_size;
-  };
-  std::vector<EffectPlot> plots;
-  // For each undecided pair: the poses that best separate the two candidates, from the
-  // difference of their predicted tool positions against the noise.
-  struct SeparatingPose {
-    Eigen::VectorXd q;
-    Vec3 p_meas_a = Vec3::Zero(), p_meas_b = Vec3::Zero();  // predicted tool position (m)
-    double separation_sigma = 0.0;  // sqrt of the predicted difference's chi-square
-  };
-  struct NextPoses {
-    std::string a, b;  // the two candidates' labels
-    std::vector<SeparatingPose> poses;
-  };
-  std::vector<NextPoses> next_poses;
-  // (report.validation: every other session of `validate`, scored with the fitted models
-  // frozen: the registration only ("registration"), with the whole identifiable geometry
-  // ("geometry"), and the audit's final model ("final").)
-};
 
 // Writes next_poses as CSV: pair,q1_rad..qN_rad,x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,
 // difference_mm,separation_sigma (atomically).
@@ -157,12 +78,15 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
                             const std::vector<RobotLog>& validate = {});
 
 // The whole `mcms audit robot` job: read, audit, write the output folder (report.txt,
-// report.json, robot.yaml (and robot.urdf for a URDF robot), residuals.csv, plots/*.svg,
-// next_poses.csv when a pair is undecided, validation.csv with --validate; atomically)
+// report.json, robot.yaml (and robot.urdf for a URDF robot), residuals.csv,
+// plots/effect<k>.svg (each named effect on the fitted log), next_poses.csv when a pair is
+// undecided; with --validate validation.csv and plots/validation<k>.svg (per other session:
+// point 1's error per posture, and per named cause without and with it; atomically)
 // and/or a JSON file.
 struct RobotAuditJob {
   std::filesystem::path log, robot, output_dir, json;
   ChainSelection chain;                       // of a URDF robot
+  std::vector<int> points;                    // points of a rigid body to use (1-based; empty: all)
   std::vector<std::filesystem::path> validate;  // other sessions, scored frozen
   RobotAuditOptions options;
 };

@@ -46,9 +46,10 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
   if (job.robot.empty() && (!job.chain.base_link.empty() || !job.chain.tip_link.empty()))
     Throw("audit robot: --base-link and --tip-link pick a chain of a URDF robot; give it with --robot");
   const RobotModel described = job.robot.empty() ? RobotModel::Default() : RobotModel::Read(job.robot, job.chain);
-  const RobotLog log = ReadRobotLog(job.log, described);
+  const RobotLog log = KeepPoints(ReadRobotLog(job.log, described), job.points, "audit robot --points");
   std::vector<RobotLog> validate;
-  for (const auto& v : job.validate) validate.push_back(ReadRobotLog(v, described));
+  for (const auto& v : job.validate)
+    validate.push_back(KeepPoints(ReadRobotLog(v, described), job.points, "audit robot --points"));
   std::vector<const RobotLog*> logs{&log};
   for (const auto& v : validate) logs.push_back(&v);
   std::vector<std::string> reading_notes;
@@ -140,6 +141,18 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
                               for (auto& v : b.y) v *= 1e3;
                               p.series = {a, b};
                               p.WriteSvg(dir / "plots" / ("effect" + std::to_string(++k) + ".svg"));
+                            }
+                            k = 0;
+                            const char* colors[] = {"#7f7f7f", "#d62728", "#1f77b4", "#2ca02c"};
+                            for (const auto& vp : r.validation_plots) {
+                              Plot p;
+                              p.title = vp.title;
+                              p.x_label = vp.covariate;
+                              p.y_label = "mm";
+                              for (size_t s = 0; s < vp.series.size(); ++s)
+                                p.series.push_back(
+                                    {vp.series[s].first, vp.x, vp.series[s].second, colors[s % 4], true});
+                              p.WriteSvg(dir / "plots" / ("validation" + std::to_string(++k) + ".svg"));
                             }
                             if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot.NumJoints());
                             r.report.WriteJson(dir / "report.json");

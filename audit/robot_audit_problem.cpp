@@ -97,34 +97,36 @@ Eigen::MatrixXd WarmupColumn(const Problem& pb, double tau) {
 // min 1/2 d' H d + g' d subject to x + d >= lower (lower = -inf where unbounded): a primal
 // active set (the bounded parameters are few). `at_bound` marks those held at the bound.
 Eigen::VectorXd BoundedStep(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, const Eigen::VectorXd& x,
-                            const Eigen::VectorXd& lower, std::vector<char>* at_bound) {
+                            const Eigen::VectorXd& lower, const Eigen::VectorXd& upper, std::vector<char>* at_bound) {
   const int n = H.rows();
-  std::vector<char> active(n, 0);
+  std::vector<char> active(n, 0);  // 1: held at its lower bound, 2: at its upper bound
   Eigen::VectorXd d = Eigen::VectorXd::Zero(n);
   for (int iter = 0; iter < 4 * n + 10; ++iter) {
     std::vector<int> fr, ac;
     for (int i = 0; i < n; ++i) (active[i] ? ac : fr).push_back(i);
     d.setZero();
-    for (int i : ac) d[i] = lower[i] - x[i];
+    for (int i : ac) d[i] = (active[i] == 1 ? lower[i] : upper[i]) - x[i];
     if (!fr.empty()) {
       Eigen::VectorXd rhs = -g(fr);
       if (!ac.empty()) rhs -= H(fr, ac) * d(ac);
       d(fr) = SolveScaled(H(fr, fr), rhs);
     }
     // Most violated bound among the free.
-    int worst = -1;
+    int worst = -1, side = 0;
     double wv = 0;
     for (int i : fr) {
-      if (!std::isfinite(lower[i])) continue;
       const double scale = std::sqrt(std::max(H(i, i), 1e-300));
-      const double v = (x[i] + d[i] - lower[i]) * scale;
-      if (v < -1e-12 && v < wv) {
-        wv = v;
-        worst = i;
+      if (std::isfinite(lower[i])) {
+        const double v = (x[i] + d[i] - lower[i]) * scale;
+        if (v < -1e-12 && v < wv) wv = v, worst = i, side = 1;
+      }
+      if (std::isfinite(upper[i])) {
+        const double v = (upper[i] - x[i] - d[i]) * scale;
+        if (v < -1e-12 && v < wv) wv = v, worst = i, side = 2;
       }
     }
     if (worst >= 0) {
-      active[worst] = 1;
+      active[worst] = static_cast<char>(side);
       continue;
     }
     // A bound that the gradient pulls away from is released.
@@ -132,7 +134,7 @@ Eigen::VectorXd BoundedStep(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, 
     int rel = -1;
     double rv = 0;
     for (int i : ac) {
-      const double v = grad[i] / std::sqrt(std::max(H(i, i), 1e-300));
+      const double v = (active[i] == 1 ? 1.0 : -1.0) * grad[i] / std::sqrt(std::max(H(i, i), 1e-300));
       if (v < -1e-12 && v < rv) {
         rv = v;
         rel = i;
@@ -144,7 +146,6 @@ Eigen::VectorXd BoundedStep(const Eigen::MatrixXd& H, const Eigen::VectorXd& g, 
   if (at_bound) *at_bound = active;
   return d;
 }
-
 
 }  // namespace
 
@@ -268,6 +269,7 @@ Problem MakeProblem(const RobotModel& robot, const RobotLog& log, const RobotAud
     pb.offset = frozen->offset;
     pb.P = frozen->P;
     pb.lower = frozen->lower;
+    pb.upper = frozen->upper;
     pb.geometry = frozen->geometry;
     pb.warmup = frozen->warmup;
     pb.theta0 = frozen->theta0;
@@ -495,14 +497,15 @@ void SolveLinear(const Problem& pb, const RowSet& set, const std::vector<int>& F
                  Eigen::MatrixXd* R, Eigen::MatrixXd* S, std::vector<char>* at_bound) {
   const Columns cols(pb, F, *theta);
   Eigen::VectorXd lower(F.size());
-  for (size_t k = 0; k < F.size(); ++k) lower[k] = pb.lower[F[k]];
+  Eigen::VectorXd upper(F.size());
+  for (size_t k = 0; k < F.size(); ++k) lower[k] = pb.lower[F[k]], upper[k] = pb.upper[F[k]];
   double last = LogDet(*S);
   for (int it = 0; it < 60; ++it) {
     const Eigen::MatrixXd W = S->inverse();
     const Eigen::MatrixXd H = cols.Normal(set, W);
     const Eigen::VectorXd g = cols.Gradient(set, W, *R);
     const Eigen::VectorXd x = (*theta)(F);
-    const Eigen::VectorXd d = BoundedStep(H, g, x, lower, at_bound);
+    const Eigen::VectorXd d = BoundedStep(H, g, x, lower, upper, at_bound);
     for (size_t k = 0; k < F.size(); ++k) (*theta)[F[k]] += d[k];
     cols.Apply(set, d, R);
     *S = MlCovariance(*R, set);

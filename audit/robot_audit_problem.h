@@ -17,7 +17,7 @@
 
 #include <Eigen/Core>
 
-#include "audit/robot_audit.h"
+#include "audit/robot_audit_types.h"
 #include "calib/robot_measurements.h"
 #include "core/pose_math.h"
 #include "model/extensions.h"
@@ -50,7 +50,7 @@ struct Problem {
   std::vector<Extension> blocks;
   std::vector<int> offset;  // first parameter of each block
   int P = 0;
-  std::vector<double> lower;                    // per parameter: -inf, or a physical bound
+  std::vector<double> lower, upper;             // per parameter: +-inf, or a physical bound
   int geometry = -1;                            // the geometry block
   int warmup = -1;                              // parameter index of the warm-up growth; -1 = none
   Eigen::VectorXd theta0;                       // the linearisation point (the nominal fit)
@@ -118,7 +118,7 @@ Eigen::MatrixXd InverseScaled(const Eigen::MatrixXd& H);
 struct FitResult {
   Eigen::VectorXd theta;
   std::vector<int> free;       // requested free parameters (base, tool, the model's terms)
-  std::vector<char> at_bound;  // per free parameter: held at its physical bound
+  std::vector<char> at_bound;  // per free parameter: held at its physical bound (1 lower, 2 upper)
   Eigen::MatrixXd noise;       // m x m
   Eigen::MatrixXd R;           // N x m residuals (predicted - measured) of the fitted rows
   Eigen::VectorXd row_ll;      // N

@@ -16,6 +16,8 @@ namespace mcms::robot_audit {
 
 namespace {
 
+constexpr double kMaxJointScale = 5e-3;
+
 // A single geometric kind is offered when asked for by name, or with the whole geometry.
 bool GeometricKindWanted(const RobotAuditOptions& o, Effect e) {
   return Wanted(o, e) || Wanted(o, Effect::kGeometry);
@@ -82,12 +84,21 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
   }
   pb->theta0 = Eigen::VectorXd::Zero(pb->P);
   pb->lower.assign(pb->P, -kInf);
+  pb->upper.assign(pb->P, kInf);
   for (size_t k = 0; k < B.size(); ++k) {
     const std::vector<double> p0 = B[k].InitialParameters();
     for (size_t j = 0; j < p0.size(); ++j) pb->theta0[pb->offset[k] + j] = p0[j];
     // Physical bounds: no joint has a negative compliance or mass, nor a negative backlash.
     if (B[k].effect == Effect::kGravityCompliance || B[k].effect == Effect::kBacklash)
       for (int j = 0; j < B[k].NumParameters(); ++j) pb->lower[pb->offset[k] + j] = 0.0;
+    // Nor a gear ratio off by more than half a percent (a joint read 1 rad as 0.995 would be
+    // broken, not misscaled), nor play of more than 0.1 rad (5.7 deg) or 5 mm.
+    if (B[k].effect == Effect::kJointScale) {
+      pb->lower[pb->offset[k]] = -kMaxJointScale;
+      pb->upper[pb->offset[k]] = kMaxJointScale;
+    }
+    if (B[k].effect == Effect::kBacklash)
+      pb->upper[pb->offset[k]] = robot.Joints()[B[k].index].type == JointType::kRevolute ? 0.1 : 0.005;
     if (B[k].effect == Effect::kThermalDrift && B[k].variant == 0) pb->warmup = pb->offset[k];
   }
 
@@ -101,7 +112,7 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
       geometric->push_back({e.Label(robot), e, {g0 + s * j + term}, 0, true});
     };
     Add({Effect::kJointOffset, j, 0}, OffsetParameter(robot.Convention(), robot.Joints()[j].type));
-    if (robot.Convention() == ChainConvention::kUrdf) continue;
+    if (robot.Convention() == ChainConvention::kUrdf) continue;  // its placements: `geometry`
     if (rev) Add({Effect::kLinkLength, j, 1}, 1);
     Add({Effect::kLinkLength, j, 0}, 2);
     Add({Effect::kLinkTwist, j, 0}, 3);

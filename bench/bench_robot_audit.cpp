@@ -7,15 +7,24 @@
 // named peer in the same process is calib-robot's CalibrateRobot (DH identification) on
 // the same measurements: the ratio says what an audit costs beyond one calibration. Not a
 // test: numbers depend on the machine.
+// The real TIAGo (../shared/data/tiago-mocap, skipped without it): loading its 89-link URDF
+// (peer: reading the same file's text alone), and the whole audit of 2021-11-30 with
+// 2021-11-26 scored frozen (--validate), as `mcms audit robot` runs them.
 //   build/bench/bench_robot_audit --benchmark_filter=10000
+//   build/bench/bench_robot_audit --benchmark_filter=Tiago
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <vector>
 
+#include <cstdlib>
+#include <filesystem>
+
 #include "audit/robot_audit.h"
 #include "calib/robot_calibration.h"
+#include "core/io.h"
 #include "core/random.h"
+#include "model/urdf.h"
 #include "tests/robot_logs.h"
 
 namespace mcms {
@@ -66,6 +75,56 @@ void BM_CalibrateRobotPeer(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_CalibrateRobotPeer)->Arg(400)->Arg(2000)->Arg(10000)->Unit(benchmark::kSecond)->Iterations(1);
+
+// The real TIAGo's folder, or empty when the data is not here.
+std::filesystem::path Tiago() {
+  const char* env = std::getenv("MCMS_DATA_DIR");
+  const std::filesystem::path root =
+      env ? std::filesystem::path(env) : std::filesystem::path(MCMS_SOURCE_DIR) / ".." / "shared" / "data";
+  const auto d = root / "tiago-mocap";
+  return std::filesystem::is_directory(d) ? d : std::filesystem::path();
+}
+
+void BM_LoadTiagoUrdf(benchmark::State& state) {
+  const auto d = Tiago();
+  if (d.empty()) {
+    state.SkipWithError("real data not present (../shared/data/tiago-mocap)");
+    return;
+  }
+  for (auto _ : state) {
+    const RobotModel r = ReadUrdf(d / "tiago_48_hey5.urdf", {"", "wrist_ft_tool_link"});
+    benchmark::DoNotOptimize(r.NumJoints());
+  }
+}
+BENCHMARK(BM_LoadTiagoUrdf)->Unit(benchmark::kMillisecond);
+
+// The peer: reading the URDF's text alone.
+void BM_ReadTiagoUrdfTextPeer(benchmark::State& state) {
+  const auto d = Tiago();
+  if (d.empty()) {
+    state.SkipWithError("real data not present (../shared/data/tiago-mocap)");
+    return;
+  }
+  for (auto _ : state) benchmark::DoNotOptimize(ReadTextFile(d / "tiago_48_hey5.urdf").size());
+}
+BENCHMARK(BM_ReadTiagoUrdfTextPeer)->Unit(benchmark::kMillisecond);
+
+void BM_AuditTiagoWithValidation(benchmark::State& state) {
+  const auto d = Tiago();
+  if (d.empty()) {
+    state.SkipWithError("real data not present (../shared/data/tiago-mocap)");
+    return;
+  }
+  for (auto _ : state) {
+    const RobotModel described = ReadUrdf(d / "tiago_48_hey5.urdf", {"", "wrist_ft_tool_link"});
+    const RobotLog fit = ReadRobotLog(d / "qualisys_2021-11-30_static_postures.csv", described);
+    const RobotLog other = ReadRobotLog(d / "qualisys_2021-11-26_static_postures.csv", described);
+    const RobotModel robot = CoverReadings(described, {&fit, &other});
+    const RobotAuditResult r = AuditRobot(robot, fit, {}, {other});
+    benchmark::DoNotOptimize(r.report.validation.size());
+  }
+}
+BENCHMARK(BM_AuditTiagoWithValidation)->Unit(benchmark::kSecond)->Iterations(1);
 
 }  // namespace
 }  // namespace mcms

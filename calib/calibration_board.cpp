@@ -22,6 +22,7 @@ extern "C" {
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 
 namespace mcms {
 
@@ -109,7 +110,7 @@ std::string CalibrationBoard::Describe() const {
 CalibrationBoard CalibrationBoard::Read(const std::filesystem::path& path) {
   YAML::Node y;
   try {
-    y = YAML::Load(ReadTextFile(path));  // bounded, and a folder is refused by name
+    y = LoadYaml(ReadTextFile(path), path.string());  // bounded, and a folder is refused by name
   } catch (const std::exception& e) {
     Throw("board file ", path.string(), ": cannot read it as YAML (", e.what(), ")");
   }

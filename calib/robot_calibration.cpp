@@ -628,8 +628,21 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_
     reg.progress = nullptr;
     const RobotCalibrationResult first = CalibrateRobot(robot, base0, measurements, reg);
     base0 = first.T_meas_base;
-    robot.SetT_flange_tool(first.robot.T_flange_tool());
-    points0 = first.points_tool;
+    // The tool (and the body's points) only where the registration moved them by more than
+    // a centimetre and their own uncertainty: the robot file's tool within a centimetre is
+    // the target the user measured, and stays exact (on a joint's axis, say, where that
+    // joint's terms are not identifiable; the registration would put it a residual's width
+    // off the axis and make them look weakly identifiable); a target far from the tool frame
+    // (motion-capture markers 12 cm from a URDF's tip link) is started where it is.
+    double moved = (first.robot.T_flange_tool().t - robot.T_flange_tool().t).norm(), sigma = 0;
+    for (const auto& p : first.parameters)
+      if (!p.fixed && (p.name == "tool.x" || p.name == "tool.y" || p.name == "tool.z")) sigma = std::max(sigma, p.sigma);
+    for (size_t k = 0; k < points0.size() && k < first.points_tool.size(); ++k)
+      moved = std::max(moved, (first.points_tool[k] - points0[k]).norm());
+    if (moved > std::max(0.01, 3.0 * sigma)) {
+      robot.SetT_flange_tool(first.robot.T_flange_tool());
+      points0 = first.points_tool;
+    }
   }
   std::vector<std::unique_ptr<CostFunction>> costs;
   for (const auto& m : measurements) costs.push_back(MakeCost(robot, base0, m, options, points0));
@@ -686,7 +699,9 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_
 
   struct Callback : ceres::IterationCallback {
     const std::function<void(int, double)>* f;
+    std::vector<double> costs;  // after each iteration
     ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+      costs.push_back(s.cost);
       if (*f) (*f)(s.iteration, s.cost);
       return ceres::SOLVER_CONTINUE;
     }
@@ -705,6 +720,15 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_
   ceres::Solve(so, &problem, &summary);
   result.iterations = static_cast<int>(summary.iterations.size());
   result.converged = summary.termination_type == ceres::CONVERGENCE;
+  // Ceres' tolerances here are tight (1e-12): an ill-conditioned but settled problem runs
+  // out of iterations while its cost no longer moves. Settled counts as converged: the
+  // (whitened) cost changed by less than kSettledCostChange over the last 10 iterations.
+  if (callback.costs.size() > 10) {
+    const double last = callback.costs.back(), before = callback.costs[callback.costs.size() - 11];
+    result.last_cost_change = std::abs(before - last);
+  }
+  if (!result.converged && summary.termination_type == ceres::NO_CONVERGENCE)
+    result.converged = result.last_cost_change <= RobotCalibrationResult::kSettledCostChange;
 
   // Covariance of the free parameters from the Jacobian at the solution.
   Evaluate(costs, x, &r, &J);

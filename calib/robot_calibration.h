@@ -47,6 +47,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <limits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -150,7 +151,14 @@ struct RobotCalibrationResult {
   // ObservabilityIndex (larger = better conditioned).
   double observability = 0.0;
   int iterations = 0;
+  // Ceres converged, or settled: its cost (half the chi-square of the residuals whitened by
+  // the position and rotation sigmas) changed by less than kSettledCostChange over the last
+  // 10 iterations, a hundredth of what moving any parameter by one sigma changes (an
+  // ill-conditioned problem crawls along a flat direction within Ceres' tight tolerances).
   bool converged = false;
+  static constexpr double kSettledCostChange = 0.01;
+  // |cost 10 iterations before the end - final cost| (inf with 10 or fewer iterations).
+  double last_cost_change = std::numeric_limits<double>::infinity();
   std::vector<const CalibrationParameter*> Fixed() const;
 };
 

@@ -2,6 +2,7 @@
 
 #include <numbers>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <map>
 #include <sstream>
@@ -25,26 +26,6 @@ std::string ValueText(const CalibrationParameter& p, double v) {
   char buf[64];
   std::snprintf(buf, sizeof buf, p.angle ? "%+.5f deg" : "%+.4f mm", p.angle ? v / kDeg : v * 1e3);
   return buf;
-}
-
-// Only the points `keep` (1-based) of every measurement.
-std::vector<RobotMeasurement> KeepPoints(const RobotLog& log, const std::vector<int>& keep, const char* option) {
-  std::vector<RobotMeasurement> out = log.rows;
-  if (keep.empty()) return out;
-  const int K = log.NumPoints();
-  for (int k : keep)
-    if (k < 1 || k > K)
-      Throw("calib-robot: ", option, " ", k, ": ", log.source.string(), " has ", K, K == 1 ? " point" : " points",
-            " per row; give numbers from 1 to ", K);
-  if (keep.size() == 2) Throw("calib-robot: ", option, " gives 2 points; give one point or at least 3");
-  for (auto& m : out) {
-    std::vector<Vec3> all{m.p_meas};
-    all.insert(all.end(), m.other_points.begin(), m.other_points.end());
-    m.p_meas = all[keep[0] - 1];
-    m.other_points.clear();
-    for (size_t i = 1; i < keep.size(); ++i) m.other_points.push_back(all[keep[i] - 1]);
-  }
-  return out;
 }
 
 // Rows x points errors of a model on measurements.
@@ -137,7 +118,7 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   for (auto& c : out_ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   const bool write_urdf = out_ext == ".urdf" || (robot.Urdf() && out_ext != ".yaml" && out_ext != ".yml");
   const RobotLog log = ReadRobotLog(job.measurements, robot);
-  const std::vector<RobotMeasurement> ms = KeepPoints(log, job.points, "--points");
+  const std::vector<RobotMeasurement> ms = KeepPoints(log, job.points, "calib-robot --points").rows;
   std::vector<RobotLog> validate;
   for (const auto& v : job.validate) {
     RobotLog vl = ReadRobotLog(v, robot);
@@ -200,7 +181,7 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   // Other sessions, frozen: the registered nominal model and the calibrated one.
   std::vector<SessionScore> scores;
   for (const RobotLog& v : validate) {
-    const std::vector<RobotMeasurement> vm = KeepPoints(v, job.points, "--points");
+    const std::vector<RobotMeasurement> vm = KeepPoints(v, job.points, "calib-robot --points").rows;
     SessionScore sc;
     sc.log = v.source.string();
     sc.rows = static_cast<int>(v.rows.size());
@@ -223,8 +204,52 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     cv = CrossValidateRobot(robot, guess, ms, cv_opt, job.folds);
   }
 
+  // Is the solution worth writing? (calib-rig's rule: refused unless --allow-poor-fit.)
+  std::vector<std::string> problems;
+  {
+    double reach = robot.T_flange_tool().t.norm();
+    for (const Joint& j : robot.Joints()) reach += std::abs(j.a) + std::abs(j.d) + j.origin.t.norm();
+    const ErrorStats after = Summarize(r.errors_after), registered = Summarize(nominal.errors_after);
+    const double rms = after.rms_position_m, rms_reg = registered.rms_position_m;
+    // What the solver minimises: positions and rotations weighted by their sigmas.
+    const auto Cost = [&](const ErrorStats& e) {
+      double c = std::pow(e.rms_position_m / job.position_sigma_m, 2);
+      if (e.rms_rotation_rad) c += std::pow(*e.rms_rotation_rad / job.rotation_sigma_rad, 2);
+      return c;
+    };
+    char b[320];
+    if (!r.converged) {
+      std::snprintf(b, sizeof b, "the solver did not converge in %d iterations (--max-iterations)", r.iterations);
+      problems.push_back(b);
+    }
+    if (rms > 0.02 * reach) {
+      std::snprintf(b, sizeof b,
+                    "the calibrated model misses the measurements by %.4g mm RMS, more than 2 %% of the robot's "
+                    "reach (%.3g m): positions in other units than metres, another robot, or a start far from the "
+                    "truth (--base-guess, --tool-guess)",
+                    rms * 1e3, reach);
+      problems.push_back(b);
+    }
+    if (Cost(after) > 1.0001 * Cost(registered) + 1e-9) {
+      std::snprintf(b, sizeof b,
+                    "the calibrated model (%.4g mm RMS) fits worse than the nominal model registered (%.4g mm): "
+                    "the solver stopped in a wrong minimum (check --tool-guess and --base-guess)",
+                    rms * 1e3, rms_reg * 1e3);
+      problems.push_back(b);
+    }
+  }
+  std::string list;
+  for (const std::string& p : problems) list += "\n  - " + p;
+  if (!problems.empty() && !job.allow_poor_fit)
+    Throw("calib-robot: the calibration of ", job.measurements.string(), " is not trustworthy:", list,
+          "\nno output written (--allow-poor-fit writes it anyway, with this warning)");
+  if (!problems.empty() && job.progress)
+    job.progress("WARNING: the calibration is not trustworthy (written because of --allow-poor-fit):" + list);
+
   std::ostringstream rep;
   rep << "# mcms calib-robot report\n";
+  if (!problems.empty())
+    rep << "WARNING: the calibration is not trustworthy (written because of --allow-poor-fit):" << list << "\n";
   rep << "robot: " << robot.Name() << " (" << robot.NumJoints() << " joints)\n";
   if (const UrdfSource* u = robot.Urdf())
     rep << "chain: " << u->base_link << " -> " << u->tip_link << " (URDF " << job.robot.string() << ")\n";
@@ -240,7 +265,8 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   }
   for (const auto& n : reading_notes) rep << "note: " << n << "\n";
   rep << "solver: " << (r.converged ? "converged" : "did NOT converge") << " after " << r.iterations
-      << " iterations; variance factor " << r.variance_factor << "; observability index " << r.observability << "\n";
+      << " iterations (whitened cost change over the last 10: " << r.last_cost_change << "); variance factor "
+      << r.variance_factor << "; observability index " << r.observability << "\n";
   rep << "T_meas_base: " << PoseText(r.T_meas_base) << "\n";
   rep << "T_flange_tool: " << PoseText(r.robot.T_flange_tool()) << "\n";
   rep << "residuals, starting model:            " << ErrorStatsText(Summarize(r.errors_before)) << "\n";

@@ -42,6 +42,11 @@ struct RobotCalibrationJob {
   int folds = 5;                        // 0 = no held-out validation
   int max_iterations = 200;
   bool registration_only = false;
+  // A calibration that did not converge, misses its measurements by more than 2 % of the
+  // robot's reach (units or the wrong robot), or fits worse than the nominal model
+  // registered (a wrong minimum) is refused and nothing is written, unless this is set (then
+  // it is written with the warning in the report and on stderr).
+  bool allow_poor_fit = false;
   // Progress lines (may be empty).
   std::function<void(const std::string&)> progress;
 };

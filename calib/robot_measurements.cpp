@@ -14,8 +14,10 @@
 #include <Eigen/Dense>
 #include <yaml-cpp/yaml.h>
 
+#include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 
 namespace mcms {
 
@@ -339,10 +341,11 @@ void CheckRobotLog(const RobotLog& log, const RobotModel& robot, int min_rows) {
             " s; rows must be in time order");
     if (r.R_meas_tool.has_value() != six)
       Throw(log.Where(i), ": some rows have a measured orientation and some do not; give all or none");
-    if (log.has_temperature && !std::isfinite(r.temperature_c))
-      Throw(log.Where(i), ": temperature_c is not a finite number");
-    if (log.has_payload && !(std::isfinite(r.payload_kg) && r.payload_kg >= 0))
-      Throw(log.Where(i), ": payload_kg is ", r.payload_kg, "; expected a finite mass >= 0");
+    if (log.has_temperature && !(r.temperature_c >= kMinTemperatureC && r.temperature_c <= kMaxTemperatureC))
+      Throw(log.Where(i), ": temperature_c is ", r.temperature_c, "; expected ", kMinTemperatureC, " to ",
+            kMaxTemperatureC, " deg C");
+    if (log.has_payload && !(std::isfinite(r.payload_kg) && r.payload_kg >= 0 && r.payload_kg <= kMaxMassKg))
+      Throw(log.Where(i), ": payload_kg is ", r.payload_kg, "; expected a finite mass from 0 to ", kMaxMassKg, " kg");
   }
 }
 
@@ -608,6 +611,25 @@ RigidBody RigidBodyPoses(const RobotLog& log, const std::vector<Vec3>& points_bo
   return body;
 }
 
+RobotLog KeepPoints(const RobotLog& log, const std::vector<int>& keep, const std::string& option) {
+  RobotLog out = log;
+  if (keep.empty()) return out;
+  const int K = log.NumPoints();
+  for (int k : keep)
+    if (k < 1 || k > K)
+      Throw(option, " ", k, ": ", log.source.string(), " has ", K, K == 1 ? " point" : " points",
+            " per row; give numbers from 1 to ", K);
+  if (keep.size() == 2) Throw(option, " gives 2 points; give one point or at least 3");
+  for (auto& m : out.rows) {
+    std::vector<Vec3> all{m.p_meas};
+    all.insert(all.end(), m.other_points.begin(), m.other_points.end());
+    m.p_meas = all[keep[0] - 1];
+    m.other_points.clear();
+    for (size_t i = 1; i < keep.size(); ++i) m.other_points.push_back(all[keep[i] - 1]);
+  }
+  return out;
+}
+
 const char* Name(PostureGroup g) {
   switch (g) {
     case PostureGroup::kRepeated: return "repeated";
@@ -638,7 +660,7 @@ std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path&
   const std::string source = "measurement file " + path.string();
   YAML::Node root;
   try {
-    root = YAML::Load(ReadTextFile(path));
+    root = LoadYaml(ReadTextFile(path), source);
   } catch (const YAML::Exception& e) {
     Throw(source, ": not valid YAML: ", e.what());
   }

@@ -114,6 +114,10 @@ enum class PostureGroup { kRepeated, kNewInRange, kOutOfRange };
 const char* Name(PostureGroup g);
 std::vector<PostureGroup> PostureGroups(const RobotLog& fitted, const RobotLog& other, double tolerance = 0.01);
 
+// The log with only the points `keep` (1-based, in that order; empty: every point) of every
+// row. InputError naming `option` for a point the log does not have, or 2 points.
+RobotLog KeepPoints(const RobotLog& log, const std::vector<int>& keep, const std::string& option);
+
 // YAML measurement files alone (the two layouts above), without a robot to check against.
 std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path& path);
 // Writes calib-robot's layout, atomically, 17 significant digits (points 2..K not written).

@@ -37,6 +37,46 @@ nlohmann::json PointsJson(const std::vector<PointScore>& p) {
   return a;
 }
 
+const ModelScore* ModelNamed(const SessionScore& s, const std::string& name) {
+  for (const ModelScore& m : s.models)
+    if (m.model == name) return &m;
+  return nullptr;
+}
+
+// Point 1 without -> with a cause, RMS / max (mm), overall and per posture group.
+std::string MovedLine(const std::string& cause, const ModelScore& without, const ModelScore& with) {
+  std::string out = "    " + cause + ":";
+  char b[160];
+  const auto Add = [&](const char* group, const std::vector<PointScore>& a, const std::vector<PointScore>& c) {
+    if (a.empty() || c.empty()) return;
+    std::snprintf(b, sizeof b, " %s %.3f/%.3f -> %.3f/%.3f;", group, a[0].rms_m * 1e3, a[0].max_m * 1e3,
+                  c[0].rms_m * 1e3, c[0].max_m * 1e3);
+    out += b;
+  };
+  Add("all", without.points, with.points);
+  for (const auto& [g, p] : without.groups)
+    for (const auto& [g2, p2] : with.groups)
+      if (g == g2) Add(Name(g), p, p2);
+  out.back() = '\n';
+  return out;
+}
+
+// What each cause moved on the session: the geometry (registration -> geometry) and each
+// model "final without X" -> "final".
+std::string MovedText(const SessionScore& s) {
+  std::string lines;
+  const ModelScore* reg = ModelNamed(s, "registration");
+  const ModelScore* geo = ModelNamed(s, "geometry");
+  const ModelScore* fin = ModelNamed(s, "final");
+  if (reg && geo) lines += MovedLine("geometry (registration -> geometry)", *reg, *geo);
+  const std::string prefix = "final without ";
+  if (fin)
+    for (const ModelScore& m : s.models)
+      if (m.model.rfind(prefix, 0) == 0) lines += MovedLine(m.model.substr(prefix.size()), m, *fin);
+  if (lines.empty()) return lines;
+  return "  what each cause moved there (point 1, RMS/max mm, without -> with it):\n" + lines;
+}
+
 }  // namespace
 
 ModelScore ScoreModel(const std::string& model, const std::vector<std::vector<Vec3>>& errors,
@@ -87,6 +127,7 @@ std::string ValidationText(const std::vector<SessionScore>& sessions) {
       }
       out += "\n";
     }
+    out += MovedText(s);
   }
   return out;
 }

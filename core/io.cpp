@@ -86,6 +86,9 @@ void RequireWritableFolder(const fs::path& path, const std::string& what) {
 std::string ReadTextFile(const fs::path& path) {
   std::error_code ec;
   if (fs::is_directory(path, ec)) Throw("cannot read ", path.string(), ": it is a folder, expected a text file");
+  // A FIFO with no writer would block forever, a device would never end.
+  if (fs::exists(path, ec) && !fs::is_regular_file(path, ec))
+    Throw("cannot read ", path.string(), ": not a regular file (a FIFO, socket or device); give a file");
   std::ifstream in(path, std::ios::binary);
   if (!in) Throw("cannot read ", path.string(), ": file missing or not readable");
   // Bounded: a device such as /dev/zero or a huge file given by mistake is refused
@@ -119,28 +122,67 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
 
 CsvTable ReadCsv(const fs::path& path) {
   std::string text = ReadTextFile(path);
+  const std::string src = path.string();
+  // Text that is not UTF-8 (a spreadsheet's "Unicode text" export) would read as garbage.
+  if (text.compare(0, 2, "\xFF\xFE") == 0 || text.compare(0, 2, "\xFE\xFF") == 0 ||
+      (text.size() >= 4 && text.find('\0') != std::string::npos))
+    Throw(src, ": UTF-16 or binary text (NUL bytes); save the CSV as UTF-8 text");
   // A UTF-8 byte order mark (written by some spreadsheet programs) is not part of the
   // first column's name.
   if (text.compare(0, 3, "\xEF\xBB\xBF") == 0) text.erase(0, 3);
-  std::istringstream in(text);
+  // Line ends: CR LF and old Mac CR alone are line breaks too.
+  std::string text_lf;
+  text_lf.reserve(text.size());
+  for (size_t i = 0; i < text.size(); ++i) {
+    if (text[i] == '\r') {
+      text_lf += '\n';
+      if (i + 1 < text.size() && text[i + 1] == '\n') ++i;
+    } else {
+      text_lf += text[i];
+    }
+  }
+  std::istringstream in(text_lf);
   CsvTable t;
   t.source = path;
   std::string line;
   int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
-    if (line.empty() || line[0] == '#' || line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    if (line.empty() || line[0] == '#' || line.find_first_not_of(" \t") == std::string::npos) continue;
+    // Excel's separator hint on the first line.
+    if (t.header.empty() && line.rfind("sep=", 0) == 0) {
+      if (line.substr(4, 1) != ",")
+        Throw(src, " line ", lineno, ": the file says its separator is '", line.substr(4, 1),
+              "'; mcms reads comma-separated values with decimal points: save the CSV with commas");
+      continue;
+    }
     auto cells = SplitCsvLine(line);
     if (t.header.empty()) {
+      if (cells.size() == 1 && line.find(';') != std::string::npos)
+        Throw(src, " line ", lineno, ": the header is separated by ';', not ','; mcms reads comma-separated "
+              "values with decimal points (a spreadsheet in a locale with decimal commas?): save the CSV with "
+              "commas and points");
+      if (cells.size() == 1 && line.find('\t') != std::string::npos)
+        Throw(src, " line ", lineno, ": the header is separated by tabs, not commas; save the CSV with commas");
+      for (size_t a = 0; a < cells.size(); ++a)
+        for (size_t b = a + 1; b < cells.size(); ++b)
+          if (!cells[a].empty() && cells[a] == cells[b])
+            Throw(src, " line ", lineno, ": column '", cells[a], "' appears twice (columns ", a + 1, " and ", b + 1,
+                  "); which one is meant is ambiguous: remove or rename one");
       t.header = std::move(cells);
       continue;
     }
-    if (cells.size() != t.header.size())
-      Throw(path.string(), " line ", lineno, ": expected ", t.header.size(), " columns as in the header, found ", cells.size());
+    if (cells.size() != t.header.size()) {
+      std::string hint;
+      if (cells.size() > t.header.size() && line.find_first_of("0123456789") != std::string::npos)
+        hint = " (numbers with decimal commas, such as 1,5 for 1.5? give decimal points)";
+      Throw(src, " line ", lineno, ": expected ", t.header.size(), " columns as in the header, found ", cells.size(),
+            hint);
+    }
     t.rows.push_back(std::move(cells));
     t.line_of_row.push_back(lineno);
   }
-  if (t.header.empty()) Throw(path.string(), ": empty file, expected a CSV header row");
+  if (t.header.empty()) Throw(src, ": empty file, expected a CSV header row");
   return t;
 }
 

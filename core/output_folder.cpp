@@ -1,10 +1,70 @@
 #include "core/output_folder.h"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <fstream>
+#include <set>
+#include <utility>
 
 #include "core/error.h"
 
 namespace mcms {
+
+namespace {
+
+constexpr const char* kManifest = ".mcms-output";
+
+// Every file and folder under `root`, relative, in a stable order.
+std::vector<std::string> Entries(const std::filesystem::path& root) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> out;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(root, fs::directory_options::none, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec))
+    out.push_back(fs::relative(it->path(), root, ec).generic_string());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The record an output folder keeps of what its run wrote: "mcms <kind>", then one
+// relative path per line. Empty kind when there is none.
+std::pair<std::string, std::set<std::string>> ReadManifest(const std::filesystem::path& folder) {
+  std::ifstream in(folder / kManifest);
+  std::pair<std::string, std::set<std::string>> m;
+  std::string line;
+  if (!in || !std::getline(in, line) || line.rfind("mcms ", 0) != 0) return m;
+  m.first = line.substr(5);
+  while (std::getline(in, line))
+    if (!line.empty()) m.second.insert(line);
+  return m;
+}
+
+// Removes what an interrupted run left beside `out` (".<name>.partial-PID",
+// ".<name>.old-PID" of a process that no longer runs).
+void RemoveStaleTemporaries(const std::filesystem::path& out) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const std::string stem = std::string(".").append(out.filename().string());
+  for (auto it = fs::directory_iterator(out.parent_path(), ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    for (const char* tag : {".partial-", ".old-"}) {
+      const std::string prefix = stem + tag;
+      if (name.rfind(prefix, 0) != 0) continue;
+      const std::string pid = name.substr(prefix.size());
+      if (pid.empty() || pid.find_first_not_of("0123456789") != std::string::npos || pid.size() > 9) continue;
+      const pid_t p = static_cast<pid_t>(std::stol(pid));
+      if (p > 0 && ::kill(p, 0) != 0 && errno == ESRCH) {
+        std::error_code rm;
+        fs::remove_all(it->path(), rm);
+      }
+    }
+  }
+}
+
+}  // namespace
 
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what) {
@@ -13,11 +73,28 @@ void RequireReplaceableFolder(const std::filesystem::path& folder, const std::ve
   if (!fs::exists(folder, ec)) return;
   if (!fs::is_directory(folder, ec)) Throw(what, ": ", folder.string(), " exists and is not a folder");
   if (fs::is_empty(folder, ec)) return;
-  bool earlier = !marker_files.empty();
-  for (const std::string& m : marker_files) earlier = earlier && fs::exists(folder / m, ec);
-  if (earlier) return;
-  Throw(what, ": folder ", folder.string(), " exists and does not hold an earlier ", kind, "; choose a new folder or ",
-        "remove it");
+  // A run replaces only what a run of the same kind recorded writing: a folder holding
+  // anything else (the user's own files) is refused, and nothing in it is touched.
+  const auto [recorded_kind, recorded] = ReadManifest(folder);
+  std::vector<std::string> foreign;
+  for (const std::string& e : Entries(folder))
+    if (e != kManifest && !recorded.count(e)) foreign.push_back(e);
+  if (recorded_kind == kind && foreign.empty()) return;
+  std::string list;
+  for (size_t i = 0; i < foreign.size() && i < 5; ++i) list += (i ? ", " : "") + foreign[i];
+  if (foreign.size() > 5) list += ", ... (" + std::to_string(foreign.size()) + " in all)";
+  std::string markers;
+  for (const std::string& m : marker_files) markers += (markers.empty() ? "" : ", ") + m;
+  if (recorded_kind.empty())
+    Throw(what, ": folder ", folder.string(), " exists and does not hold an earlier ", kind,
+          " (no record of an mcms run, ", kManifest, ", beside its files: ", list,
+          markers.empty() ? "" : "; an earlier " + kind + " holds " + markers,
+          "); nothing in it was touched: choose a new folder or remove it");
+  if (recorded_kind != kind)
+    Throw(what, ": folder ", folder.string(), " holds the output of mcms ", recorded_kind, ", not of ", kind,
+          "; nothing in it was touched: choose a new folder or remove it");
+  Throw(what, ": folder ", folder.string(), " holds an earlier ", kind, " and files that run did not write: ", list,
+        "; nothing in it was touched: move them out, or choose a new folder");
 }
 
 void CreateOutputFolder(const std::filesystem::path& folder, const std::string& what) {
@@ -35,6 +112,7 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   namespace fs = std::filesystem;
   fs::path out = fs::absolute(folder).lexically_normal();
   if (!out.has_filename()) out = out.parent_path();
+  RemoveStaleTemporaries(out);
   RequireReplaceableFolder(out, marker_files, kind, what);
   // (not "." + string: GCC 12 reports a false -Wrestrict overlap in that concatenation)
   const std::string stem = std::string(".").append(out.filename().string());
@@ -52,6 +130,14 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   }
   try {
     write(tmp);
+    {
+      // What this run wrote, so that the next run of the same kind may replace it.
+      const std::vector<std::string> written = Entries(tmp);
+      std::ofstream m(tmp / kManifest);
+      m << "mcms " << kind << "\n";
+      for (const std::string& e : written) m << e << "\n";
+      if (!m.flush()) Throw(what, ": cannot write ", (out / kManifest).string());
+    }
     RequireReplaceableFolder(out, marker_files, kind, what);
     if (fs::exists(out)) {
       const fs::path old = out.parent_path() / (stem + ".old-" + pid);

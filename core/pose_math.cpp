@@ -78,4 +78,26 @@ double RotationAngle(const Mat3& R_a, const Mat3& R_b) {
   return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w()));
 }
 
+Vec3 RpyOf(const Mat3& R) {
+  // R = Rz(y) Ry(p) Rx(r): R(2,0) = -sin p.
+  const double sp = std::clamp(-R(2, 0), -1.0, 1.0);
+  const double p = std::asin(sp);
+  double r, y;
+  if (std::abs(sp) < 1.0 - 1e-12) {
+    r = std::atan2(R(2, 1), R(2, 2));
+    y = std::atan2(R(1, 0), R(0, 0));
+  } else {
+    // Gimbal lock: only r -/+ y is defined; take y = 0.
+    y = 0.0;
+    r = std::atan2(-R(1, 2), R(1, 1));
+  }
+  return Vec3(r, p, y);
+}
+
+Mat3 RotationOfRpy(const Vec3& rpy) {
+  return (Eigen::AngleAxisd(rpy[2], Vec3::UnitZ()) * Eigen::AngleAxisd(rpy[1], Vec3::UnitY()) *
+          Eigen::AngleAxisd(rpy[0], Vec3::UnitX()))
+      .toRotationMatrix();
+}
+
 }  // namespace mcms

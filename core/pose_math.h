@@ -49,4 +49,8 @@ Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, cons
 // Angle of the relative rotation R_a^T R_b, radians.
 double RotationAngle(const Mat3& R_a, const Mat3& R_b);
 
+// URDF's rpy (fixed axes: R = Rz(yaw) Ry(pitch) Rx(roll)) of a rotation, and back.
+Vec3 RpyOf(const Mat3& R);
+Mat3 RotationOfRpy(const Vec3& rpy);
+
 }  // namespace mcms

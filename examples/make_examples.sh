@@ -10,7 +10,7 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
 # The example robots as URDF too (their forward kinematics equal the DH tables'; docs/urdf.md).
-mcms convert-robot model/robots/kuka_kr5_arc.yaml -o examples/robots/kuka_kr5_arc.urdf > /dev/null
+mcms convert-robot -o examples/robots/kuka_kr5_arc.urdf > /dev/null  # the built-in KR 5 arc
 mcms convert-robot examples/robots/ur10_like.yaml -o examples/robots/ur10_like.urdf > /dev/null
 
 # The robot log with a hidden joint-3 offset (CSV for audit robot, YAML for calib-robot).

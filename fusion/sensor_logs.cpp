@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 
 namespace mcms {
 
@@ -420,7 +421,7 @@ FusionSetup ParseFusionSetup(const std::string& yaml_text, const fs::path& sourc
   const Yaml y(name);
   YAML::Node root;
   try {
-    root = YAML::Load(yaml_text);
+    root = LoadYaml(yaml_text, name);
   } catch (const YAML::Exception& e) {
     Throw(name, ": not valid YAML: ", e.what());
   }

@@ -1,3 +1,4 @@
+#include "core/limits.h"
 #include "jobs/demo.h"
 
 #include <numbers>
@@ -135,7 +136,8 @@ bool DemoOptions::IsValid(std::string* why) const {
   };
   if (points < 1) return fail("points must be >= 1, got " + std::to_string(points));
   if (!(camera_rate_hz > 0) || !std::isfinite(camera_rate_hz)) return fail("camera_rate_hz must be positive");
-  if (threads < 0) return fail("threads must be >= 0 (0: the hardware's), got " + std::to_string(threads));
+  if (threads < 0 || threads > kMaxThreads)
+    return fail("threads must be 0 (the hardware's) to " + std::to_string(kMaxThreads) + ", got " + std::to_string(threads));
   std::string model_why;
   if (!camera_model.IsValid(&model_why)) return fail("camera model " + camera_model.name + ": " + model_why);
   if (!(experiment.kf_angular_psd > 0) || !(experiment.kf_linear_psd > 0))
@@ -156,7 +158,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   const bool model_file = std::filesystem::is_regular_file(o.camera_model.name, ec);
   RequireOutputsSpareInputs({{out, "demo -o", true}}, {model_file ? fs::path(o.camera_model.name) : fs::path()});
   RequireWritableFolder(out, "demo -o");  // before minutes of simulation, not after
-  const int threads = o.threads > 0 ? o.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int threads = ThreadsToUse(o.threads);
   print(Format("mcms demo: the paper's lab experiment: %d points on a %.0f mm sphere, %.0f s dwell, %zu cameras at "
                "%.1f Hz (%zu frames), robot at %.0f Hz, inclinometer every %.0f ms, %d threads -> %s\n",
                lo.points, 1e3 * lo.sphere_radius_m, lo.dwell_s, sc.rig.size(), lo.camera_rate_hz, sc.NumFrames(),

@@ -1,3 +1,4 @@
+#include "core/limits.h"
 #include "jobs/fov_map.h"
 
 #include <numbers>
@@ -206,7 +207,8 @@ std::string FovGrid::ToString() const {
 bool FovMapOptions::IsValid(std::string* why) const {
   if (!noise.IsValid(why)) return false;
   if (!prediction.IsValid(why)) return false;
-  if (threads < 1) return (*why = "threads must be >= 1", false);
+  if (threads < 1 || threads > kMaxThreads)
+    return (*why = "threads must be 1 to " + std::to_string(kMaxThreads) + ", got " + std::to_string(threads), false);
   if (!(threshold_mm > 0 && std::isfinite(threshold_mm))) return (*why = "the threshold must be a positive number of mm", false);
   if (!(std::abs(R_rig_target.determinant() - 1) < 1e-6)) return (*why = "the orientation is not a rotation", false);
   return true;

@@ -20,7 +20,8 @@ const std::vector<EffectInfo>& EffectCatalog() {
       {Effect::kErrorMotion, "error_motion", SensorKind::kRobot, "harmonic error motion of a rotary joint (ISO 230-7)"},
       {Effect::kLinkTwist, "link_twist", SensorKind::kRobot, "one DH twist alpha off (rad)"},
       {Effect::kGeometry, "geometry", SensorKind::kRobot,
-       "every DH parameter the data identify (theta offset, d, a, alpha of each joint) at once"},
+       "every geometric parameter the data identify (a DH table's theta offset, d, a, alpha of each joint; a URDF "
+       "chain's offsets and placement errors) at once"},
       {Effect::kCameraMoved, "camera_moved", SensorKind::kCamera, "the camera's pose in the rig moved (6 dof)"},
       {Effect::kFocalLength, "focal_length", SensorKind::kCamera, "both focal lengths scaled by 1 + s"},
       {Effect::kPrincipalPoint, "principal_point", SensorKind::kCamera, "the principal point shifted (px)"},

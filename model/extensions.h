@@ -70,7 +70,8 @@ std::optional<Effect> EffectFromName(std::string_view name);
 //           geometry = the robot's number of geometric parameters (RobotModel::
 //           NumGeometryParameters: the error model of model/joint.h, per joint DH [dtheta,
 //           dd, da, dalpha] or URDF [offset, x, y, z, rx, ry, rz]); link_length and link_twist
-//           are DH terms (a URDF joint's are in its placement); gravity_compliance 0 = the joint's
+//           are DH terms (a URDF joint's are in its placement, which `geometry` holds);
+//           gravity_compliance 0 = the joint's
 //           compliance (rad per N m) times the gravity torque of the robot's own masses
 //           and the payload (MeasurementContext::gravity_torque), 2 n + 1 = lumped masses:
 //           compliance x mass (rad kg / (N m)) at each link frame's origin o_1..o_n, at

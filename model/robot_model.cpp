@@ -11,10 +11,11 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 #include "model/joint.h"
-#include "model/urdf.h"
 
 namespace mcms {
 
@@ -322,7 +323,21 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
     if (!std::isnan(j.mass_kg) && !(std::isfinite(j.mass_kg) && j.mass_kg >= 0))
       Throw(who, ": ", JointLabel(joints_, i), " mass_kg is ", j.mass_kg, "; expected a finite mass >= 0");
     if (!j.com_m.allFinite()) Throw(who, ": ", JointLabel(joints_, i), " com_m is not finite");
+    // Limits (core/limits.h): no robot is larger, no encoder noisier, no link heavier.
+    const std::string at = who + ": " + JointLabel(joints_, i);
+    CheckMagnitude(j.a, kMaxRobotLengthM, at + " a", "m");
+    CheckMagnitude(j.d, kMaxRobotLengthM, at + " d", "m");
+    CheckMagnitude(j.origin.t.lpNorm<Eigen::Infinity>(), kMaxRobotLengthM, at + " origin (largest coordinate)", "m");
+    CheckMagnitude(j.com_m.lpNorm<Eigen::Infinity>(), kMaxRobotLengthM, at + " com_m (largest coordinate)", "m");
+    CheckMagnitude(j.encoder_sigma, kMaxEncoderSigma, at + " encoder_sigma",
+                   j.type == JointType::kRevolute ? "rad" : "m");
+    if (!std::isnan(j.mass_kg)) CheckMagnitude(j.mass_kg, kMaxMassKg, at + " mass_kg", "kg");
   }
+  for (int i = 0; i < NumJoints(); ++i)
+    for (int k = 0; k < i; ++k)
+      if (!joints_[i].name.empty() && joints_[i].name == joints_[k].name)
+        Throw(who, ": joints ", k + 1, " and ", i + 1, " are both named '", joints_[i].name,
+              "'; a log names its joint columns by them, so each name must be unique");
   int with_mass = 0;
   for (const Joint& j : joints_) with_mass += !std::isnan(j.mass_kg);
   if (with_mass > 0 && with_mass < NumJoints())
@@ -332,6 +347,8 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
       (T_flange_tool_.R.transpose() * T_flange_tool_.R - Mat3::Identity()).norm() > 1e-9 ||
       T_flange_tool_.R.determinant() < 0)
     Throw(who, ": T_flange_tool must be a finite rigid transform");
+  CheckMagnitude(T_flange_tool_.t.lpNorm<Eigen::Infinity>(), kMaxRobotLengthM, who + ": the tool (largest coordinate)",
+                 "m");
 }
 
 bool RobotModel::HasMasses() const {
@@ -358,19 +375,13 @@ RobotModel RobotModel::Default() {
   return model;
 }
 
-RobotModel RobotModel::Read(const std::filesystem::path& path, const ChainSelection& chain) {
-  if (IsUrdfFile(path)) return ReadUrdf(path, chain);
-  if (!chain.base_link.empty() || !chain.tip_link.empty())
-    Throw("robot file ", path.string(), ": --base-link and --tip-link pick a chain of a URDF; this is a YAML "
-          "description, whose joints are the chain");
-  return Parse(ReadTextFile(path), "robot file " + path.string());
-}
+// RobotModel::Read is in model/urdf.cpp: it reads a URDF or this YAML.
 
 RobotModel RobotModel::Parse(const std::string& yaml_text, const std::string& source) {
   const YamlReader in(source);
   YAML::Node root;
   try {
-    root = YAML::Load(yaml_text);
+    root = LoadYaml(yaml_text, source);
   } catch (const YAML::Exception& e) {
     Throw(source, ": not valid YAML: ", e.what());
   }

@@ -222,28 +222,6 @@ std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std
 
 }  // namespace
 
-Vec3 RpyOf(const Mat3& R) {
-  // R = Rz(y) Ry(p) Rx(r): R(2,0) = -sin p.
-  const double sp = std::clamp(-R(2, 0), -1.0, 1.0);
-  const double p = std::asin(sp);
-  double r, y;
-  if (std::abs(sp) < 1.0 - 1e-12) {
-    r = std::atan2(R(2, 1), R(2, 2));
-    y = std::atan2(R(1, 0), R(0, 0));
-  } else {
-    // Gimbal lock: only r -/+ y is defined; take y = 0.
-    y = 0.0;
-    r = std::atan2(-R(1, 2), R(1, 1));
-  }
-  return Vec3(r, p, y);
-}
-
-Mat3 RotationOfRpy(const Vec3& rpy) {
-  return (Eigen::AngleAxisd(rpy[2], Vec3::UnitZ()) * Eigen::AngleAxisd(rpy[1], Vec3::UnitY()) *
-          Eigen::AngleAxisd(rpy[0], Vec3::UnitX()))
-      .toRotationMatrix();
-}
-
 bool IsUrdfFile(const std::filesystem::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -254,6 +232,14 @@ bool IsUrdfFile(const std::filesystem::path& path) {
   const std::string text = ReadTextFile(path);
   const size_t p = text.find_first_not_of(" \t\r\n\xEF\xBB\xBF");
   return p != std::string::npos && text[p] == '<' && text.find("<robot") != std::string::npos;
+}
+
+RobotModel RobotModel::Read(const std::filesystem::path& path, const ChainSelection& chain) {
+  if (IsUrdfFile(path)) return ReadUrdf(path, chain);
+  if (!chain.base_link.empty() || !chain.tip_link.empty())
+    Throw("robot file ", path.string(), ": --base-link and --tip-link pick a chain of a URDF; this is a YAML "
+          "description, whose joints are the chain");
+  return Parse(ReadTextFile(path), "robot file " + path.string());
 }
 
 RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& chain) {

@@ -47,8 +47,4 @@ std::string UrdfText(const RobotModel& robot, const std::map<std::string, std::s
 void WriteUrdf(const std::filesystem::path& path, const RobotModel& robot,
                const std::map<std::string, std::string>& comments = {});
 
-// URDF's rpy (fixed axes: R = Rz(yaw) Ry(pitch) Rx(roll)) of a rotation, and back.
-Vec3 RpyOf(const Mat3& R);
-Mat3 RotationOfRpy(const Vec3& rpy);
-
 }  // namespace mcms

@@ -4,6 +4,7 @@
 #include <limits>
 #include <opencv2/core.hpp>
 
+#include "core/limits.h"
 #include "audit/camera_audit.h"
 #include "fusion/sensor_logs.h"
 #include "jobs/fov_map.h"
@@ -262,7 +263,7 @@ FovMapOptions GetFovMapOptions(py::handle R_rig_target, int threads) {
       Throw("argument 'R_rig_target': not a rotation matrix");
     o.R_rig_target = R;
   }
-  if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+  CheckThreads(threads, "argument 'threads'", false);
   o.threads = threads;
   return o;
 }
@@ -634,7 +635,7 @@ void BindTracker(py::module_& m) {
           [](Tracker& t, const std::string& images_dir, std::optional<std::string> frames_csv, double frame_rate_hz,
              int threads) {
             if (!(frame_rate_hz > 0)) Throw("argument 'frame_rate_hz': expected > 0, got ", frame_rate_hz);
-            if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+            CheckThreads(threads, "argument 'threads'", false);
             SequenceInput in;
             in.images_dir = images_dir;
             if (frames_csv) in.frames_csv = *frames_csv;
@@ -657,7 +658,7 @@ void BindTrackingResults(py::module_& m) {
          double frame_rate_hz, int frames, const std::string& polarity, int threads) {
         if (!(frame_rate_hz > 0)) Throw("argument 'frame_rate_hz': expected > 0, got ", frame_rate_hz);
         if (frames < 1) Throw("argument 'frames': expected >= 1, got ", frames);
-        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+        CheckThreads(threads, "argument 'threads'", false);
         BlobDetectorOptions detector;
         if (polarity == "dark")
           detector.polarity = Polarity::kDark;
@@ -904,7 +905,7 @@ void BindFieldOfViewGridAndJobs(py::module_& m) {
         in.tracker.threshold_dn = threshold_dn;
         if (noise_frames < 1) Throw("argument 'noise_frames': expected >= 1, got ", noise_frames);
         in.tracker.noise_frames = static_cast<size_t>(noise_frames);
-        if (threads < 1) Throw("argument 'threads': expected >= 1, got ", threads);
+        CheckThreads(threads, "argument 'threads'", false);
         in.tracker.threads = threads;
         TrackRecordingResult r;
         {

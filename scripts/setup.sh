@@ -16,6 +16,7 @@ esac
 
 packages=(
   build-essential cmake pkg-config
+  ninja-build  # the generator: starts compiling sooner than make and keeps both cores busy
   ccache  # a rebuild after a small change recompiles only what changed (Ceres and OpenCV headers are slow)
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
@@ -42,7 +43,10 @@ fi
 jobs=$(nproc 2>/dev/null || echo 2)
 launcher=()
 if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache); fi
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DMCMS_WERROR=ON "${launcher[@]}"
+generator=()
+# Ninja for a new build tree; an existing one keeps the generator it was made with.
+if [ ! -f build/CMakeCache.txt ] && command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
+cmake -S . -B build "${generator[@]}" -DCMAKE_BUILD_TYPE=Release -DMCMS_WERROR=ON "${launcher[@]}"
 if [ "$mode" = demo ]; then
   cmake --build build -j"$jobs" --target mcms  # only the program: no tests, benchmarks or fuzz targets
   ./build/app/mcms demo -o mcms-demo

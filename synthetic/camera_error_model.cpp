@@ -9,6 +9,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include "core/error.h"
+#include "core/io.h"
+#include "core/yaml.h"
 
 namespace mcms {
 
@@ -120,7 +122,7 @@ CameraErrorModel ReadCameraErrorModel(const std::string& spec) {
           "\": expected ideal, paper, or the JSON file that `mcms fov-map --measured --json FILE` writes (no such file)");
   YAML::Node root;
   try {
-    root = YAML::LoadFile(spec);
+    root = LoadYaml(ReadTextFile(spec), "--camera-model " + spec);
   } catch (const YAML::Exception& e) {
     Throw("--camera-model ", spec, ": not valid JSON (", e.what(), ")");
   }

@@ -13,6 +13,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/output_folder.h"
@@ -252,6 +253,13 @@ void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quie
   std::string why;
   if (!scenario.IsValid(&why)) Throw("scenario: ", why);
   if (out_dir.empty()) Throw("render: no output folder given");
+  for (size_t c = 0; c < scenario.rig.size(); ++c) {
+    const CameraModel& cam = scenario.rig.cameras[c];
+    const double px = static_cast<double>(cam.Width()) * cam.Height();
+    if (px > kMaxRenderPixels)
+      Throw("render: camera ", scenario.rig.names[c], "'s image is ", cam.Width(), " x ", cam.Height(), " px (", px,
+            " px); at most ", kMaxRenderPixels, " px per image are rendered (the scenario's imagersize)");
+  }
   // An earlier render (absent, empty, or holding these) may be replaced.
   const std::vector<std::string> markers = {"scenario.yaml", "truth", "images"};
   WriteFolderAtomically(out_dir, markers, "render", "render output", [&](const fs::path& tmp) {

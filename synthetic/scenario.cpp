@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 
 namespace mcms {
 
@@ -508,7 +509,7 @@ bool SafeName(const std::string& n) {
 Scenario Scenario::Parse(const std::string& text, const std::string& source, const fs::path& base_dir) {
   YAML::Node root;
   try {
-    root = YAML::Load(text);
+    root = LoadYaml(text, source);
   } catch (const YAML::ParserException& e) {
     Throw(source, " line ", e.mark.line + 1, ": not valid YAML or JSON: ", e.msg);
   }

@@ -670,8 +670,9 @@ TEST(BadInput, CalibRobotOnOneRepeatedMeasurementNamesTheFileAndTheCause) {
   WriteText(d / "same.yaml", yaml);
   const CliRun r = Mcms(d, "calib-robot same.yaml -o out.yaml --quiet");
   EXPECT_EQ(r.code, 2) << r.err;
-  EXPECT_NE(r.err.find("same.yaml: the starting registration cannot be found"), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find("every measured position is the same"), std::string::npos) << r.err;
+  // The same measurement 100 times: the duplicated rows are named before any fit.
+  EXPECT_NE(r.err.find("same.yaml measurement 2 (line 3) repeats"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("measurement 1 (line 2) exactly"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(d / "out.yaml"));
 }
 

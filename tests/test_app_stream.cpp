@@ -332,8 +332,8 @@ ChildRun StoreEverything(const fs::path& rec) {
 
 // Peak memory of `mcms track` at 100 and 3,100 frame sets must be the same within 3 MB. The
 // positive control, measured the same way on the same recordings: the store-everything path
-// grows its peak by more than 6 MB (about 3.8 KB per frame set), so the threshold would
-// catch a track that keeps its results.
+// grows its peak by 5 to 8 MB (about 2 KB per frame set; the allocator's arenas make it
+// vary), more than the 3 MB threshold, so the threshold catches a track that keeps its results.
 TEST(Stream, TrackPeakMemoryDoesNotGrowWithTheRecording) {
   const fs::path small = LongRecording("rss_small", 100);
   const fs::path large = LongRecording("rss_large", 3100);
@@ -349,7 +349,7 @@ TEST(Stream, TrackPeakMemoryDoesNotGrowWithTheRecording) {
   ASSERT_EQ(sa.code, 0);
   ASSERT_EQ(sb.code, 0);
   std::printf("the store-everything path: %.1f MB at 100 frame sets, %.1f MB at 3100\n", sa.peak_mb, sb.peak_mb);
-  EXPECT_GT(sb.peak_mb - sa.peak_mb, 6.0) << "positive control: keeping every result must show in the peak";
+  EXPECT_GT(sb.peak_mb - sa.peak_mb, 3.0) << "positive control: keeping every result must show in the peak";
 }
 
 // A write error mid-run (the output file hits the file-size limit after about 100 rows, as

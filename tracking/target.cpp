@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 
 namespace mcms {
 
@@ -39,7 +40,7 @@ Target Target::Read(const std::filesystem::path& path) {
   if (!std::filesystem::exists(path)) Throw("target file ", path.string(), " does not exist");
   Target t;
   try {
-    const YAML::Node root = YAML::Load(ReadTextFile(path));
+    const YAML::Node root = LoadYaml(ReadTextFile(path), "target file " + path.string());
     if (!root.IsMap()) Throw(path.string(), ": expected a YAML map with ball_radius_m and balls_m");
     if (root["name"]) t.name = root["name"].as<std::string>();
     if (!root["ball_radius_m"]) Throw(path.string(), ": missing field 'ball_radius_m'");

@@ -15,6 +15,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/yaml.h"
 #include "vision/mrcal_c.h"
 
 namespace mcms {
@@ -365,7 +366,7 @@ CameraModel CameraModel::ReadOpenCvYaml(const fs::path& path) {
   }
   YAML::Node root;
   try {
-    root = YAML::Load(text);
+    root = LoadYaml(text, path.string());
   } catch (const YAML::Exception& e) {
     Throw("cannot parse OpenCV YAML ", path.string(), ": line ", e.mark.line + 1, ": ", e.msg,
           " (expected an OpenCV FileStorage file: %YAML:1.0, then camera_matrix, distortion_coefficients, "
@@ -452,7 +453,7 @@ CameraRig CameraRig::Read(const fs::path& path) {
   if (!fs::exists(path)) Throw("rig file ", path.string(), " does not exist");
   YAML::Node root;
   try {
-    root = YAML::Load(ReadTextFile(path));
+    root = LoadYaml(ReadTextFile(path), "rig file " + path.string());
   } catch (const YAML::Exception& e) {
     Throw("cannot parse rig file ", path.string(), ": ", e.what());
   }

@@ -265,6 +265,9 @@ class FieldOfView(unittest.TestCase):
         np.testing.assert_allclose(r["sigma_d"], m["sigma_d"], rtol=0.05)
         with self.assertRaisesRegex(mcms.InputError, "'grid'"):
             mcms.fov_map(rig, target, "0:1")
+        # Issue 37: a thread count past the limit is an error naming it, not a dead interpreter.
+        with self.assertRaisesRegex(mcms.InputError, "'threads': expected 1 to 256 threads, got 100000"):
+            mcms.fov_map(rig, target, "-0.2:0.2:3,0:0.1:2,0:0:1", threads=100000)
 
     def test_predict_points_with_the_detector_noise(self):
         rig = pinhole_rig(4)

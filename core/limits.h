@@ -1,0 +1,32 @@
+// Limits on the numbers an option or a file gives, checked before any work starts: a
+// number past its limit is an InputError that names the option or key, the value and the
+// limit (never a crash, an allocation failure or hours of work later).
+#pragma once
+
+#include <string>
+
+namespace mcms {
+
+// Worker threads: 0 means the machine's cores where an option allows it.
+constexpr int kMaxThreads = 256;
+// InputError unless 0 <= n <= kMaxThreads (1 <= n when `zero_means_all_cores` is false).
+void CheckThreads(int n, const std::string& what, bool zero_means_all_cores = true);
+// n, or the machine's cores (at least 1) for 0.
+int ThreadsToUse(int n);
+
+// Pixels of one rendered image (a 200 MP camera; each costs 4 bytes or more in memory).
+constexpr double kMaxRenderPixels = 2e8;
+
+// Lengths of a robot (DH a and d, URDF origins, the tool, registration guesses): no robot
+// or measuring volume is larger (m).
+constexpr double kMaxRobotLengthM = 1000.0;
+// An encoder's noise (rad or m): beyond it a reading says nothing about the joint.
+constexpr double kMaxEncoderSigma = 0.1;
+// A link, a tool or a payload (kg).
+constexpr double kMaxMassKg = 1e5;
+// Temperatures a robot or a camera works at (deg C).
+constexpr double kMinTemperatureC = -100.0, kMaxTemperatureC = 300.0;
+// InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
+void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
+
+}  // namespace mcms

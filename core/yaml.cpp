@@ -1,0 +1,38 @@
+#include "core/yaml.h"
+
+#include <map>
+
+#include "core/error.h"
+
+namespace mcms {
+namespace {
+
+void CheckUniqueKeys(const YAML::Node& n, const std::string& source, int depth) {
+  if (depth > 256) Throw(source, ": nested more than 256 levels deep");
+  if (n.IsMap()) {
+    std::map<std::string, int> seen;  // key -> line (1-based)
+    for (const auto& kv : n) {
+      if (kv.first.IsScalar()) {
+        const std::string key = kv.first.Scalar();
+        const int line = kv.first.Mark().line + 1;
+        const auto [it, fresh] = seen.emplace(key, line);
+        if (!fresh)
+          Throw(source, " line ", line, ": key '", key, "' appears twice (lines ", it->second, " and ", line,
+                "); a map holds each key once: remove one");
+      }
+      CheckUniqueKeys(kv.second, source, depth + 1);
+    }
+  } else if (n.IsSequence()) {
+    for (const auto& e : n) CheckUniqueKeys(e, source, depth + 1);
+  }
+}
+
+}  // namespace
+
+YAML::Node LoadYaml(const std::string& text, const std::string& source) {
+  YAML::Node root = YAML::Load(text);
+  CheckUniqueKeys(root, source, 0);
+  return root;
+}
+
+}  // namespace mcms

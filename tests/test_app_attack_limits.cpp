@@ -1,0 +1,139 @@
+// Hostile inputs of issue 37, through one mechanism each: the number limits of
+// core/limits.h (threads, a robot's lengths, encoder noise, masses, temperatures), the one
+// YAML loader that refuses a duplicated key (core/yaml.h), unique joint names, and
+// calib-robot's refusal to write a calibration it cannot trust (calib-rig's rule, with
+// --allow-poor-fit). Each is refused before any work with the input and the limit named,
+// a non-zero exit, and nothing written.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <regex>
+#include <string>
+#include <vector>
+
+#include "tests/cli_runner.h"
+#include "tests/test_util.h"
+
+namespace mcms {
+namespace {
+
+namespace fs = std::filesystem;
+using test::CliRun;
+
+const fs::path kSource = MCMS_SOURCE_DIR;
+
+// Refused: non-zero exit, every part in stderr, the folder unchanged.
+CliRun ExpectRefused(const fs::path& dir, const std::string& args, const std::vector<std::string>& parts) {
+  const auto before = test::Snapshot(dir);
+  const CliRun r = test::Mcms(dir, args);
+  EXPECT_NE(r.code, 0) << args;
+  EXPECT_EQ(r.err.find("internal error"), std::string::npos) << args << "\n" << r.err;
+  for (const auto& p : parts) EXPECT_NE(r.err.find(p), std::string::npos) << args << "\nmissing: " << p << "\n" << r.err;
+  EXPECT_EQ(test::Snapshot(dir), before) << args << ": something was written";
+  return r;
+}
+
+std::string Kr5Yaml() { return test::ReadAll(kSource / "model" / "robots" / "kuka_kr5_arc.yaml"); }
+
+TEST(AttackLimits, ThreadsBeyondTheLimitAreRefusedBeforeAnyWork) {
+  const auto d = test::ScratchDir("attack_limits_threads");
+  ExpectRefused(d, "fov-map --threads 100000 -o out --quiet", {"--threads", "256"});
+  ExpectRefused(d, "render --threads 100000 -o rec -q", {"--threads", "256"});
+  ExpectRefused(d, "track rec --threads 100000", {"--threads", "256"});
+  ExpectRefused(d, "demo --threads 100000 -o demo", {"--threads", "256"});
+}
+
+TEST(AttackLimits, RobotLengthsEncoderNoiseAndMassesBeyondAnyRobot) {
+  const auto d = test::ScratchDir("attack_limits_robot");
+  fs::copy_file(kSource / "examples" / "robot_measurements.yaml", d / "m.yaml", fs::copy_options::overwrite_existing);
+  std::string huge = Kr5Yaml();
+  huge.replace(huge.find("a_m: 0.600"), 10, "a_m: 1.0e300");
+  test::WriteText(d / "huge.yaml", huge);
+  ExpectRefused(d, "calib-robot m.yaml --robot huge.yaml -o out.yaml --quiet", {"huge.yaml", "A2", "1e+300", "1000 m"});
+  ExpectRefused(d, "calib-robot m.yaml --tool-guess 0 0 1e300 1 0 0 0 -o out.yaml --quiet",
+                {"--tool-guess z", "1000 m"});
+  std::string noisy = Kr5Yaml();
+  noisy.replace(noisy.find("encoder_sigma_rad: 1.0e-5"), 25, "encoder_sigma_rad: 1.0e300");
+  test::WriteText(d / "noisy.yaml", noisy);
+  ExpectRefused(d, "calib-robot m.yaml --robot noisy.yaml -o out.yaml --quiet", {"noisy.yaml", "encoder_sigma", "0.1 rad"});
+  // A log's payload and temperature.
+  std::string log = test::ReadAll(kSource / "examples" / "robot_log.csv");
+  std::string cold = std::regex_replace(log, std::regex(",21\\.001\\n"), ",-300\n");
+  test::WriteText(d / "cold.csv", cold);
+  ExpectRefused(d, "audit robot cold.csv -o aud -q", {"cold.csv", "temperature_c", "-300", "-100"});
+}
+
+TEST(AttackLimits, DuplicatedYamlKeysAndJointNamesAreRefusedNamingBoth) {
+  const auto d = test::ScratchDir("attack_limits_yaml");
+  fs::copy_file(kSource / "examples" / "robot_measurements.yaml", d / "m.yaml", fs::copy_options::overwrite_existing);
+  std::string twice = Kr5Yaml();
+  twice.replace(twice.find("convention: standard_dh"), 23, "convention: standard_dh\nconvention: modified_dh");
+  test::WriteText(d / "twice.yaml", twice);
+  ExpectRefused(d, "calib-robot m.yaml --robot twice.yaml -o out.yaml --quiet",
+                {"twice.yaml", "key 'convention' appears twice"});
+  std::string names = Kr5Yaml();
+  names.replace(names.find("name: A3"), 8, "name: A2");
+  test::WriteText(d / "names.yaml", names);
+  ExpectRefused(d, "calib-robot m.yaml --robot names.yaml -o out.yaml --quiet", {"names.yaml", "'A2'", "unique"});
+  // A scenario and a fusion setup go through the same loader.
+  std::string scenario = test::ReadAll(kSource / "examples" / "short_scenario.yaml");
+  scenario += "\nseed: 3\nseed: 4\n";
+  test::WriteText(d / "scenario.yaml", scenario);
+  ExpectRefused(d, "render scenario.yaml -o rec -q", {"scenario.yaml", "key 'seed' appears twice"});
+}
+
+TEST(AttackLimits, RenderOfAnImageNoMemoryHoldsIsRefusedBeforeAnyWork) {
+  const auto d = test::ScratchDir("attack_limits_render");
+  std::string scenario = test::ReadAll(kSource / "examples" / "short_scenario.yaml");
+  scenario.replace(scenario.find("imagersize: [1280, 1024]"), 24, "imagersize: [100000, 100000]");
+  test::WriteText(d / "big.yaml", scenario);
+  ExpectRefused(d, "render big.yaml -o rec -q", {"cam0", "100000 x 100000", "2e+08 px"});
+}
+
+TEST(AttackLimits, CalibRobotWritesNothingItCannotTrustUnlessAllowed) {
+  const auto d = test::ScratchDir("attack_limits_calib");
+  fs::copy_file(kSource / "examples" / "robot_measurements.yaml", d / "m.yaml", fs::copy_options::overwrite_existing);
+  ExpectRefused(d, "calib-robot m.yaml --max-iterations 1 -o out.yaml --report rep.txt --quiet",
+                {"m.yaml", "not trustworthy", "did not converge", "no output written", "--allow-poor-fit"});
+  const CliRun r = test::Mcms(d, "calib-robot m.yaml --max-iterations 1 --allow-poor-fit -o out.yaml --report rep.txt --quiet");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(d / "out.yaml"));
+  EXPECT_NE(test::ReadAll(d / "rep.txt").find("WARNING: the calibration is not trustworthy"), std::string::npos);
+  // The example converges and is written without a warning.
+  const CliRun ok = test::Mcms(d, "calib-robot m.yaml -o good.yaml --report good.txt --quiet");
+  ASSERT_EQ(ok.code, 0) << ok.err;
+  EXPECT_EQ(test::ReadAll(d / "good.txt").find("WARNING"), std::string::npos);
+}
+
+// The ownership rule of output folders (core/output_folder.h): a folder holding the
+// user's own files is refused and nothing in it touched; the run's own earlier output is
+// replaced; what an interrupted run left beside it is removed.
+TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
+  const auto d = test::ScratchDir("attack_limits_folders");
+  fs::copy_file(kSource / "examples" / "robot_log.csv", d / "log.csv", fs::copy_options::overwrite_existing);
+  fs::create_directories(d / "keep");
+  test::WriteText(d / "keep" / "report.json", "{}\n");
+  test::WriteText(d / "keep" / "notes.txt", "my notes\n");
+  ExpectRefused(d, "audit robot log.csv -o keep -q", {"keep", "notes.txt", "nothing in it was touched"});
+  EXPECT_EQ(test::ReadAll(d / "keep" / "notes.txt"), "my notes\n");
+
+  // Twice into the same folder: the second run replaces the first's output.
+  ASSERT_EQ(test::Mcms(d, "audit robot log.csv -o aud -q").code, 0);
+  EXPECT_TRUE(fs::exists(d / "aud" / ".mcms-output"));
+  const CliRun again = test::Mcms(d, "audit robot log.csv -o aud -q");
+  EXPECT_EQ(again.code, 0) << again.err;
+  // A file added to it since is the user's: refused, kept.
+  test::WriteText(d / "aud" / "mine.txt", "x\n");
+  ExpectRefused(d, "audit robot log.csv -o aud -q", {"aud", "mine.txt"});
+  // Another command's output folder is not replaced either.
+  ExpectRefused(d, "fov-map -o aud --quiet", {"aud", "audit robot", "not of"});
+
+  // What a killed run left (a process id that no longer runs) is removed by the next run.
+  fs::create_directories(d / ".aud2.partial-999999999");
+  ASSERT_EQ(test::Mcms(d, "audit robot log.csv -o aud2 -q").code, 0);
+  EXPECT_FALSE(fs::exists(d / ".aud2.partial-999999999"));
+}
+
+}  // namespace
+}  // namespace mcms
