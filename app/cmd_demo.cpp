@@ -4,8 +4,9 @@
 #include <cstdio>
 #include <memory>
 
-#include "core/limits.h"
 #include "app/commands.h"
+#include "core/limits.h"
+#include "core/output_folder.h"
 #include "jobs/html_report.h"
 #include "jobs/demo.h"
 
@@ -60,6 +61,7 @@ McmsCommand demo_command([](CLI::App& app) {
                             std::printf("report: %s (%zu figures, %zu tables; open it in a browser)\n", page.string().c_str(),
                                         c.figures, c.tables);
                           }
+                          RecordOutputFolder(*out, "demo");
                           return 0;
                         }));
 });

@@ -97,6 +97,15 @@ void RequireReplaceableFolder(const std::filesystem::path& folder, const std::ve
         "; nothing in it was touched: move them out, or choose a new folder");
 }
 
+void RecordOutputFolder(const std::filesystem::path& folder, const std::string& kind) {
+  std::vector<std::string> written = Entries(folder);
+  std::erase(written, std::string(kManifest));
+  std::ofstream m(folder / kManifest);
+  m << "mcms " << kind << "\n";
+  for (const std::string& e : written) m << e << "\n";
+  if (!m.flush()) Throw("cannot write ", (folder / kManifest).string());
+}
+
 void CreateOutputFolder(const std::filesystem::path& folder, const std::string& what) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -130,14 +139,7 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   }
   try {
     write(tmp);
-    {
-      // What this run wrote, so that the next run of the same kind may replace it.
-      const std::vector<std::string> written = Entries(tmp);
-      std::ofstream m(tmp / kManifest);
-      m << "mcms " << kind << "\n";
-      for (const std::string& e : written) m << e << "\n";
-      if (!m.flush()) Throw(what, ": cannot write ", (out / kManifest).string());
-    }
+    RecordOutputFolder(tmp, kind);  // so that the next run of the same kind may replace it
     RequireReplaceableFolder(out, marker_files, kind, what);
     if (fs::exists(out)) {
       const fs::path old = out.parent_path() / (stem + ".old-" + pid);

@@ -23,6 +23,10 @@ namespace mcms {
 void WriteFolderAtomically(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                            const std::string& kind, const std::string& what,
                            const std::function<void(const std::filesystem::path&)>& write);
+// Writes `folder`/.mcms-output, the record of what a run of `kind` wrote there: every file
+// and folder under it now. For an output written in place rather than by
+// WriteFolderAtomically (the demo), called when the run is done.
+void RecordOutputFolder(const std::filesystem::path& folder, const std::string& kind);
 // The refusal test of WriteFolderAtomically alone, for checking before long work.
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what);

@@ -157,7 +157,10 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
   std::error_code ec;
   const bool model_file = std::filesystem::is_regular_file(o.camera_model.name, ec);
   RequireOutputsSpareInputs({{out, "demo -o", true}}, {model_file ? fs::path(o.camera_model.name) : fs::path()});
-  RequireWritableFolder(out, "demo -o");  // before minutes of simulation, not after
+  // Before minutes of simulation, not after: an earlier demo is replaced, a folder holding
+  // anything else (the user's own logs named like the demo's) is refused untouched.
+  RequireWritableFolder(out, "demo -o");
+  RequireReplaceableFolder(out, {"summary.txt"}, "demo", "demo -o");
   const int threads = ThreadsToUse(o.threads);
   print(Format("mcms demo: the paper's lab experiment: %d points on a %.0f mm sphere, %.0f s dwell, %zu cameras at "
                "%.1f Hz (%zu frames), robot at %.0f Hz, inclinometer every %.0f ms, %d threads -> %s\n",
@@ -235,7 +238,10 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
                "  mcms fuse --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer inclinometer.csv "
                "--setup fusion_setup.yaml --windows dwells.csv -o fused_poses.csv\n",
                out.string().c_str(), out.string().c_str()));
-  if (!o.iso9283) return res;
+  if (!o.iso9283) {
+    RecordOutputFolder(out, "demo");
+    return res;
+  }
 
   // ISO 9283 (issue 4) on the forward model: AP/RP, AD/RD, AT/RT before and after
   // calibration and before and after a fused correction (jobs/iso9283_experiment.h).
@@ -250,6 +256,7 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
                "iso9283_path_1..4.csv (input of `mcms iso9283 POSES --path PATH`; 1 = before calibration, "
                "2 = after, 3 = camera correction, 4 = MOIFA correction), iso9283_ap.svg, iso9283_rp.svg}\n",
                out.string().c_str(), iso.conditions.size()));
+  RecordOutputFolder(out, "demo");  // what this run wrote: the next demo may replace it
   return res;
 }
 

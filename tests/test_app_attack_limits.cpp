@@ -129,6 +129,13 @@ TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
   // Another command's output folder is not replaced either.
   ExpectRefused(d, "fov-map -o aud --quiet", {"aud", "audit robot", "not of"});
 
+  // The demo writes in place: a folder of the user's own logs named like the demo's is
+  // refused before minutes of simulation, its files untouched.
+  fs::create_directories(d / "logs");
+  test::WriteText(d / "logs" / "robot_joints.csv", "my joints\n");
+  ExpectRefused(d, "demo -o logs -q --points 3 --no-iso9283", {"demo -o", "logs", "robot_joints.csv"});
+  EXPECT_EQ(test::ReadAll(d / "logs" / "robot_joints.csv"), "my joints\n");
+
   // What a killed run left (a process id that no longer runs) is removed by the next run.
   fs::create_directories(d / ".aud2.partial-999999999");
   ASSERT_EQ(test::Mcms(d, "audit robot log.csv -o aud2 -q").code, 0);
