@@ -17,7 +17,7 @@ void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& r
   WriteFileAtomically(path, [&](std::ostream& os) {
     os << "pair";
     for (int j = 1; j <= num_joints; ++j) os << ",q" << j << "_rad";
-    os << ",x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,difference_mm,separation_sigma\n";
+    os << ",x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,difference_mm,separation_sigma,readings_each\n";
     char b[64];
     for (const auto& np : result.next_poses)
       for (const auto& p : np.poses) {
@@ -31,7 +31,8 @@ void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& r
             std::snprintf(b, sizeof b, ",%.9g", (*v)[k]);
             os << b;
           }
-        std::snprintf(b, sizeof b, ",%.6f,%.3f\n", (p.p_meas_a - p.p_meas_b).norm() * 1e3, p.separation_sigma);
+        std::snprintf(b, sizeof b, ",%.6f,%.3f,%d\n", (p.p_meas_a - p.p_meas_b).norm() * 1e3, p.separation_sigma,
+                      np.readings);
         os << b;
       }
   });
@@ -70,7 +71,7 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
     text << "\n";
   }
   const Eigen::MatrixXd& S = r.nominal.noise;
-  char buf[256];
+  char buf[768];
   std::snprintf(buf, sizeof buf,
                 "nominal model: position residual RMS %.4f mm; noise sigma x y z %.4f %.4f %.4f mm (fitted)\n",
                 PositionRms(r.nominal.residuals) * 1e3, std::sqrt(S(0, 0)) * 1e3, std::sqrt(S(1, 1)) * 1e3,
@@ -82,10 +83,21 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
   text << buf;
   for (const auto& np : r.next_poses)
     if (!np.poses.empty()) {
-      std::snprintf(buf, sizeof buf,
-                    "to tell [%s] from [%s]: measure the %zu poses of next_poses.csv (-o); the best "
-                    "separates them by %.1f sigma of the noise\n",
-                    np.a.c_str(), np.b.c_str(), np.poses.size(), np.poses.front().separation_sigma);
+      if (np.readings > 0)
+        std::snprintf(buf, sizeof buf,
+                      "to tell [%s] from [%s]: measure each of the %zu poses of next_poses.csv (-o) %d times; "
+                      "with the registration, the tool and every other parameter refitted they then separate the "
+                      "two by a noncentrality of %.1f (%.1f needed to decide at the selection's tie band with 90 %% "
+                      "power; the logged rows alone: %.1f)\n",
+                      np.a.c_str(), np.b.c_str(), np.poses.size(), np.readings, np.noncentrality,
+                      np.noncentrality_needed, np.noncentrality_logged);
+      else
+        std::snprintf(buf, sizeof buf,
+                      "to tell [%s] from [%s]: the best %zu poses found (next_poses.csv, -o) would not decide within "
+                      "1000 readings each once the registration, the tool and every other parameter are refitted "
+                      "(noncentrality %.1f of %.1f needed): the two are not separable by poses within the joint "
+                      "limits\n",
+                      np.a.c_str(), np.b.c_str(), np.poses.size(), np.noncentrality, np.noncentrality_needed);
       text << buf;
     }
   const std::string report = text.str();

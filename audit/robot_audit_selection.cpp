@@ -265,6 +265,84 @@ Tried FitCandidate(const Problem& pb, const FitResult& cur, int option, const st
 
 
 
+// The flexible family re-tested after every accepted step (issue 35): an error motion named
+// earlier (or just now) is taken out of the model and every physical candidate of the
+// catalog not in the model is fitted in its place, on top of everything else now in it.
+// Where the best of them passes the step's test on that base and explains the residual as
+// well as the error motion did (Vuong's paired z with the BIC correction below the tie
+// band, as rule 4 of audit/model_selection.h), it replaces the error motion: a harmonic
+// series follows the shape of a joint's deflection under the arm's weight or of its play
+// too, and a physical cause is preferred where the data cannot tell them apart (rule 5).
+void RetestFlexible(const Problem& pb, const std::vector<Option>& opts, const RobotAuditOptions& o, double alpha,
+                    std::set<int>* taken, SelectionResult* res, std::vector<std::string>* notes,
+                    const std::function<void(const std::string&)>& say) {
+  const double logN = std::log(static_cast<double>(pb.N));
+  const SelectionRule rule;
+  for (Finding& g : res->findings) {
+    if (g.undecided || g.dropped || opts[g.option].tier != 2) continue;
+    std::vector<int> free;
+    for (int t : res->cur.free)
+      if (std::find(g.terms.begin(), g.terms.end(), t) == g.terms.end()) free.push_back(t);
+    Eigen::VectorXd th = res->cur.theta;
+    for (int t : g.terms) th[t] = pb.theta0[t];
+    const FitResult base = FitProfiled(pb, free, th, res->cur.noise);
+    std::vector<int> physical;
+    for (size_t i = 0; i < opts.size(); ++i)
+      if (opts[i].tier == 0 && !opts[i].geometric && !taken->count(static_cast<int>(i)))
+        physical.push_back(static_cast<int>(i));
+    if (physical.empty()) continue;
+    std::vector<std::string> ignored;
+    const std::vector<Screened> sc = Screen(pb, base, opts, physical, o.identifiability_tolerance, &ignored);
+    const int M = static_cast<int>(sc.size());
+    std::optional<Tried> best;
+    double best_z = kInf;
+    const int k_em = ParamCount(pb, g.terms);
+    for (const Screened& s : sc) {
+      const int k = ParamCount(pb, s.terms);
+      if (s.gain < 0.3 * ChiSquareThreshold(k, alpha / M)) continue;
+      Tried t = FitCandidate(pb, base, s.option, s.terms);
+      t.lr = 2.0 * (t.fit.loglik - base.loglik);
+      t.bic = BicGain(t.lr, k, logN);
+      if (t.lr < ChiSquareThreshold(k, alpha / M) || t.bic <= 0) continue;
+      const std::vector<double> a(res->cur.row_ll.data(), res->cur.row_ll.data() + pb.N);
+      const std::vector<double> b(t.fit.row_ll.data(), t.fit.row_ll.data() + pb.N);
+      // z > 0: the error motion explains the residual better than this cause.
+      const double z = PairedZ(a, b, 0.5 * (k_em - k) * logN);
+      if (z < best_z) {
+        best_z = z;
+        best = std::move(t);
+      }
+    }
+    if (!best || !(best_z < rule.tie_z)) continue;
+    const std::string was = opts[g.option].key, now = opts[best->option].key;
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "%s was named, then re-tested with the later effects in: %s explains the same residual (likelihood "
+                  "ratio %.1f on the same base, paired z %.2f against the error motion, tie below %.3g) and, being "
+                  "a physical cause, is named in its place",
+                  was.c_str(), now.c_str(), best->lr, best_z, rule.tie_z);
+    say(b);
+    notes->push_back(b);
+    taken->erase(g.option);
+    taken->insert(best->option);
+    const HeldOut base_cv = CrossValidate(pb, base, res->cur.noise);
+    best->cv = CrossValidate(pb, best->fit, res->cur.noise);
+    best->cv_done = true;
+    g.option = best->option;
+    g.terms = best->terms;
+    g.lr = best->lr;
+    g.bic = best->bic;
+    g.tau_sigma = best->tau_sigma;
+    g.base_cv_loglik = base_cv.loglik;
+    g.rms_before = base_cv.rms;
+    g.ll_gain = best->cv.loglik - base_cv.loglik;
+    g.rms_after = best->cv.rms;
+    res->cur = best->fit;
+    res->cur_cv = CrossValidate(pb, res->cur, res->cur.noise);
+    res->cv_known = true;
+  }
+}
+
 // Greedy forward selection over every candidate, from `start`: single geometric terms,
 // the whole identifiable geometry (`geometry_terms`, offered as one candidate while the
 // data can hold it), and the non-geometric catalog. A non-geometric candidate must also
@@ -423,6 +501,7 @@ SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts,
     res.findings.push_back(f);
     res.cur = best.fit;
     res.cur_cv = best.cv;
+    RetestFlexible(pb, opts, o, alpha, &taken, &res, notes, say);
   }
   return res;
 }
@@ -442,6 +521,9 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
     Eigen::VectorXd q;
     double score;
     Vec3 pa, pb;
+    RowData row;              // the pose's row (B's prediction as its measurement)
+    Eigen::MatrixXd J[2];     // whitened Jacobian of A's (0) and B's (1) residual
+    Eigen::VectorXd w[2];     // whitened difference: the other model's prediction minus this one's
   };
   std::vector<Cand> cands;
   for (int k = 0; k < 4000; ++k) {
@@ -476,15 +558,120 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
     RowResidual(pb, row, A.fit.theta.data(), e);
     Eigen::VectorXd d(pb.m);
     for (int a = 0; a < pb.m; ++a) d[a] = e[a];
-    cands.push_back({q, (Li * d).squaredNorm(), pbv + Vec3(e[0], e[1], e[2]), pbv});
+    cands.push_back({q, (Li * d).squaredNorm(), pbv + Vec3(e[0], e[1], e[2]), pbv, row, {}, {}});
   }
   std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) { return a.score > b.score; });
-  for (const Cand& c : cands) {
-    bool far = true;
-    for (const auto& s : np.poses) far &= (s.q - c.q).cwiseAbs().maxCoeff() > 0.2;
-    if (!far) continue;
-    np.poses.push_back({c.q, c.pa, c.pb, std::sqrt(c.score)});
-    if (static_cast<int>(np.poses.size()) >= count) break;
+  if (cands.size() > 300) cands.resize(300);
+
+  // What a set of poses decides once measured: each model is refitted (registration, tool,
+  // every parameter it holds) to the other's predictions on the logged rows and r readings
+  // of each new pose, linearised; the whitened misfit left is the noncentrality of their
+  // likelihood ratio. Side 0 fits A to B, side 1 B to A; the smaller decides.
+  const Tried* M[2] = {&A, &B};
+  Eigen::MatrixXd Jold[2];
+  Eigen::VectorXd wold[2];
+  for (int side = 0; side < 2; ++side) {
+    const std::vector<int>& F = M[side]->fit.free;
+    Jold[side].resize(static_cast<Eigen::Index>(pb.N) * pb.m, F.size());
+    wold[side].resize(static_cast<Eigen::Index>(pb.N) * pb.m);
+    for (int i = 0; i < pb.N; ++i) {
+      // The other model's prediction minus this one's: (R_other - R_this) at row i.
+      const Eigen::VectorXd d = (M[1 - side]->fit.R.row(i) - M[side]->fit.R.row(i)).transpose();
+      wold[side].segment(static_cast<Eigen::Index>(i) * pb.m, pb.m) = Li * d;
+      for (size_t c = 0; c < F.size(); ++c)
+        for (int a = 0; a < pb.m; ++a) {
+          double v = 0;
+          for (int b = 0; b <= a; ++b) v += Li(a, b) * pb.J[b](i, F[c]);
+          Jold[side](static_cast<Eigen::Index>(i) * pb.m + a, c) = v;
+        }
+    }
+  }
+  // Each candidate's whitened difference and Jacobians (central differences; the models
+  // are linear in their parameters at these sizes).
+  for (Cand& c : cands) {
+    for (int side = 0; side < 2; ++side) {
+      const std::vector<int>& F = M[side]->fit.free;
+      Eigen::VectorXd th = M[side]->fit.theta;
+      double e0[6], ep[6], em[6];
+      RowData row = c.row;
+      RowResidual(pb, row, M[1 - side]->fit.theta.data(), e0);
+      row.p = Vec3(e0[0], e0[1], e0[2]) + row.p;  // the other model's prediction measured
+      if (pb.six) row.R = ExpSO3(Vec3(e0[3], e0[4], e0[5])) * row.R;
+      RowResidual(pb, row, th.data(), e0);
+      Eigen::VectorXd d(pb.m);
+      for (int a = 0; a < pb.m; ++a) d[a] = -e0[a];
+      c.w[side] = Li * d;
+      Eigen::MatrixXd J(pb.m, F.size());
+      for (size_t k = 0; k < F.size(); ++k) {
+        const double h = 1e-6 * std::max(1.0, std::abs(th[F[k]]));
+        const double t0 = th[F[k]];
+        th[F[k]] = t0 + h;
+        RowResidual(pb, row, th.data(), ep);
+        th[F[k]] = t0 - h;
+        RowResidual(pb, row, th.data(), em);
+        th[F[k]] = t0;
+        for (int a = 0; a < pb.m; ++a) J(a, k) = (ep[a] - em[a]) / (2 * h);
+      }
+      c.J[side] = Li * J;
+    }
+  }
+  const auto Noncentrality = [&](const std::vector<const Cand*>& S, double r) {
+    double worst = kInf;
+    for (int side = 0; side < 2; ++side) {
+      Eigen::MatrixXd H = Jold[side].transpose() * Jold[side];
+      Eigen::VectorXd g = Jold[side].transpose() * wold[side];
+      double tot = wold[side].squaredNorm();
+      for (const Cand* c : S) {
+        H += r * c->J[side].transpose() * c->J[side];
+        g += r * c->J[side].transpose() * c->w[side];
+        tot += r * c->w[side].squaredNorm();
+      }
+      worst = std::min(worst, std::max(0.0, tot - g.dot(SolveScaled(H, g))));
+    }
+    return worst;
+  };
+  // Greedy: the pose that adds most to what one reading of each decides, away from the
+  // poses taken (no joint within 0.2 of theirs).
+  std::vector<const Cand*> S;
+  std::vector<bool> used(cands.size(), false);
+  while (static_cast<int>(S.size()) < count) {
+    int best = -1;
+    double best_l = -1;
+    for (size_t i = 0; i < cands.size(); ++i) {
+      if (used[i]) continue;
+      bool far = true;
+      for (const Cand* t : S) far &= (t->q - cands[i].q).cwiseAbs().maxCoeff() > 0.2;
+      if (!far) continue;
+      S.push_back(&cands[i]);
+      const double l = Noncentrality(S, 1.0);
+      S.pop_back();
+      if (l > best_l) best_l = l, best = static_cast<int>(i);
+    }
+    if (best < 0) break;
+    used[best] = true;
+    S.push_back(&cands[best]);
+  }
+  for (const Cand* c : S) np.poses.push_back({c->q, c->pa, c->pb, std::sqrt(c->score)});
+  // Readings of each pose for a decision: Vuong's z of the paired log-likelihoods is about
+  // (lambda / 2 - offset) / sqrt(lambda), offset = |k_A - k_B| ln(n) / 2 (the BIC correction);
+  // the selection decides where z exceeds its tie band, with 90 % power at
+  // z_tie + 1.2816: lambda >= (t + sqrt(t^2 + 2 offset))^2.
+  const double t = SelectionRule{}.tie_z + 1.2816;
+  const double dk = std::abs(ParamCount(pb, A.terms) - ParamCount(pb, B.terms));
+  const auto Needed = [&](int r) {
+    const double off = 0.5 * dk * std::log(static_cast<double>(pb.N + r * static_cast<int>(S.size())));
+    return std::pow(t + std::sqrt(t * t + 2 * off), 2);
+  };
+  np.noncentrality_logged = Noncentrality({}, 0.0);
+  np.readings = 0;
+  for (int r = 1; r <= 1000 && !S.empty(); r = r < 10 ? r + 1 : r + std::max(1, r / 5)) {
+    const double l = Noncentrality(S, r);
+    np.noncentrality = l;
+    np.noncentrality_needed = Needed(r);
+    if (l >= np.noncentrality_needed) {
+      np.readings = r;
+      break;
+    }
   }
   return np;
 }

@@ -98,6 +98,17 @@ struct RobotAuditResult {
   struct NextPoses {
     std::string a, b;  // the two candidates' labels
     std::vector<SeparatingPose> poses;
+    // What the poses decide once measured, with everything the audit refits refitted (the
+    // registration, the tool and every other parameter of each model, on the logged rows and
+    // the new ones): the noncentrality of the likelihood ratio between the two models (the
+    // whitened misfit left when either model is fitted to the other's predictions; the
+    // smaller of the two ways) per reading of each pose, after `readings` readings of each,
+    // and the one the selection needs to decide at its tie band with 90 % power. readings
+    // = 0: not within 1000 readings of each pose.
+    double noncentrality_logged = 0.0;  // on the logged rows alone
+    double noncentrality = 0.0;         // with `readings` readings of each pose
+    double noncentrality_needed = 0.0;
+    int readings = 0;
   };
   std::vector<NextPoses> next_poses;
   // (report.validation: every other session of `validate`, scored with the fitted models

@@ -64,7 +64,7 @@ std::string B85Encode(const std::string& bytes) {
     for (int k = 4; k >= 0; --k) c[k] = kAlphabet[w % 85], w /= 85;
     out.append(c, 5);
   }
-  out.resize(out.size() - padding);
+  out.erase(out.size() - std::min(padding, out.size()));  // erase: never grows
   return out;
 }
 
@@ -359,7 +359,7 @@ std::string B85Decode(const std::string& text) {
     if (w > 0xffffffffull) Throw("base85: group at ", i, " overflows");
     for (int k = 3; k >= 0; --k) out.push_back(static_cast<char>((w >> (8 * k)) & 0xff));
   }
-  out.resize(out.size() - padding);
+  out.erase(out.size() - std::min(padding, out.size()));  // erase: never grows
   return out;
 }
 

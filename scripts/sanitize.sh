@@ -37,7 +37,8 @@ cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCMS_WERROR=ON -DMC
   "${launcher[@]}" \
   -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
   -DCMAKE_C_FLAGS="$san" -DCMAKE_CXX_FLAGS="$san" \
-  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" -DMCMS_BUILD_PYTHON=OFF
+  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" -DMCMS_BUILD_PYTHON=OFF \
+  -DMCMS_UNITY=OFF  # every source compiled from its own includes (a missing one hides in a unity batch)
 
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:check_initialization_order=1:strict_init_order=1:detect_stack_use_after_return=1}"
 

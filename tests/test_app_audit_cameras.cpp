@@ -65,8 +65,13 @@ struct Recording {
   std::vector<FrameResult> results;
 };
 
-Recording Make(const std::vector<Hidden>& hs, uint64_t seed) {
-  const Scenario sc = Motion(0.0);
+// `cameras` < 4: the default rig's first `cameras` cameras only (a smaller rig).
+Recording Make(const std::vector<Hidden>& hs, uint64_t seed, size_t cameras = 4) {
+  Scenario sc = Motion(0.0);
+  if (cameras < sc.rig.size()) {
+    sc.rig.cameras.resize(cameras);
+    sc.rig.names.resize(cameras);
+  }
   CameraRig world = sc.rig;
   CameraRig moved = sc.rig;  // camera_moved from from_time_s on
   double from_time_s = std::numeric_limits<double>::infinity();
@@ -101,6 +106,7 @@ Recording Make(const std::vector<Hidden>& hs, uint64_t seed) {
     else moved.cameras[k].MutableIntrinsics() = world.cameras[k].Intrinsics();
   std::vector<Scenario> late;
   for (double dt : late_s) late.push_back(Motion(dt));
+  for (Scenario& l : late) l.rig = sc.rig;
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> n01;
   Recording r{sc.rig, sc.target, {}};
@@ -133,12 +139,13 @@ Recording Make(const std::vector<Hidden>& hs, uint64_t seed) {
 }
 
 // A seed picks the size (uniform in [lo, hi] with a random sign per component) and the
-// camera (or ball); the effect is given.
-Hidden Pick(const std::string& name, uint64_t seed) {
+// camera (or ball); the effect is given. `camera` >= 0 puts it on that camera.
+Hidden Pick(const std::string& name, uint64_t seed, int camera = -1) {
   std::mt19937_64 rng(seed * 7919 + 17);
   std::uniform_real_distribution<double> u(0, 1);
   auto size = [&](double lo, double hi) { return (lo + (hi - lo) * u(rng)) * (u(rng) < 0.5 ? -1 : 1); };
   Hidden h{name, static_cast<int>(rng() % 4), {}};
+  if (camera >= 0) h.index = camera;
   if (name == "camera_moved") {
     // A bump in the camera's own frame: a roll of 0.5 to 1.5 mrad about the optical axis
     // (what no change of the intrinsics mimics: a tilt alone is, at these sizes, the same
@@ -299,6 +306,67 @@ TEST(AuditCameras, NamesTwoEffectsAtOnce) {
   EXPECT_TRUE(named.count("target_geometry at " + Where(b, rec.rig)));
   EXPECT_EQ(named.size(), 2u);
 }
+
+}  // namespace
+}  // namespace mcms
+
+namespace mcms {
+namespace {
+
+// Two effects at once (issue 35, open): every pair of the catalog's camera effects on two
+// different cameras of the default rig (4 cameras) and of a 3-camera rig (its first three),
+// and every pair of different effects on one camera: both named at the right cameras,
+// nothing else. NOT YET MET, so disabled (run it with --gtest_also_run_disabled_tests):
+// measured 38 of 57 pass. The failures: a neighbour charged with another camera's fault
+// (the leave-one-camera-out poses still lean on the faulty camera, and a round compares
+// candidates on their own camera's samples only, not on what fixing them does to the
+// others'); two intrinsics of one camera named as one camera_moved (a 6-parameter move
+// mimics focal length + principal point better than either alone; a tilt and a principal
+// point are the same image shift at these sizes); a weak second effect missed.
+struct Pair {
+  std::string a, b;
+  size_t cameras;
+  bool same;
+  uint64_t seed;
+};
+std::vector<Pair> AllPairs() {
+  const std::vector<std::string> E = {"pixel_noise_scale", "camera_moved",      "focal_length",
+                                      "principal_point",   "radial_distortion", "camera_time_offset"};
+  std::vector<Pair> out;
+  for (size_t cameras : {4u, 3u})
+    for (size_t i = 0; i < E.size(); ++i)
+      for (size_t j = i; j < E.size(); ++j) out.push_back({E[i], E[j], cameras, false, 200 + out.size()});
+  for (size_t i = 0; i < E.size(); ++i)
+    for (size_t j = i + 1; j < E.size(); ++j) out.push_back({E[i], E[j], 4, true, 200 + out.size()});
+  return out;
+}
+
+class TwoEffects : public ::testing::TestWithParam<Pair> {};
+
+TEST_P(TwoEffects, DISABLED_BothNamedAtTheirCamerasNothingElse) {
+  const Pair& p = GetParam();
+  const uint64_t seed = p.seed;
+  const int ca = static_cast<int>(seed % p.cameras);
+  const int cb = p.same ? ca : static_cast<int>((ca + 1 + seed / 7 % (p.cameras - 1)) % p.cameras);
+  const Hidden ha = Pick(p.a, seed, ca), hb = Pick(p.b, seed + 1, cb);
+  const Recording rec = Make({ha, hb}, seed, p.cameras);
+  const CameraAuditResult r = Audit(rec);
+  const std::string what = p.a + " at " + Where(ha, rec.rig) + " + " + p.b + " at " + Where(hb, rec.rig) + " (" +
+                           std::to_string(p.cameras) + " cameras, seed " + std::to_string(seed) + ")";
+  std::printf("%s\n%s", what.c_str(), r.report.Text().c_str());
+  std::set<std::string> named;
+  for (const auto& e : r.report.effects) named.insert(e.name + " at " + e.where);
+  EXPECT_TRUE(named.count(p.a + " at " + Where(ha, rec.rig))) << what;
+  EXPECT_TRUE(named.count(p.b + " at " + Where(hb, rec.rig))) << what;
+  EXPECT_EQ(named.size(), 2u) << what << ": only the two hidden effects";
+  EXPECT_TRUE(r.report.undecided.empty()) << what;
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalog, TwoEffects, ::testing::ValuesIn(AllPairs()),
+                         [](const ::testing::TestParamInfo<Pair>& i) {
+                           return i.param.a + "_" + i.param.b + (i.param.same ? "_one_camera" : "") + "_" +
+                                  std::to_string(i.param.cameras) + "cams";
+                         });
 
 }  // namespace
 }  // namespace mcms

@@ -11,7 +11,10 @@
 //    the arm's own weight (link masses and a payload), thermal growth of every link and
 //    backlash that lags the motor-side encoder: each named at the right place with its
 //    size, alone and all at once on top of DH errors;
-//  - clean logs of both robots: called clean at the designed rate (1 %) over 100 seeds.
+//  - clean logs of both robots: called clean at the designed rate (1 %) over 100 seeds;
+//  - several at once (issue 35): the arm's weight on robot files without masses on top of
+//    every DH error, joint scale against offset over the logged spreads, backlash beside
+//    the weight; ties decided by measuring the proposed poses as often as the audit says.
 // Logs: tests/robot_logs.h (anisotropic noise, unknown registration and tool, 2 h, repeats).
 #include <gtest/gtest.h>
 
@@ -110,10 +113,17 @@ void ExpectNamedOrSeparated(const RobotModel& robot, const RobotAuditResult& res
   ASSERT_TRUE(InUndecided(res.report, h.ext)) << what << ": " << h.ext.Label() << " neither named nor undecided\n"
                                               << res.report.Text();
   ASSERT_FALSE(res.next_poses.empty()) << what;
+  // Each pose measured as many times as the audit says decides the pair (issue 35).
   std::vector<Eigen::VectorXd> qs;
-  for (const auto& np : res.next_poses)
+  for (const auto& np : res.next_poses) {
+    ASSERT_GT(np.readings, 0) << what << ": [" << np.a << "] vs [" << np.b << "] said not separable\n"
+                              << res.report.Text();
+    std::printf("%s: [%s] vs [%s]: %zu poses x %d readings (noncentrality %.1f, needed %.1f, logged %.1f)\n",
+                what.c_str(), np.a.c_str(), np.b.c_str(), np.poses.size(), np.readings, np.noncentrality,
+                np.noncentrality_needed, np.noncentrality_logged);
     for (const auto& p : np.poses)
-      for (int r = 0; r < 3; ++r) qs.push_back(p.q);
+      for (int r = 0; r < np.readings; ++r) qs.push_back(p.q);
+  }
   Rng rng(seed + 99);
   test::AppendRows(truth, qs, log.rows.back().time_s + 60.0, 30.0, rng, &log);
   const RobotAuditResult again = AuditRobot(robot, log, o);
@@ -183,9 +193,77 @@ TEST(RobotAudit, FindsEachHiddenEffect) {
   }
 }
 
+// Joint scale against joint offset (issue 35): a scale is told from an offset by the spread
+// of that joint's angles. Scale errors of joints 1-3 of both robots (DH exact, 80 poses x 5
+// readings as a user's log), over the logged spreads of the other tests (the KR 5 arc's
+// working region and its narrow wrist-tie region, the UR10-like's poses): the scale is
+// named at its joint with its size, or reported undecided with what it ties with; never a
+// wrong effect named in its place.
+TEST(RobotAudit, JointScaleIsNamedOrUndecidedNeverAnOffsetAlone) {
+  const RobotModel kr5 = RobotModel::Default(), ur10 = Ur10Like();
+  RobotLogSpec narrow;
+  narrow.lo = {-1.2, -1.6, 0.2, -0.4, 0.6, -0.4};
+  narrow.hi = {1.2, 0.4, 2.2, 0.4, 1.4, 0.4};
+  struct Case {
+    const RobotModel* robot;
+    RobotLogSpec spec;
+    const char* what;
+  };
+  const Case cases[] = {{&kr5, {}, "KR 5 working region"}, {&kr5, narrow, "KR 5 narrow region"},
+                        {&ur10, Ur10Spec(), "UR10-like"}};
+  int named = 0, undecided = 0;
+  for (size_t c = 0; c < 3; ++c)
+    for (int j = 0; j < 3; ++j) {
+      const uint64_t seed = 7300 + 10 * c + j;
+      Rng rng(seed);
+      RobotLogSpec spec = cases[c].spec;
+      spec.poses = 80;
+      spec.repeats = 5;
+      const double size = (rng.Uniform() < 0.5 ? -1 : 1) * (1.2e-4 + 1.0e-4 * rng.Uniform());
+      const Hidden h{{Effect::kJointScale, j, 0}, {size}};
+      const RobotLog log = MakeRobotLog(*cases[c].robot, seed, {h}, spec);
+      const RobotAuditResult res = AuditRobot(*cases[c].robot, log);
+      const std::string what = std::string(cases[c].what) + ", " + h.ext.Label() + " " + std::to_string(size * 1e6) +
+                               " ppm, seed " + std::to_string(seed);
+      std::printf("%s:\n%s", what.c_str(), res.report.Text().c_str());
+      const AuditEffect* e = Find(res.report, h.ext);
+      if (e) {
+        ++named;
+        ExpectSizes(*e, h, what);
+      } else {
+        ++undecided;
+        EXPECT_TRUE(InUndecided(res.report, h.ext)) << what << ": neither named nor undecided\n" << res.report.Text();
+      }
+      for (const auto& x : res.report.effects)
+        EXPECT_TRUE(x.name == "joint_scale" && x.where == h.ext.Where())
+            << what << ": " << x.name << " at " << x.where << " named (the DH table is exact)";
+    }
+  std::printf("joint scale: named on %d, undecided on %d of 9 logs\n", named, undecided);
+}
+
 // The arm's own weight on a robot whose masses are not given: lumped masses at the link
 // frames' origins and the payload. Named at the right joint, with a deflection that
 // matches the truth's, and no negative compliance ever.
+// The relative RMS difference between the fitted lumped-mass deflection of `joint` (rad) and
+// the truth's (its compliance times the gravity torque of the true masses) over the log's poses.
+double DeflectionError(const RobotModel& robot, const RobotModel& massed, const RobotLog& log,
+                       const RobotLogSpec& spec, int joint, const AuditEffect& e) {
+  const int n = robot.NumJoints();
+  double err = 0, ref = 0;
+  for (const auto& row : log.rows) {
+    const Eigen::MatrixXd L = GravityLever(robot, row.q);
+    double d = 0;
+    for (const auto& [name, v] : e.parameters) {
+      const int col = name == "c_m_tool" ? 2 * n : (name[4] == 'o' ? 0 : n) + std::stoi(name.substr(5)) - 1;
+      d += v * L(joint, col) * (col == 2 * n && log.has_payload ? row.payload_kg : 1.0);
+    }
+    const double truth = spec.compliance[joint] * GravityTorque(massed, row.q, spec.payload_kg)[joint];
+    err += (d - truth) * (d - truth);
+    ref += truth * truth;
+  }
+  return std::sqrt(err / ref);
+}
+
 TEST(RobotAudit, GravityOfTheArmWithoutMassesInTheRobotFile) {
   const RobotModel robot = RobotModel::Default();
   const RobotModel massed = Kr5WithLumpedMasses();
@@ -203,20 +281,8 @@ TEST(RobotAudit, GravityOfTheArmWithoutMassesInTheRobotFile) {
     ASSERT_NE(e, nullptr) << res.report.Text();
     EXPECT_GT(e->heldout_loglik_gain, 0.0);
     for (const auto& [name, v] : e->parameters) EXPECT_GE(v, 0.0) << name;
-    // The fitted deflection against the truth's over the log's poses.
-    double err = 0, ref = 0;
-    for (const auto& row : log.rows) {
-      const Eigen::MatrixXd L = GravityLever(robot, row.q);
-      double d = 0;
-      for (const auto& [name, v] : e->parameters) {
-        const int col = name == "c_m_tool" ? 12 : (name[4] == 'o' ? 0 : 6) + std::stoi(name.substr(5)) - 1;
-        d += v * L(joint, col) * (col == 12 && log.has_payload ? row.payload_kg : 1.0);
-      }
-      const double truth = spec.compliance[joint] * GravityTorque(massed, row.q, spec.payload_kg)[joint];
-      err += (d - truth) * (d - truth);
-      ref += truth * truth;
-    }
-    EXPECT_LT(std::sqrt(err / ref), 0.35) << "fitted deflection off the truth's by " << std::sqrt(err / ref);
+    const double off = DeflectionError(robot, massed, log, spec, joint, *e);
+    EXPECT_LT(off, 0.35) << "fitted deflection off the truth's by " << off;
     for (const auto& x : res.report.effects)
       EXPECT_TRUE(x.name == "gravity_compliance" || x.name == "joint_offset" || x.name == "geometry")
           << "named " << x.name << " at " << x.where;
@@ -242,6 +308,71 @@ TEST(RobotAudit, NamesTwoEffectsAtOnce) {
 // at most 4 (P(X >= 5 | n = 100, p = 0.01) = 0.0034). Measured: 1 of 100 for each.
 bool Geometric(const std::string& name) {
   return name == "geometry" || name == "joint_offset" || name == "link_length" || name == "link_twist";
+}
+
+// The arm's weight when the robot file gives no masses (issue 35), on robots whose every
+// DH term is a little off: the UR10-like (its file's masses make the truth, the audit is
+// given the table without them) and the KR 5 arc with lumped masses, with and without a
+// payload column, 4 seeds each. Gravity compliance named at the right joint (its
+// deflection against the truth's), or undecided with it; never a geometric term or another
+// effect in its place.
+RobotModel WithoutMasses(const RobotModel& r) {
+  std::vector<Joint> j = r.Joints();
+  for (Joint& x : j) {
+    x.mass_kg = std::nan("");  // not given
+    x.com_m = Vec3::Zero();
+  }
+  RobotModel out = r.WithJoints(j);
+  out.SetToolMass({});
+  return out;
+}
+TEST(RobotAudit, ArmsWeightWithoutMassesOnTopOfEveryDhError) {
+  const RobotModel ur10 = Ur10Like(), kr5m = Kr5WithLumpedMasses();
+  const RobotModel* truths[2] = {&ur10, &kr5m};
+  int named = 0, undecided = 0;
+  for (int r = 0; r < 2; ++r) {
+    const RobotModel given = WithoutMasses(*truths[r]);
+    ASSERT_FALSE(given.HasMasses());
+    for (int s = 0; s < 4; ++s) {
+      const uint64_t seed = 7400 + 10 * r + s;
+      RobotLogSpec spec = r == 0 ? Ur10Spec() : RobotLogSpec{};
+      spec.masses = truths[r];
+      const int joint = 1 + s % 2;
+      spec.compliance.assign(6, 0.0);
+      spec.compliance[joint] = 2e-6 * (1.0 + 0.5 * (s / 2));  // rad / N m
+      spec.payload_column = s < 2;
+      spec.dh_length_sigma_m = 0.05e-3;
+      spec.dh_angle_sigma_rad = 5e-5;
+      spec.poses = 60;
+      const RobotLog log = MakeRobotLog(given, seed, {}, spec);
+      const RobotAuditResult res = AuditRobot(given, log);
+      const std::string where = "joint " + std::to_string(joint + 1);
+      const std::string what = std::string(r == 0 ? "UR10-like" : "KR 5 arc") + " without masses, weight at " +
+                               where + (spec.payload_column ? "" : ", no payload column") + ", seed " +
+                               std::to_string(seed);
+      std::printf("%s:\n%s", what.c_str(), res.report.Text().c_str());
+      const Extension gc{Effect::kGravityCompliance, joint, 0};
+      const AuditEffect* e = Find(res.report, "gravity_compliance", where);
+      if (e) {
+        ++named;
+        EXPECT_GT(e->heldout_loglik_gain, 0.0) << what;
+        for (const auto& [name, v] : e->parameters) EXPECT_GE(v, 0.0) << what << ": " << name;
+        const double off = DeflectionError(given, *truths[r], log, spec, joint, *e);
+        std::printf("%s: fitted deflection off the truth's by %.3f (relative RMS)\n", what.c_str(), off);
+        EXPECT_LT(off, 0.35) << what << ": fitted deflection off the truth's by " << off;
+      } else {
+        ++undecided;
+        EXPECT_TRUE(InUndecided(res.report, gc)) << what << ": the arm's weight neither named nor undecided\n"
+                                                 << res.report.Text();
+      }
+      for (const auto& x : res.report.effects)
+        EXPECT_TRUE(Geometric(x.name) || (x.name == "gravity_compliance" && x.where == where))
+            << what << ": " << x.name << " at " << x.where << " named";
+      // A geometric term named alone where the weight is: only with the whole geometry
+      // (every DH term is off), never a single term standing in for the deflection.
+    }
+  }
+  std::printf("arm's weight without masses: named on %d, undecided on %d of 8 logs\n", named, undecided);
 }
 
 TEST(RobotAudit, NormalRobotIsGeometry) {
@@ -407,12 +538,12 @@ TEST(RobotAudit, TieIsReportedAndTheProposedPosesSeparateIt) {
     for (const auto& e : g) EXPECT_FALSE(e.parameters.empty()) << "an undecided candidate without its size";
   }
   ASSERT_FALSE(res.next_poses.empty());
-  // Each proposed pose separates the two by its predicted difference against the noise;
-  // together (each measured 3 times below) they must be able to decide.
-  double chi2 = 0;
-  for (const auto& p : res.next_poses.front().poses) chi2 += 3 * p.separation_sigma * p.separation_sigma;
-  EXPECT_GT(chi2, 20.0);
-  EXPECT_GE(res.next_poses.front().poses.front().separation_sigma, res.next_poses.front().poses.back().separation_sigma);
+  // The proposed poses decide, measured as many times as the audit says, with everything
+  // refitted: the noncentrality then reaches what the tie band needs (measured below).
+  const auto& np = res.next_poses.front();
+  ASSERT_GT(np.readings, 0);
+  EXPECT_GE(np.noncentrality, np.noncentrality_needed);
+  EXPECT_LT(np.noncentrality_logged, np.noncentrality_needed) << "the logged rows alone were undecided";
   // The CSV the command writes.
   const auto csv = std::filesystem::temp_directory_path() / "mcms_test_next_poses.csv";
   WriteNextPoses(csv, res, robot.NumJoints());
@@ -496,20 +627,27 @@ TEST(RobotAudit, UrdfRobotWithPlacementErrorsAndTheArmsWeight) {
 // within 3 sigma of the truth; nothing else but geometry.
 TEST(RobotAudit, UrdfRobotWithWristBacklashAndTheArmsWeight) {
   const RobotModel seven = SevenJoints();
-  for (uint64_t seed : {6200u, 6201u}) {
+  // Backlash at j4 on two seeds, and at j3 on a third. (At j5 this log cannot see it: the tool
+  // point lies on j5's axis, its offset is a combination of the tool's; on seed 6201 the
+  // arm's weight at j2 was named error_motion at j2 there before the flexible family was
+  // re-tested after every accepted effect (issue 35); now gravity_compliance at j2 replaces
+  // it, paired z -3.25 in its favour.)
+  const std::pair<uint64_t, int> cases[] = {{6200u, 4}, {6201u, 4}, {6202u, 3}};
+  for (const auto& [seed, bj] : cases) {
     RobotLogSpec spec = SevenSpec();
     spec.masses = &seven;
     spec.compliance = {0, 0, 2e-5, 0, 0, 0, 0};
     spec.dh_length_sigma_m = 0.05e-3;
     spec.dh_angle_sigma_rad = 5e-5;
     spec.poses = 100;
-    const Hidden backlash{{Effect::kBacklash, 4, 0}, {2e-3}};
+    const Hidden backlash{{Effect::kBacklash, bj, 0}, {2e-3}};
     const RobotLog log = MakeRobotLog(seven, seed, {backlash}, spec);
     const RobotAuditResult res = AuditRobot(seven, log);
-    const std::string what = "seven-joint URDF with wrist backlash seed " + std::to_string(seed);
+    const std::string jb = "j" + std::to_string(bj);
+    const std::string what = "seven-joint URDF with backlash at " + jb + " seed " + std::to_string(seed);
     std::printf("%s:\n%s", what.c_str(), res.report.Text().c_str());
-    const AuditEffect* b = Find(res.report, "backlash", "j4");
-    ASSERT_NE(b, nullptr) << what << ": backlash at j4 not named\n" << res.report.Text();
+    const AuditEffect* b = Find(res.report, "backlash", jb);
+    ASSERT_NE(b, nullptr) << what << ": backlash at " << jb << " not named\n" << res.report.Text();
     ExpectSizes(*b, backlash, what);
     const Hidden compliance{{Effect::kGravityCompliance, 2, 0}, {2e-5}};
     const AuditEffect* c = Find(res.report, "gravity_compliance", "j2");
@@ -518,7 +656,7 @@ TEST(RobotAudit, UrdfRobotWithWristBacklashAndTheArmsWeight) {
     for (const auto& x : res.report.effects) {
       const bool expected = x.name == "geometry" || x.name == "joint_offset" ||
                             (x.name == "gravity_compliance" && x.where == "j2") ||
-                            (x.name == "backlash" && x.where == "j4");
+                            (x.name == "backlash" && x.where == jb);
       EXPECT_TRUE(expected) << what << ": " << x.name << " at " << x.where << " named";
     }
   }
