@@ -189,6 +189,21 @@ bool SameFile(const fs::path& a, const fs::path& b) {
 
 void RequireOutputsSpareInputs(const std::vector<RunOutput>& outputs, const std::vector<fs::path>& inputs) {
   std::error_code ec;
+  // Two outputs of one run on one file: the one written last would silently replace the
+  // other (calib-robot -o x.yaml --report x.yaml); a file inside an output folder would be
+  // removed when the folder is replaced.
+  for (size_t a = 0; a < outputs.size(); ++a)
+    for (size_t b = a + 1; b < outputs.size(); ++b) {
+      const RunOutput &x = outputs[a], &y = outputs[b];
+      if (x.path.empty() || y.path.empty() || (x.path == y.path && x.what == y.what)) continue;
+      const fs::path px = Resolved(x.path), py = Resolved(y.path);
+      if (px == py || SameFile(x.path, y.path))
+        Throw(x.what, " ", x.path.string(), " and ", y.what, " ", y.path.string(),
+              " name the same file: one output would replace the other; choose different outputs");
+      if ((x.folder && Within(py, px)) || (y.folder && Within(px, py)))
+        Throw(x.what, " ", x.path.string(), " and ", y.what, " ", y.path.string(),
+              ": one lies inside the other's output folder, which is replaced as a whole; choose outputs apart");
+    }
   for (const RunOutput& out : outputs) {
     if (out.path.empty()) continue;
     const fs::path o = Resolved(out.path);

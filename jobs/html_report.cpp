@@ -329,21 +329,25 @@ std::string AddTruthColumns(Table& t, const Table& truth) {
       cov[a][b] = t.Column(std::string("cov_") + axes[a] + "_" + axes[b]);
       have_cov = have_cov && cov[a][b] >= 0;
     }
+  // A pose: seven finite values whose quaternion is a unit one (within 1e-3: a pose file
+  // rounds, it does not invent a norm of 5).
   auto pose_of = [](const Table& tab, size_t r, const int* c) -> std::optional<Pose> {
     double v[7];
     for (int i = 0; i < 7; ++i) {
       const auto x = tab.Value(r, c[i]);
-      if (!x) return std::nullopt;
+      if (!x || !std::isfinite(*x)) return std::nullopt;
       v[i] = *x;
     }
-    return Pose::FromQuaternion(Eigen::Quaterniond(v[3], v[4], v[5], v[6]).normalized(), Vec3(v[0], v[1], v[2]));
+    const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
+    if (!(std::abs(q.norm() - 1.0) <= 1e-3)) return std::nullopt;
+    return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
   };
   std::map<long long, Pose> truth_by_frame;
   for (size_t r = 0; r < truth.rows.size(); ++r)
     if (const auto f = truth.Value(r, tf))
       if (const auto T = pose_of(truth, r, tc)) truth_by_frame[std::llround(*f)] = *T;
   for (const char* h : {"err_x_mm", "err_y_mm", "err_z_mm", "err_rot_mdeg", "nees"}) t.header.push_back(h);
-  size_t matched = 0, with_nees = 0, inside = 0;
+  size_t matched = 0, with_nees = 0, inside = 0, bad_pose = 0, bad_cov = 0;
   double sum_nees = 0, sum_sq_mm = 0;
   const auto [lo, hi] = ChiSquareBand95(6);
   for (size_t r = 0; r < t.rows.size(); ++r) {
@@ -351,6 +355,10 @@ std::string AddTruthColumns(Table& t, const Table& truth) {
     const auto f = t.Value(r, ef);
     const auto est = pose_of(t, r, ec);
     const auto tr = f ? truth_by_frame.find(std::llround(*f)) : truth_by_frame.end();
+    bool given = f.has_value();  // a pose written (a lost frame's cells are empty)
+    for (int i = 0; i < 7; ++i)
+      given = given && ec[i] >= 0 && static_cast<size_t>(ec[i]) < t.rows[r].size() && !t.rows[r][ec[i]].empty();
+    bad_pose += !est && given;
     if (est && tr != truth_by_frame.end()) {
       const Vec6 e = PoseErrorVector(*est, tr->second);
       ++matched;
@@ -366,8 +374,14 @@ std::string AddTruthColumns(Table& t, const Table& truth) {
             ok = ok && v.has_value();
             C(a, b) = v.value_or(0.0);
           }
+        // A covariance: finite, symmetric, positive definite, no standard deviation above
+        // 100 (m or rad): anything else is not an estimate's uncertainty.
+        ok = ok && C.allFinite() && (C - C.transpose()).cwiseAbs().maxCoeff() <= 1e-9 * C.cwiseAbs().maxCoeff() &&
+             C.diagonal().maxCoeff() <= 1e4;
         Eigen::LDLT<Mat6> ldlt(C);
-        if (ok && ldlt.info() == Eigen::Success && ldlt.isPositive() && (ldlt.vectorD().array() > 0).all()) {
+        ok = ok && ldlt.info() == Eigen::Success && ldlt.isPositive() && (ldlt.vectorD().array() > 0).all();
+        bad_cov += !ok;
+        if (ok) {
           const double nees = PoseNees(*est, tr->second, C);
           cells[4] = Num(nees);
           ++with_nees;
@@ -384,6 +398,11 @@ std::string AddTruthColumns(Table& t, const Table& truth) {
   if (with_nees)
     o << ", mean NEES " << Num(sum_nees / static_cast<double>(with_nees)) << " (6 for a consistent covariance), "
       << inside << " of " << with_nees << " frames inside the 95 % band [" << lo << ", " << hi << "]";
+  if (bad_pose)
+    o << "; " << bad_pose << " frame(s) left out: their pose is not seven finite numbers with a unit quaternion";
+  if (bad_cov)
+    o << "; " << bad_cov << " frame(s) without a NEES: their covariance is not finite, symmetric and positive "
+      << "definite with standard deviations below 100";
   return o.str();
 }
 

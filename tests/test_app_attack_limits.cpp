@@ -106,6 +106,20 @@ TEST(AttackLimits, CalibRobotWritesNothingItCannotTrustUnlessAllowed) {
   EXPECT_EQ(test::ReadAll(d / "good.txt").find("WARNING"), std::string::npos);
 }
 
+// Two outputs of one run on one file (calib-robot -o x.yaml --report x.yaml): refused before
+// the work, naming both, instead of one silently replacing the other; and a file output
+// inside a folder output that is replaced as a whole.
+TEST(AttackLimits, TwoOutputsOnOneFileAreRefusedNamingBoth) {
+  const auto d = test::ScratchDir("attack_limits_clash");
+  fs::copy_file(kSource / "examples" / "robot_measurements.yaml", d / "m.yaml", fs::copy_options::overwrite_existing);
+  ExpectRefused(d, "calib-robot m.yaml -o x.yaml --report x.yaml --quiet",
+                {"calib-robot -o x.yaml", "calib-robot --report x.yaml", "name the same file"});
+  ExpectRefused(d, "calib-robot m.yaml -o x.yaml --report sub/../x.yaml --quiet", {"name the same file"});
+  ExpectRefused(d, "calib-robot m.yaml -o x.yaml --plot x.yaml --quiet", {"--plot", "name the same file"});
+  ExpectRefused(d, "fov-map --quiet -o out --json out/fov.json", {"fov-map -o out", "fov-map --json out/fov.json",
+                                                                 "inside the other's output folder"});
+}
+
 // The ownership rule of output folders (core/output_folder.h): a folder holding the
 // user's own files is refused and nothing in it touched; the run's own earlier output is
 // replaced; what an interrupted run left beside it is removed.

@@ -256,15 +256,33 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
   est += "4,4,lost,\"no balls\",,,,,,,,0,";
   for (int i = 0; i < 36; ++i) est += ",";
   est += "\n";
+  // Frames 5-8 are garbage a broken writer could leave (issue 37): a quaternion of norm 5, a
+  // NaN position, a negative variance and a variance of 1e308. They are said, never averaged.
+  const char* bad[4][2] = {{"5,0,0,0", "1e-6"}, {"1,0,0,0", "1e-6"}, {"1,0,0,0", "-1e-6"}, {"1,0,0,0", "1e308"}};
+  for (int k = 5; k < 9; ++k) {
+    char row[200];
+    std::snprintf(row, sizeof(row), "%d,%d,ok,\"\",%s,0.2,0.9,%s,5,0.1", k, k, k == 6 ? "nan" : "0.101",
+                  bad[k - 5][0]);
+    est += row;
+    for (int i = 0; i < 6; ++i)
+      for (int j = 0; j < 6; ++j) est += i != j ? ",0" : i == 5 ? std::string(",") + bad[k - 5][1] : ",1e-6";
+    est += "\n";
+    std::snprintf(row, sizeof(row), "%d,%d,0.1,0.2,0.9,1,0,0,0\n", k, k);
+    truth += row;
+  }
   test::WriteText(d / "poses.csv", est);
   test::WriteText(d / "truth" / "poses.csv", truth);
   HtmlReportContents c;
   const std::string html = BuildHtmlReport({d}, &c);
   EXPECT_EQ(c.kind, "track");
   // NEES = (1 mm / 1 mm)^2 + (k * 0.1 mrad / 0.1 mrad)^2 = 1 + k^2: mean (1 + 2 + 5 + 10) / 4 = 4.5.
-  EXPECT_NE(html.find("poses.csv against the truth (matched by frame): 4 of 5 frames, position error RMS 1 mm, "
+  EXPECT_NE(html.find("poses.csv against the truth (matched by frame): 6 of 9 frames, position error RMS 1 mm, "
                       "mean NEES 4.5 (6 for a consistent covariance), 3 of 4 frames inside the 95 % band"),
             std::string::npos);
+  EXPECT_NE(html.find("; 2 frame(s) left out: their pose is not seven finite numbers with a unit quaternion; 2 "
+                      "frame(s) without a NEES: their covariance is not finite, symmetric and positive definite"),
+            std::string::npos)
+      << html.substr(html.find("against the truth"), 600);
   EXPECT_EQ(c.figures, 9u);  // status, position, sigma, RMS, errors x, y, z, rotation error, NEES
   // The table on the page carries the new columns: x error +1 mm (estimate - truth, the error
   // of core/statistics.h PoseError, as every NEES in the project), NEES 1 + k^2.
