@@ -44,6 +44,33 @@ constexpr size_t kMaxSvgBytes = size_t{8} << 20;  // a larger SVG is listed, not
 constexpr size_t kReportHeadLines = 60;           // lines of a long report shown before "more"
 constexpr size_t kMaxSortableRows = 2000;         // a longer table shows its first and last rows
 
+// Why `s` is not UTF-8 text ("" when it is): a NUL byte, a control character other than
+// tab, line feed, carriage return and form feed, or a byte sequence that is not UTF-8 (a
+// sequence cut at the end of a bounded read is allowed).
+std::string NotText(const std::string& s) {
+  for (size_t i = 0; i < s.size();) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    if (c < 0x80) {
+      if (c == 0) return "a NUL byte at " + std::to_string(i);
+      if (c < 0x20 && c != '\t' && c != '\n' && c != '\r' && c != '\f')
+        return "control character " + std::to_string(c) + " at " + std::to_string(i);
+      ++i;
+      continue;
+    }
+    int len = 0;  // the sequence's length by its lead byte
+    if (c >= 0xc2 && c <= 0xdf) len = 2;
+    else if (c >= 0xe0 && c <= 0xef) len = 3;
+    else if (c >= 0xf0 && c <= 0xf4) len = 4;
+    if (len == 0) return "a byte that is not UTF-8 at " + std::to_string(i);
+    for (int k = 1; k < len; ++k) {
+      if (i + k >= s.size()) return "";
+      if ((static_cast<unsigned char>(s[i + k]) & 0xc0) != 0x80) return "a byte that is not UTF-8 at " + std::to_string(i);
+    }
+    i += len;
+  }
+  return "";
+}
+
 std::string Html(const std::string& s) {
   std::string o;
   o.reserve(s.size());
@@ -1200,6 +1227,12 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
       bool was_cut = false;
       texts[f->name] = read_bounded(*f, options.max_text_bytes, &was_cut);
       cut[f->name] = was_cut;
+      // A file named like text that is not (NUL bytes, control characters, bytes that are
+      // not UTF-8) is listed, not pasted into the UTF-8 page (issue 37).
+      if (const std::string why = NotText(texts[f->name]); !why.empty()) {
+        texts[f->name] = "(not shown: " + f->name + " is not text: " + why + ")";
+        cut[f->name] = false;
+      }
     }
   for (const File* f : csvs) {
     if (f->size > kMaxTextFileBytes) {

@@ -292,6 +292,23 @@ TEST(HtmlReport, TrackerPosesAreComparedWithTheRenderedTruth) {
     EXPECT_NE(html.find(v), std::string::npos) << v;
 }
 
+// Files named like text that are not (issue 37: a .txt of 2,408 NUL bytes was pasted into
+// the UTF-8 page): listed with the reason, never pasted; real text, UTF-8 included, is.
+TEST(HtmlReport, BinaryFilesNamedLikeTextAreNotPasted) {
+  const fs::path d = test::ScratchDir("html_report_binary");
+  test::WriteText(d / "notes.txt", "caf\xc3\xa9: 3 runs\n");
+  test::WriteText(d / "dump.txt", std::string("abc\0\0\0def", 9));
+  test::WriteText(d / "model.yaml", "a: \xff\xfe\n");
+  test::WriteText(d / "ctl.log", "ok\x01\n");
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d}, &c);
+  EXPECT_EQ(html.find('\0'), std::string::npos) << "a NUL byte on the page";
+  EXPECT_NE(html.find("(not shown: dump.txt is not text: a NUL byte at 3)"), std::string::npos);
+  EXPECT_NE(html.find("(not shown: model.yaml is not text: a byte that is not UTF-8 at 3)"), std::string::npos);
+  EXPECT_NE(html.find("(not shown: ctl.log is not text: control character 1 at 2)"), std::string::npos);
+  EXPECT_NE(html.find("caf\xc3\xa9: 3 runs"), std::string::npos) << "UTF-8 text is shown";
+}
+
 // The first screen of a page (section#answer), "" when it has none; it comes before every
 // other section.
 std::string AnswerOf(const std::string& html) {
