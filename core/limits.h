@@ -26,6 +26,9 @@ constexpr double kMaxEncoderSigma = 0.1;
 constexpr double kMaxMassKg = 1e5;
 // Temperatures a robot or a camera works at (deg C).
 constexpr double kMinTemperatureC = -100.0, kMaxTemperatureC = 300.0;
+// How far a camera rig measures, and how far from a robot it stands (m): a tracker pose or
+// a rig registration farther is a length in mm read as metres, not a measurement.
+constexpr double kMaxRigRangeM = 100.0;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 

@@ -13,6 +13,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/io.h"
 #include "core/yaml.h"
 
@@ -183,6 +184,10 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
   const YAML::Node br = root["T_base_rig"];
   if (!br) y.Fail(root, "missing 'T_base_rig' (the rig frame registered in the robot base)");
   s.T_base_rig = y.Transform(br, "T_base_rig", {"sigma_rotation_rad", "sigma_rotation_deg", "sigma_translation_m"});
+  if (!(s.T_base_rig.t.norm() <= kMaxRigRangeM))
+    y.Fail(br, "T_base_rig puts the rig ", s.T_base_rig.t.norm(),
+           " m from the robot base, farther than a camera rig measures (", kMaxRigRangeM,
+           " m): is its translation in mm? expected metres");
   if (auto n = y.WithUnit(br, "sigma_rotation", kAngle, "T_base_rig")) {
     const double sr = NonNegative(y, n->first, n->second, "T_base_rig.sigma_rotation");
     s.T_base_rig_covariance.topLeftCorner<3, 3>() = sr * sr * Mat3::Identity();
@@ -325,6 +330,10 @@ TrackerLog ReadTrackerLog(const fs::path& path) {
     if (std::abs(q.norm() - 1.0) > 1e-6)
       Throw(path.string(), " line ", line, ": quaternion (qw, qx, qy, qz) must have unit norm, has norm ", q.norm());
     s.T_rig_target = Pose::FromQuaternion(q.normalized(), Vec3(t.Number(i, x), t.Number(i, yc), t.Number(i, z)));
+    if (!(s.T_rig_target.t.norm() <= kMaxRigRangeM))
+      Throw(path.string(), " line ", line, ": (x_m, y_m, z_m) puts the target ", s.T_rig_target.t.norm(),
+            " m from the rig, farther than a camera rig measures (", kMaxRigRangeM,
+            " m): are the positions in mm? expected metres");
     for (int r = 0; r < 6; ++r)
       for (int c = 0; c < 6; ++c) s.covariance(r, c) = t.Number(i, cov[r][c]);
     const double scale = s.covariance.cwiseAbs().maxCoeff();

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -118,6 +119,40 @@ TEST(AttackLimits, TwoOutputsOnOneFileAreRefusedNamingBoth) {
   ExpectRefused(d, "calib-robot m.yaml -o x.yaml --plot x.yaml --quiet", {"--plot", "name the same file"});
   ExpectRefused(d, "fov-map --quiet -o out --json out/fov.json", {"fov-map -o out", "fov-map --json out/fov.json",
                                                                  "inside the other's output folder"});
+}
+
+// Lengths in mm where metres are expected (issue 37: a tracker log in mm fused the flange at
+// 142 m; a setup's T_base_rig in mm at 745 m): refused, naming the file, the line or key
+// and the likely unit, before any fusion.
+TEST(AttackLimits, TrackerPosesAndRigRegistrationInMillimetresAreRefused) {
+  const auto d = test::ScratchDir("attack_limits_units");
+  for (const char* f : {"tracker_poses.csv", "robot_joints.csv", "inclinometer.csv", "fusion_setup.yaml"})
+    fs::copy_file(kSource / "examples" / "fusion" / f, d / f, fs::copy_options::overwrite_existing);
+  // x_m, y_m, z_m (columns 5-7) times 1000.
+  std::istringstream in(test::ReadAll(d / "tracker_poses.csv"));
+  std::string line, mm;
+  for (int row = 0; std::getline(in, line); ++row) {
+    if (row > 0 && !line.empty() && line[0] != '#') {
+      std::vector<std::string> cells;
+      std::stringstream ss(line);
+      for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+      for (int k = 4; k < 7; ++k) cells[k] = std::to_string(1000.0 * std::stod(cells[k]));
+      line.clear();
+      for (size_t k = 0; k < cells.size(); ++k) line += (k ? "," : "") + cells[k];
+    }
+    mm += line + "\n";
+  }
+  test::WriteText(d / "tracker_mm.csv", mm);
+  std::string setup = test::ReadAll(d / "fusion_setup.yaml");
+  const std::string t = "translation_m: [0.75, 0, 0.050000000000000044]";
+  ASSERT_NE(setup.find(t), std::string::npos);
+  setup.replace(setup.find(t), t.size(), "translation_m: [750, 0, 50]");
+  test::WriteText(d / "setup_mm.yaml", setup);
+  const std::string logs = " --robot robot_joints.csv --inclinometer inclinometer.csv -o fused.csv";
+  ExpectRefused(d, "fuse --tracker tracker_mm.csv --setup fusion_setup.yaml" + logs,
+                {"tracker_mm.csv line", "m from the rig", "in mm? expected metres"});
+  ExpectRefused(d, "fuse --tracker tracker_poses.csv --setup setup_mm.yaml" + logs,
+                {"setup_mm.yaml", "T_base_rig puts the rig 751", "in mm? expected metres"});
 }
 
 // The ownership rule of output folders (core/output_folder.h): a folder holding the
