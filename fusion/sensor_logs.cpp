@@ -330,10 +330,14 @@ TrackerLog ReadTrackerLog(const fs::path& path) {
     if (std::abs(q.norm() - 1.0) > 1e-6)
       Throw(path.string(), " line ", line, ": quaternion (qw, qx, qy, qz) must have unit norm, has norm ", q.norm());
     s.T_rig_target = Pose::FromQuaternion(q.normalized(), Vec3(t.Number(i, x), t.Number(i, yc), t.Number(i, z)));
-    if (!(s.T_rig_target.t.norm() <= kMaxRigRangeM))
-      Throw(path.string(), " line ", line, ": (x_m, y_m, z_m) puts the target ", s.T_rig_target.t.norm(),
+    if (const double r = s.T_rig_target.t.norm(); !(r <= kMaxRigRangeM)) {
+      if (!std::isfinite(r))
+        Throw(path.string(), " line ", line, ": (x_m, y_m, z_m) puts the target absurdly far from the rig (",
+              t.rows[i][x], ", ", t.rows[i][yc], ", ", t.rows[i][z], "): a mistyped row? expected metres");
+      Throw(path.string(), " line ", line, ": (x_m, y_m, z_m) puts the target ", r,
             " m from the rig, farther than a camera rig measures (", kMaxRigRangeM,
             " m): are the positions in mm? expected metres");
+    }
     for (int r = 0; r < 6; ++r)
       for (int c = 0; c < 6; ++c) s.covariance(r, c) = t.Number(i, cov[r][c]);
     const double scale = s.covariance.cwiseAbs().maxCoeff();
