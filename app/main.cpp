@@ -9,6 +9,7 @@
 
 #include "app/commands.h"
 #include "core/error.h"
+#include "core/io.h"
 
 namespace {
 
@@ -52,6 +53,8 @@ int main(int argc, char** argv) {
     return app.exit(e);
   }
   try {
+    // One command per process: every file it reads is an input no output may replace.
+    const mcms::RunInputsRecord run_inputs;
     return mcms::app::RunSelected(app);
   } catch (const mcms::InputError& e) {
     std::fprintf(stderr, "mcms: error: %s\n", e.what());

@@ -80,8 +80,12 @@ void WriteCameraAuditFolder(const std::filesystem::path& out, const CameraRig& r
 }
 
 void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const std::string&)>& print) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   namespace fs = std::filesystem;
   const fs::path dir = a.recording;
+  // (the rig's camera model files are inputs too)
+  const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
+  const Target target = Target::Read(dir / "target.yaml");
   RequireOutputsSpareInputs({{a.json, "audit cameras --json"},
                              {a.output, "audit cameras -o", true},
                              {a.repaired_rig, "audit cameras --repaired-rig"},
@@ -91,8 +95,6 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
   if (!a.repaired_target.empty()) RequireWritableFile(a.repaired_target, "audit --repaired-target");
   if (!a.json.empty()) RequireWritableFile(a.json, "audit --json");
   if (!a.output.empty()) RequireReplaceableFolder(a.output, {"report.json"}, "audit cameras", "audit cameras -o");
-  const CameraRig rig = CameraRig::Read(dir / "rig.yaml");
-  const Target target = Target::Read(dir / "target.yaml");
   const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate_hz}, rig);
   std::vector<std::string> notes;
   Tracker tracker(rig, target, a.tracker.Options(seq, rig, &notes));

@@ -103,11 +103,12 @@ RobotLog TrackerAgainstJoints(const TrackerLog& tracker, const JointLog& joints,
 
 void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const std::string&)>& print,
                        const std::function<void(const std::string&)>& progress) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
+  const FusionSetup setup = ReadFusionSetup(a.setup);  // (and the robot file it names: an input too)
   RequireOutputsSpareInputs({{a.output, "audit fusion -o", true}, {a.json, "audit fusion --json"}},
                             {a.tracker, a.robot, a.inclinometer, a.setup});
   if (!a.json.empty()) RequireWritableFile(a.json, "audit fusion --json");
   if (!a.output.empty()) RequireReplaceableFolder(a.output, {"report.json"}, "audit fusion", "audit fusion -o");
-  const FusionSetup setup = ReadFusionSetup(a.setup);
   const TrackerLog tracker = ReadTrackerLog(a.tracker);
   const JointLog joints = ReadJointLog(a.robot, setup.robot);
   const bool with_incl = !a.inclinometer.empty();

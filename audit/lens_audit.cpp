@@ -551,6 +551,7 @@ void WriteLensAuditFiles(const LensAuditResult& r, const std::filesystem::path& 
 }
 
 void RunLensAuditJob(const LensAuditJob& job, const std::function<void(const std::string&)>& print) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   std::string why;
   if (!job.options.IsValid(&why)) Throw("audit lens: ", why);
   RequireOutputsSpareInputs({{job.output, "audit lens -o", true}, {job.json, "audit lens --json"}}, {job.model});

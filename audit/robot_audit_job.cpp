@@ -38,6 +38,7 @@ void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& r
   });
 }
 std::string RunRobotAuditJob(const RobotAuditJob& job) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   std::vector<std::filesystem::path> inputs{job.log, job.robot};
   inputs.insert(inputs.end(), job.validate.begin(), job.validate.end());
   RequireOutputsSpareInputs({{job.output_dir, "audit robot -o", true}, {job.json, "audit robot --json"}}, inputs);

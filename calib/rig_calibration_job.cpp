@@ -215,6 +215,7 @@ void ReportSolution(const RigCalibrationJob& a, const CameraCalibrationResult& r
 }  // namespace
 
 void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(const std::string&)>& print) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   const CalibrationBoard board = CalibrationBoard::Read(a.board);
   CameraCalibrationOptions options;
   options.lensmodel = a.lensmodel;

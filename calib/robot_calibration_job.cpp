@@ -93,6 +93,7 @@ std::string ErrorStatsText(const ErrorStats& s) {
 }
 
 std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   if (job.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml (or ROBOT.urdf)");
   // Refuse outputs that are inputs, and unwritable outputs, before the solve, not after it.
   std::vector<std::filesystem::path> inputs{job.measurements, job.robot};

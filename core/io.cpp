@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <set>
 #include <sstream>
 
 #include "core/error.h"
@@ -15,7 +16,58 @@ namespace mcms {
 
 namespace fs = std::filesystem;
 
+namespace {
+thread_local int tl_run_depth = 0;
+thread_local std::set<fs::path> tl_read;
+
+}  // namespace
+
+fs::path ResolvedPath(const fs::path& p) {
+  std::error_code ec;
+  fs::path r = fs::weakly_canonical(fs::absolute(p, ec), ec);
+  if (ec) r = fs::absolute(p, ec).lexically_normal();
+  if (!r.has_filename() && r.has_parent_path()) r = r.parent_path();
+  return r;
+}
+
+bool PathWithin(const fs::path& inner, const fs::path& outer) {
+  auto i = inner.begin();
+  for (auto o = outer.begin(); o != outer.end(); ++o, ++i)
+    if (i == inner.end() || *i != *o) return false;
+  return true;
+}
+
+RunInputsRecord::RunInputsRecord() { ++tl_run_depth; }
+RunInputsRecord::~RunInputsRecord() {
+  if (--tl_run_depth == 0) tl_read.clear();
+}
+
+void NoteInputRead(const fs::path& path) {
+  if (tl_run_depth > 0 && !path.empty()) tl_read.insert(ResolvedPath(path));
+}
+
+std::vector<fs::path> InputsReadThisRun() { return {tl_read.begin(), tl_read.end()}; }
+
+void RequireNotReadThisRun(const fs::path& output, bool folder) {
+  if (tl_read.empty() || output.empty()) return;
+  const fs::path o = ResolvedPath(output);
+  std::error_code ec;
+  for (const fs::path& in : tl_read) {
+    const bool in_folder = fs::is_directory(in, ec);
+    if (o == in || (fs::exists(output, ec) && fs::exists(in, ec) && fs::equivalent(output, in, ec)))
+      Throw("output ", output.string(), " is ", in.string(), ", which this run read; it was not replaced",
+            " (choose another output)");
+    if (in_folder && PathWithin(o, in))
+      Throw("output ", output.string(), " lies inside ", in.string(),
+            ", a folder this run read whole; nothing was written there (choose another output)");
+    if (folder && PathWithin(in, o))
+      Throw("output folder ", output.string(), " holds ", in.string(),
+            ", which this run read; the folder was not replaced (choose another output folder)");
+  }
+}
+
 void WriteFileAtomically(const fs::path& path, const std::function<void(std::ostream&)>& write) {
+  RequireNotReadThisRun(path, false);
   if (path.has_parent_path() && !path.parent_path().empty()) {
     std::error_code ec;
     fs::create_directories(path.parent_path(), ec);
@@ -84,6 +136,7 @@ void RequireWritableFolder(const fs::path& path, const std::string& what) {
 }
 
 std::string ReadTextFile(const fs::path& path) {
+  NoteInputRead(path);
   std::error_code ec;
   if (fs::is_directory(path, ec)) Throw("cannot read ", path.string(), ": it is a folder, expected a text file");
   // A FIFO with no writer would block forever, a device would never end.

@@ -10,8 +10,37 @@
 
 namespace mcms {
 
+// The absolute, normal form of a path, its symlinks resolved as far as it exists (as the
+// OS resolves it), without a trailing separator.
+std::filesystem::path ResolvedPath(const std::filesystem::path& p);
+// Whether `inner` is `outer` or lies inside it (both resolved).
+bool PathWithin(const std::filesystem::path& inner, const std::filesystem::path& outer);
+
+// The files a run reads, so that no output of the run replaces one: not only the inputs
+// it names (checked by RequireOutputsSpareInputs) but those read through another input
+// (a rig's camera model files, a fusion setup's robot, the files of a reported folder).
+// While a RunInputsRecord lives on a thread (each job opens one; nested ones share the
+// outermost, which forgets the files when it ends), every file that thread reads through
+// ReadTextFile, and every folder a reader walks (NoteInputRead), is recorded; reads on
+// other threads are not (concurrent jobs of one process, a Dask worker's, stay apart).
+class RunInputsRecord {
+ public:
+  RunInputsRecord();
+  ~RunInputsRecord();
+  RunInputsRecord(const RunInputsRecord&) = delete;
+  RunInputsRecord& operator=(const RunInputsRecord&) = delete;
+};
+// Records `path` (a file or a folder read whole) as read by the current run, if one is open.
+void NoteInputRead(const std::filesystem::path& path);
+// What the current run has read so far (absolute paths), empty without a run.
+std::vector<std::filesystem::path> InputsReadThisRun();
+// InputError when `output` is a file the current run read, or (`folder`) holds one or
+// lies inside a folder it read whole: the last check before an output replaces anything.
+void RequireNotReadThisRun(const std::filesystem::path& output, bool folder);
+
 // Writes a file through a temporary name in the same folder and renames it into
 // place only when `write` returned normally, so a failure leaves no partial file.
+// Refused (RequireNotReadThisRun) when the file is one the run read.
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write);
 

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/io.h"
 
 namespace mcms {
 
@@ -123,6 +124,7 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   if (!out.has_filename()) out = out.parent_path();
   RemoveStaleTemporaries(out);
   RequireReplaceableFolder(out, marker_files, kind, what);
+  RequireNotReadThisRun(out, true);
   // (not "." + string: GCC 12 reports a false -Wrestrict overlap in that concatenation)
   const std::string stem = std::string(".").append(out.filename().string());
   const std::string pid = std::to_string(::getpid());
@@ -141,6 +143,7 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
     write(tmp);
     RecordOutputFolder(tmp, kind);  // so that the next run of the same kind may replace it
     RequireReplaceableFolder(out, marker_files, kind, what);
+    RequireNotReadThisRun(out, true);
     if (fs::exists(out)) {
       const fs::path old = out.parent_path() / (stem + ".old-" + pid);
       fs::remove_all(old, ec);
@@ -163,23 +166,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The absolute, normal form of a path with its symlinks resolved as far as it exists.
-fs::path Resolved(const fs::path& p) {
-  std::error_code ec;
-  fs::path r = fs::weakly_canonical(fs::absolute(p, ec), ec);
-  if (ec) r = fs::absolute(p, ec).lexically_normal();
-  if (!r.has_filename() && r.has_parent_path()) r = r.parent_path();
-  return r;
-}
-
-// Whether `inner` is `outer` or lies inside it (both resolved).
-bool Within(const fs::path& inner, const fs::path& outer) {
-  auto i = inner.begin();
-  for (auto o = outer.begin(); o != outer.end(); ++o, ++i)
-    if (i == inner.end() || *i != *o) return false;
-  return true;
-}
-
 bool SameFile(const fs::path& a, const fs::path& b) {
   std::error_code ec;
   return fs::exists(a, ec) && fs::exists(b, ec) && fs::equivalent(a, b, ec) && !ec;
@@ -187,8 +173,12 @@ bool SameFile(const fs::path& a, const fs::path& b) {
 
 }  // namespace
 
-void RequireOutputsSpareInputs(const std::vector<RunOutput>& outputs, const std::vector<fs::path>& inputs) {
+void RequireOutputsSpareInputs(const std::vector<RunOutput>& outputs, const std::vector<fs::path>& named_inputs) {
   std::error_code ec;
+  // The inputs the run named and those it has read so far through them (a rig's model
+  // files, a setup's robot: RunInputsRecord).
+  std::vector<fs::path> inputs = named_inputs;
+  for (const fs::path& p : InputsReadThisRun()) inputs.push_back(p);
   // Two outputs of one run on one file: the one written last would silently replace the
   // other (calib-robot -o x.yaml --report x.yaml); a file inside an output folder would be
   // removed when the folder is replaced.
@@ -196,38 +186,46 @@ void RequireOutputsSpareInputs(const std::vector<RunOutput>& outputs, const std:
     for (size_t b = a + 1; b < outputs.size(); ++b) {
       const RunOutput &x = outputs[a], &y = outputs[b];
       if (x.path.empty() || y.path.empty() || (x.path == y.path && x.what == y.what)) continue;
-      const fs::path px = Resolved(x.path), py = Resolved(y.path);
+      const fs::path px = ResolvedPath(x.path), py = ResolvedPath(y.path);
       if (px == py || SameFile(x.path, y.path))
         Throw(x.what, " ", x.path.string(), " and ", y.what, " ", y.path.string(),
               " name the same file: one output would replace the other; choose different outputs");
-      if ((x.folder && Within(py, px)) || (y.folder && Within(px, py)))
+      if ((x.folder && PathWithin(py, px)) || (y.folder && PathWithin(px, py)))
         Throw(x.what, " ", x.path.string(), " and ", y.what, " ", y.path.string(),
               ": one lies inside the other's output folder, which is replaced as a whole; choose outputs apart");
     }
   for (const RunOutput& out : outputs) {
     if (out.path.empty()) continue;
-    const fs::path o = Resolved(out.path);
-    for (const fs::path& in : inputs) {
+    const fs::path o = ResolvedPath(out.path);
+    for (size_t k = 0; k < inputs.size(); ++k) {
+      const fs::path& in = inputs[k];
       if (in.empty() || !fs::exists(in, ec)) continue;
-      const fs::path i = Resolved(in);
+      const fs::path i = ResolvedPath(in);
+      // An input read through another one (a rig's camera model) is named as such.
+      const std::string the_input =
+          k < named_inputs.size() ? "the input " + in.string()
+                                  : in.string() + ", a file this run reads through another of its inputs";
       const bool in_folder = fs::is_directory(in, ec);
       const std::string named = "; it would overwrite an input of this run: choose another output";
       if (!out.folder) {
         if (SameFile(out.path, in) || o == i)
-          Throw(out.what, " ", out.path.string(), " is the input ", in.string(), named);
-        if (in_folder && Within(o, i) && fs::exists(out.path, ec) && !fs::is_directory(out.path, ec))
-          Throw(out.what, " ", out.path.string(), " is a file inside the input folder ", in.string(), named);
+          Throw(out.what, " ", out.path.string(), " is ", the_input, named);
+        // New or not: a file written into a folder the run reads whole becomes part of what
+        // the next run reads (a poses.csv among the images is taken for a camera's folder).
+        if (in_folder && PathWithin(o, i))
+          Throw(out.what, " ", out.path.string(), " lies inside the input folder ", in.string(),
+                ", which this run reads whole: choose an output outside it");
         continue;
       }
       if (SameFile(out.path, in) || o == i)
-        Throw(out.what, " ", out.path.string(), " is the input ", in.string(),
+        Throw(out.what, " ", out.path.string(), " is ", the_input,
               "; the output folder would replace it: choose another output folder");
-      if (Within(i, o) && fs::exists(out.path, ec))
-        Throw(out.what, " ", out.path.string(), " holds the input ", in.string(),
+      if (PathWithin(i, o) && fs::exists(out.path, ec))
+        Throw(out.what, " ", out.path.string(), " holds ", the_input,
               "; writing the output folder would remove it: choose another output folder");
-      if (in_folder && Within(o, i) && fs::exists(out.path, ec))
+      if (in_folder && PathWithin(o, i))
         Throw(out.what, " ", out.path.string(), " lies inside the input folder ", in.string(),
-              " and exists; replacing it would change what this run reads: choose another output folder");
+              ", which this run reads whole: writing it would change what this run reads; choose another output folder");
     }
   }
 }

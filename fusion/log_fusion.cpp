@@ -158,9 +158,10 @@ void DropOutOfRangeTilts(const Inclinometer& inc, InclinometerLog* log, std::vec
 }  // namespace
 
 FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
-  RequireOutputsSpareInputs({{r.output, "fuse -o"}}, {r.tracker, r.robot, r.inclinometer, r.setup, r.windows});
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   FuseFilesResult out;
-  out.setup = ReadFusionSetup(r.setup);
+  out.setup = ReadFusionSetup(r.setup);  // (and the robot file it names: an input too)
+  RequireOutputsSpareInputs({{r.output, "fuse -o"}}, {r.tracker, r.robot, r.inclinometer, r.setup, r.windows});
   out.logs.tracker = ReadTrackerLog(r.tracker);
   if (!r.robot.empty()) out.logs.robot = ReadJointLog(r.robot, out.setup.robot);
   if (!r.inclinometer.empty()) {

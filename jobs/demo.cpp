@@ -146,6 +146,7 @@ bool DemoOptions::IsValid(std::string* why) const {
 }
 
 DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::string&)>& print) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   std::string why;
   if (!o.IsValid(&why)) Throw("demo: ", why);
   LabOptions lo;

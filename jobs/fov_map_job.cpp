@@ -34,6 +34,7 @@ MeasuredReport AnalyseMeasuredAgainstRig(const MeasuredPoints& measured, const M
 }
 
 void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   if (a.output.empty()) Throw("fov-map: give an output folder with -o DIR");
   const fs::path out = a.output;
   RequireOutputsSpareInputs({{out, "fov-map -o", true}, {a.json, "fov-map --json"}},

@@ -1413,6 +1413,7 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
 }
 
 HtmlReportContents WriteHtmlReport(const HtmlReportOptions& options, const fs::path& output) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   // The page reads every file of the folder but earlier pages: none may be the output.
   std::vector<File> files;
   std::vector<std::pair<std::string, size_t>> folders;
@@ -1420,6 +1421,13 @@ HtmlReportContents WriteHtmlReport(const HtmlReportOptions& options, const fs::p
   std::vector<fs::path> inputs;
   for (const File& f : files) inputs.push_back(f.path);
   RequireOutputsSpareInputs({{output, "mcms report -o"}}, inputs);
+  // Inside the folder it reports, the page may only be an HTML page (which the report skips
+  // as an earlier page): any other file there is part of the run (a camera model, the
+  // truth), or would become part of it.
+  if (!options.dir.empty() && PathWithin(ResolvedPath(output), ResolvedPath(options.dir)) &&
+      Lower(output.extension().string()) != ".html")
+    Throw("mcms report -o ", output.string(), " lies inside the reported folder ", options.dir.string(),
+          " and is not an .html page: it would replace or join the run's files; give a .html name or a path outside");
   RequireWritableFile(output, "mcms report -o");
   HtmlReportContents c;
   const std::string page = BuildHtmlReport(options, &c);

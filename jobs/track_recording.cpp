@@ -82,6 +82,7 @@ std::vector<std::string> DescribeTruthErrors(const PoseErrorSummary& s, const st
 TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
                                     const std::function<void(const std::string&)>& on_note,
                                     const std::function<void(size_t, size_t)>& progress) {
+  const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   namespace fs = std::filesystem;
   const auto start = std::chrono::steady_clock::now();
   const fs::path& dir = in.dir;
@@ -106,12 +107,12 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
     const fs::path t = dir / "truth" / "poses.csv";
     res.truth = fs::exists(t) ? t.string() : std::string();
   }
+  const CameraRig rig = CameraRig::Read(rig_file);  // (and its camera model files: inputs too)
+  const Target target = Target::Read(target_file);
   RequireOutputsSpareInputs({{res.output, in.output_what}},
                             {res.images, rig_file, target_file, frames, fs::path(res.truth)});
   RequireWritableFile(res.output, in.output_what);  // before the sequence, not after it
 
-  const CameraRig rig = CameraRig::Read(rig_file);
-  const Target target = Target::Read(target_file);
   const ImageSequence seq = ScanImageSequence({res.images, frames, in.rate_hz}, rig);
   // The truth, checked against the recording's frames before the long work.
   std::map<size_t, TruthPose> truth;

@@ -191,5 +191,47 @@ TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
   EXPECT_FALSE(fs::exists(d / ".aud2.partial-999999999"));
 }
 
+// Files a run reads through another input are inputs too (core/io.h RunInputsRecord): a
+// rig's camera model files, a fusion setup's robot, the files of a reported folder; and
+// nothing is written into a folder a run reads whole (a poses.csv among the images).
+TEST(AttackLimits, FilesReadThroughAnotherInputAreNeverReplaced) {
+  const auto d = test::ScratchDir("attack_limits_read_through");
+  fs::remove_all(d / "rec");
+  ASSERT_EQ(test::Mcms(d, "render --frames 3 -q -o rec").code, 0);
+  fs::remove(d / "rec" / ".mcms-output");
+  std::string rig = "cameras:\n";
+  for (int c = 0; c < 4; ++c)
+    rig += "  - {name: cam" + std::to_string(c) + ", model: rec/cameras/cam" + std::to_string(c) + ".cameramodel}\n";
+  test::WriteText(d / "rigm.yaml", rig);
+  ExpectRefused(d, "track rec --rig rigm.yaml -q -o rec/cameras/cam0.cameramodel",
+                {"track -o rec/cameras/cam0.cameramodel", "reads through another of its inputs"});
+  ExpectRefused(d, "track rec -q -o rec/images/zz/poses.csv",
+                {"rec/images/zz/poses.csv", "lies inside the input folder", "reads whole"});
+  ExpectRefused(d, "report rec -o rec/truth/poses.csv", {"rec/truth/poses.csv", "inside the reported folder"});
+  ExpectRefused(d, "report rec -o rec/cameras/cam0.cameramodel", {"cam0.cameramodel", "inside the reported folder"});
+  // A rig of model files in the audited recording.
+  fs::copy_file(d / "rigm.yaml", d / "rec" / "rig_models.yaml");
+  std::string in_rec = rig;
+  for (size_t p; (p = in_rec.find("rec/cameras")) != std::string::npos;) in_rec.replace(p, 11, "cameras");
+  fs::copy(d / "rec", d / "recm", fs::copy_options::recursive);
+  test::WriteText(d / "recm" / "rig.yaml", in_rec);
+  ExpectRefused(d, "audit cameras recm -q --json recm/cameras/cam1.cameramodel",
+                {"--json recm/cameras/cam1.cameramodel", "reads through another of its inputs"});
+
+  // A setup naming its robot file.
+  for (const char* f : {"tracker_poses.csv", "robot_joints.csv", "inclinometer.csv", "fusion_setup.yaml"})
+    fs::copy_file(kSource / "examples" / "fusion" / f, d / f, fs::copy_options::overwrite_existing);
+  test::WriteText(d / "kr5.yaml", Kr5Yaml());
+  test::WriteText(d / "s.yaml", "robot: kr5.yaml\n" + test::ReadAll(d / "fusion_setup.yaml"));
+  fs::create_directories(d / "aud");
+  test::WriteText(d / "aud" / "robot.yaml", Kr5Yaml());
+  test::WriteText(d / "s2.yaml", "robot: aud/robot.yaml\n" + test::ReadAll(d / "fusion_setup.yaml"));
+  const std::string logs = " --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer inclinometer.csv";
+  ExpectRefused(d, "fuse" + logs + " --setup s.yaml -o kr5.yaml", {"fuse -o kr5.yaml", "reads through another"});
+  ExpectRefused(d, "audit fusion" + logs + " --setup s.yaml -q --json kr5.yaml",
+                {"--json kr5.yaml", "reads through another"});
+  ExpectRefused(d, "audit fusion" + logs + " --setup s2.yaml -q -o aud", {"-o aud holds", "robot.yaml"});
+}
+
 }  // namespace
 }  // namespace mcms

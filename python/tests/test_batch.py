@@ -192,6 +192,19 @@ class Batch(unittest.TestCase):
             with self.assertRaisesRegex(mcms.InputError, "x -o .*holds the input"):
                 mcms.require_outputs_spare_inputs([(rec, "x -o", True)], [frames])
             mcms.require_outputs_spare_inputs([(os.path.join(d, "new.csv"), "x -o", False)], [frames, "/no/such/file"])
+            # Issue 37: a rig of camera model files; the models are inputs read through the rig.
+            rigm = os.path.join(d, "rigm.yaml")
+            with open(rigm, "w") as f:
+                f.write("cameras:\n" + "".join(
+                    f"  - {{name: cam{c}, model: {os.path.join(rec, 'cameras', f'cam{c}.cameramodel')}}}\n"
+                    for c in range(4)))
+            model = os.path.join(rec, "cameras", "cam0.cameramodel")
+            with open(model, "rb") as f:
+                model_before = f.read()
+            with self.assertRaisesRegex(mcms.InputError, "reads through another of its inputs"):
+                mcms.track_recording(rec, rig=rigm, output=model)
+            with open(model, "rb") as f:
+                self.assertEqual(f.read(), model_before)
 
     @unittest.skipIf(distributed is None, "skipped: python3-distributed not installed")
     def test_batch_output_that_is_an_input_is_refused(self):
@@ -221,6 +234,12 @@ class Batch(unittest.TestCase):
             self.assertIn("is the input " + listing, r.stderr)
             with open(listing) as f:
                 self.assertEqual(f.read(), os.path.join(recs, "rec_a") + "\n")
+            # Issue 37: the output inside a recording's images (a folder the run reads whole).
+            inside = os.path.join(recs, "rec_a", "images")
+            r = self.batch(recs, "-o", inside)
+            self.assertEqual(r.returncode, 2, r.stderr)
+            self.assertIn("lies inside the input folder", r.stderr)
+            self.assertEqual(sorted(os.listdir(inside)), ["cam0", "cam1", "cam2", "cam3"])
 
     @unittest.skipIf(distributed is None, "skipped: python3-distributed not installed")
     def test_bad_input(self):
