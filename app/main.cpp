@@ -9,6 +9,7 @@
 
 #include "app/commands.h"
 #include "core/error.h"
+#include "core/interrupt.h"
 #include "core/io.h"
 
 namespace {
@@ -43,6 +44,8 @@ int RefuseUnknownSubcommand(CLI::App& app, int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Ctrl-C or a kill leaves no temporaries behind (core/interrupt.h).
+  mcms::InstallInterruptCleanup();
   CLI::App app{"mcms: multi-camera photogrammetry, robot and inclinometer fusion for robot metrology"};
   app.require_subcommand(1);
   mcms::app::RegisterCommands(app);

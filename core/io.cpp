@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/interrupt.h"
 
 namespace mcms {
 
@@ -74,6 +75,7 @@ void WriteFileAtomically(const fs::path& path, const std::function<void(std::ost
     if (ec) Throw("cannot create folder ", path.parent_path().string(), " for output ", path.string(), ": ", ec.message());
   }
   const fs::path tmp = path.string() + ".partial-" + std::to_string(::getpid());
+  const RemovedOnInterrupt remove_if_interrupted(tmp);
   try {
     std::ofstream out(tmp, std::ios::binary);
     if (!out) Throw("cannot write output file ", path.string());

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/interrupt.h"
 #include "core/io.h"
 
 namespace mcms {
@@ -80,7 +81,17 @@ void RequireReplaceableFolder(const std::filesystem::path& folder, const std::ve
   std::vector<std::string> foreign;
   for (const std::string& e : Entries(folder))
     if (e != kManifest && !recorded.count(e)) foreign.push_back(e);
-  if (recorded_kind == kind && foreign.empty()) return;
+  if (recorded_kind == kind && foreign.empty()) {
+    // Replacing it removes every file in it: a folder inside that cannot be written would
+    // stop that half-way (and leave the old output beside the new one).
+    if (::access(folder.c_str(), W_OK) != 0)
+      Throw(what, ": folder ", folder.string(), " holds an earlier ", kind, " but is not writable; it cannot be replaced");
+    for (const std::string& e : Entries(folder))
+      if (fs::is_directory(folder / e, ec) && !fs::is_symlink(folder / e, ec) && ::access((folder / e).c_str(), W_OK) != 0)
+        Throw(what, ": folder ", folder.string(), " holds an earlier ", kind, " whose folder ", e,
+              " is not writable, so it cannot be replaced; nothing in it was touched: make it writable or choose a new folder");
+    return;
+  }
   std::string list;
   for (size_t i = 0; i < foreign.size() && i < 5; ++i) list += (i ? ", " : "") + foreign[i];
   if (foreign.size() > 5) list += ", ... (" + std::to_string(foreign.size()) + " in all)";
@@ -129,6 +140,7 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   const std::string stem = std::string(".").append(out.filename().string());
   const std::string pid = std::to_string(::getpid());
   const fs::path tmp = out.parent_path() / (stem + ".partial-" + pid);
+  const RemovedOnInterrupt remove_if_interrupted(tmp);
   std::error_code ec;
   fs::remove_all(tmp, ec);
   {

@@ -167,97 +167,97 @@ DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::str
                "%.1f Hz (%zu frames), robot at %.0f Hz, inclinometer every %.0f ms, %d threads -> %s\n",
                lo.points, 1e3 * lo.sphere_radius_m, lo.dwell_s, sc.rig.size(), lo.camera_rate_hz, sc.NumFrames(),
                lo.robot_rate_hz, 1e3 * lo.inclinometer.period, threads, out.string().c_str()));
-  CreateOutputFolder(out, "demo -o");
-  // What the cameras see: the truth moved by each visit's rigid error (synthetic/
-  // camera_error_model.h). The truth (sc) is what is scored against.
-  const CameraErrorModel& model = o.camera_model;
-  Scenario seen = sc;
-  std::vector<int> frames_of_point(lo.points, 0);
-  for (int p : lab.point_of_frame)
-    if (p >= 0) ++frames_of_point[p];
-  Rng rng(lo.seed * 7919 + 13);
-  {
-    std::vector<Vec3> visit(lo.points);
-    for (auto& v : visit) v = model.DrawVisit(&rng);
-    for (size_t k = 0; k < seen.NumFrames(); ++k) {
-      const int p = lab.point_of_frame[k];
-      seen.T_rig_target[k].t += p >= 0 ? visit[p] : model.DrawVisit(&rng);
-    }
-  }
-  print("camera model: " + model.Describe() + "\n");
-  WriteFileAtomically(out / "camera_model.txt", [&](std::ostream& s) { s << model.Describe() << "\n"; });
-  if (o.save_images) RenderSequence(seen, out / "recording", o.quiet, threads);
-  std::vector<FrameResult> tracked = RenderAndTrack(seen, threads, o.quiet);
-  // The pixel-noise excess on the tracked poses, and the per-visit error in the tracker's
-  // reported covariance (the visit covariance times the visit's frame count).
-  for (size_t k = 0; k < tracked.size(); ++k) {
-    if (!tracked[k].T_rig_target) continue;
-    model.ScalePixelNoise(&*tracked[k].T_rig_target, &tracked[k].cov, &rng);
-    const int p = lab.point_of_frame[k];
-    model.AddVisitCovariance(&tracked[k].cov, p >= 0 ? frames_of_point[p] : 1);
-  }
-
-  // The logs the fusion reads, written and then fused from the files, as `mcms fuse` does.
-  WritePoseCsv(out / "tracker_poses.csv", tracked);
-  const SensorLogs logs = LabSensorLogs(lab, tracked);
-  const FusionSetup setup = LabFusionSetup(lab, o.experiment);
-  WriteJointLog(out / "robot_joints.csv", *logs.robot, setup.robot);
-  WriteInclinometerLog(out / "inclinometer.csv", *logs.inclinometer);
-  WriteFusionSetup(out / "fusion_setup.yaml", setup);  // the default robot: lab.nominal is RobotModel::Default()
-  WriteFusionWindows(out / "dwells.csv", LabWindows(lab));
-  FuseFilesRequest req;
-  req.tracker = out / "tracker_poses.csv";
-  req.robot = out / "robot_joints.csv";
-  req.inclinometer = out / "inclinometer.csv";
-  req.setup = out / "fusion_setup.yaml";
-  req.windows = out / "dwells.csv";
-  req.output = out / "fused_poses.csv";
-  const FuseFilesResult fused = FuseLogFiles(req);
-
+  // Written in a temporary folder beside `out`, which replaces it only when complete: an
+  // interrupted or failed demo leaves nothing (core/output_folder.h). Messages name `out`.
+  CreateOutputFolder(out.has_parent_path() ? out.parent_path() : fs::path("."), "demo -o");
   DemoResult res;
-  const PoseErrorSummary ts = EvaluatePoses(tracked, sc.T_rig_target);
-  res.lab = EvaluateLabExperiment(lab, fused.logs, fused.setup, fused.rows);
-  res.lab_report = "Tracker (rig frame, every frame):\n" + FormatSummary(ts) + "\nFlange pose at the " +
-                   std::to_string(lo.points) + " points (robot base frame), each sensor alone and fused:\n" +
-                   FormatLabTable(res.lab);
-  res.reduction_sd = BootstrapReductionSd(res.lab);
-  res.paper_report = FormatPaperComparison(res.lab, res.reduction_sd, model);
-  std::string model_text = "Camera model: " + model.Describe() + "\n";
-  if (!model.VisitSigma().isZero())
-    model_text +=
-        "  (every frame of a visit reports the visit's covariance times the visit's frame count, so the tracker's\n"
-        "  'predicted' per-frame position error below is inflated by that; the fused camera estimate of a dwell\n"
-        "  reports the visit's covariance, which the camera's NEES in the table checks)\n";
-  res.lab_report = model_text + res.lab_report + res.paper_report;
-  print("\n" + res.lab_report);
-  WriteFileAtomically(out / "summary.txt", [&](std::ostream& s) { s << res.lab_report; });
-  WritePointErrors(out, res.lab, lo.points);
-  print(Format("wrote %s/{summary.txt, point_errors.csv, position_error_per_point.svg, "
-               "orientation_error_per_point.svg}\n"
-               "fused the logs it wrote: %s/{tracker_poses.csv, robot_joints.csv, inclinometer.csv, "
-               "fusion_setup.yaml, dwells.csv} -> fused_poses.csv; to re-fuse them:\n"
-               "  mcms fuse --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer inclinometer.csv "
-               "--setup fusion_setup.yaml --windows dwells.csv -o fused_poses.csv\n",
-               out.string().c_str(), out.string().c_str()));
-  if (!o.iso9283) {
-    RecordOutputFolder(out, "demo");
-    return res;
-  }
+  WriteFolderAtomically(out, {"summary.txt"}, "demo", "demo -o", [&](const fs::path& dir) {
+    // What the cameras see: the truth moved by each visit's rigid error (synthetic/
+    // camera_error_model.h). The truth (sc) is what is scored against.
+    const CameraErrorModel& model = o.camera_model;
+    Scenario seen = sc;
+    std::vector<int> frames_of_point(lo.points, 0);
+    for (int p : lab.point_of_frame)
+      if (p >= 0) ++frames_of_point[p];
+    Rng rng(lo.seed * 7919 + 13);
+    {
+      std::vector<Vec3> visit(lo.points);
+      for (auto& v : visit) v = model.DrawVisit(&rng);
+      for (size_t k = 0; k < seen.NumFrames(); ++k) {
+        const int p = lab.point_of_frame[k];
+        seen.T_rig_target[k].t += p >= 0 ? visit[p] : model.DrawVisit(&rng);
+      }
+    }
+    print("camera model: " + model.Describe() + "\n");
+    WriteFileAtomically(dir / "camera_model.txt", [&](std::ostream& s) { s << model.Describe() << "\n"; });
+    if (o.save_images) RenderSequence(seen, dir / "recording", o.quiet, threads);
+    std::vector<FrameResult> tracked = RenderAndTrack(seen, threads, o.quiet);
+    // The pixel-noise excess on the tracked poses, and the per-visit error in the tracker's
+    // reported covariance (the visit covariance times the visit's frame count).
+    for (size_t k = 0; k < tracked.size(); ++k) {
+      if (!tracked[k].T_rig_target) continue;
+      model.ScalePixelNoise(&*tracked[k].T_rig_target, &tracked[k].cov, &rng);
+      const int p = lab.point_of_frame[k];
+      model.AddVisitCovariance(&tracked[k].cov, p >= 0 ? frames_of_point[p] : 1);
+    }
 
-  // ISO 9283 (issue 4) on the forward model: AP/RP, AD/RD, AT/RT before and after
-  // calibration and before and after a fused correction (jobs/iso9283_experiment.h).
-  const Iso9283Experiment iso = RunIso9283Experiment();
-  res.iso_report = FormatIso9283Experiment(iso);
-  print("\n" + res.iso_report);
-  WriteFileAtomically(out / "iso9283_summary.txt", [&](std::ostream& s) { s << res.iso_report; });
-  WriteIso9283ExperimentCsv(out / "iso9283_characteristics.csv", iso);
-  WriteIso9283Measurements(out, "iso9283_", iso);
-  WriteIso9283ExperimentSvg(out / "iso9283_ap.svg", out / "iso9283_rp.svg", iso);
-  print(Format("wrote %s/{iso9283_summary.txt, iso9283_characteristics.csv, iso9283_attained_1..%zu.csv, "
-               "iso9283_path_1..4.csv (input of `mcms iso9283 POSES --path PATH`; 1 = before calibration, "
-               "2 = after, 3 = camera correction, 4 = MOIFA correction), iso9283_ap.svg, iso9283_rp.svg}\n",
-               out.string().c_str(), iso.conditions.size()));
-  RecordOutputFolder(out, "demo");  // what this run wrote: the next demo may replace it
+    // The logs the fusion reads, written and then fused from the files, as `mcms fuse` does.
+    WritePoseCsv(dir / "tracker_poses.csv", tracked);
+    const SensorLogs logs = LabSensorLogs(lab, tracked);
+    const FusionSetup setup = LabFusionSetup(lab, o.experiment);
+    WriteJointLog(dir / "robot_joints.csv", *logs.robot, setup.robot);
+    WriteInclinometerLog(dir / "inclinometer.csv", *logs.inclinometer);
+    WriteFusionSetup(dir / "fusion_setup.yaml", setup);  // the default robot: lab.nominal is RobotModel::Default()
+    WriteFusionWindows(dir / "dwells.csv", LabWindows(lab));
+    FuseFilesRequest req;
+    req.tracker = dir / "tracker_poses.csv";
+    req.robot = dir / "robot_joints.csv";
+    req.inclinometer = dir / "inclinometer.csv";
+    req.setup = dir / "fusion_setup.yaml";
+    req.windows = dir / "dwells.csv";
+    req.output = dir / "fused_poses.csv";
+    const FuseFilesResult fused = FuseLogFiles(req);
+
+    const PoseErrorSummary ts = EvaluatePoses(tracked, sc.T_rig_target);
+    res.lab = EvaluateLabExperiment(lab, fused.logs, fused.setup, fused.rows);
+    res.lab_report = "Tracker (rig frame, every frame):\n" + FormatSummary(ts) + "\nFlange pose at the " +
+                     std::to_string(lo.points) + " points (robot base frame), each sensor alone and fused:\n" +
+                     FormatLabTable(res.lab);
+    res.reduction_sd = BootstrapReductionSd(res.lab);
+    res.paper_report = FormatPaperComparison(res.lab, res.reduction_sd, model);
+    std::string model_text = "Camera model: " + model.Describe() + "\n";
+    if (!model.VisitSigma().isZero())
+      model_text +=
+          "  (every frame of a visit reports the visit's covariance times the visit's frame count, so the tracker's\n"
+          "  'predicted' per-frame position error below is inflated by that; the fused camera estimate of a dwell\n"
+          "  reports the visit's covariance, which the camera's NEES in the table checks)\n";
+    res.lab_report = model_text + res.lab_report + res.paper_report;
+    print("\n" + res.lab_report);
+    WriteFileAtomically(dir / "summary.txt", [&](std::ostream& s) { s << res.lab_report; });
+    WritePointErrors(dir, res.lab, lo.points);
+    print(Format("wrote %s/{summary.txt, point_errors.csv, position_error_per_point.svg, "
+                 "orientation_error_per_point.svg}\n"
+                 "fused the logs it wrote: %s/{tracker_poses.csv, robot_joints.csv, inclinometer.csv, "
+                 "fusion_setup.yaml, dwells.csv} -> fused_poses.csv; to re-fuse them:\n"
+                 "  mcms fuse --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer inclinometer.csv "
+                 "--setup fusion_setup.yaml --windows dwells.csv -o fused_poses.csv\n",
+                 out.string().c_str(), out.string().c_str()));
+    if (!o.iso9283) return;
+
+    // ISO 9283 (issue 4) on the forward model: AP/RP, AD/RD, AT/RT before and after
+    // calibration and before and after a fused correction (jobs/iso9283_experiment.h).
+    const Iso9283Experiment iso = RunIso9283Experiment();
+    res.iso_report = FormatIso9283Experiment(iso);
+    print("\n" + res.iso_report);
+    WriteFileAtomically(dir / "iso9283_summary.txt", [&](std::ostream& s) { s << res.iso_report; });
+    WriteIso9283ExperimentCsv(dir / "iso9283_characteristics.csv", iso);
+    WriteIso9283Measurements(dir, "iso9283_", iso);
+    WriteIso9283ExperimentSvg(dir / "iso9283_ap.svg", dir / "iso9283_rp.svg", iso);
+    print(Format("wrote %s/{iso9283_summary.txt, iso9283_characteristics.csv, iso9283_attained_1..%zu.csv, "
+                 "iso9283_path_1..4.csv (input of `mcms iso9283 POSES --path PATH`; 1 = before calibration, "
+                 "2 = after, 3 = camera correction, 4 = MOIFA correction), iso9283_ap.svg, iso9283_rp.svg}\n",
+                 out.string().c_str(), iso.conditions.size()));
+  });
   return res;
 }
 

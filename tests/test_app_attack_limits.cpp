@@ -5,8 +5,10 @@
 // --allow-poor-fit). Each is refused before any work with the input and the limit named,
 // a non-zero exit, and nothing written.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <filesystem>
 #include <regex>
 #include <sstream>
@@ -172,6 +174,26 @@ TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
   EXPECT_TRUE(fs::exists(d / "aud" / ".mcms-output"));
   const CliRun again = test::Mcms(d, "audit robot log.csv -o aud -q");
   EXPECT_EQ(again.code, 0) << again.err;
+  // Its plots/ made read-only: it cannot be replaced whole, so it is refused before the work
+  // (not replaced half-way with the old output left beside it). Run as an ordinary user
+  // (root writes anyway): setpriv to nobody when the tests run as root.
+  {
+    const fs::path ro = test::ScratchDir("attack_limits_readonly");
+    std::string as_user;
+    if (::geteuid() == 0) {
+      ASSERT_EQ(std::system(("chown 65534:65534 '" + ro.string() + "'").c_str()), 0);
+      as_user = "setpriv --reuid=65534 --regid=65534 --clear-groups ";
+    }
+    const std::string run = as_user + "'" + MCMS_CLI + "' audit robot '" + (d / "log.csv").string() + "' -o aro -q";
+    ASSERT_EQ(test::Shell(ro, run).code, 0);
+    fs::permissions(ro / "aro" / "plots", fs::perms::owner_write, fs::perm_options::remove);
+    const auto before = test::Snapshot(ro);
+    const CliRun r = test::Shell(ro, run);
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("folder plots is not writable"), std::string::npos) << r.err;
+    EXPECT_EQ(test::Snapshot(ro), before);
+    fs::permissions(ro / "aro" / "plots", fs::perms::owner_write, fs::perm_options::add);
+  }
   // A file added to it since is the user's: refused, kept.
   test::WriteText(d / "aud" / "mine.txt", "x\n");
   ExpectRefused(d, "audit robot log.csv -o aud -q", {"aud", "mine.txt"});
@@ -231,6 +253,25 @@ TEST(AttackLimits, FilesReadThroughAnotherInputAreNeverReplaced) {
   ExpectRefused(d, "audit fusion" + logs + " --setup s.yaml -q --json kr5.yaml",
                 {"--json kr5.yaml", "reads through another"});
   ExpectRefused(d, "audit fusion" + logs + " --setup s2.yaml -q -o aud", {"-o aud holds", "robot.yaml"});
+}
+
+// Interrupted runs leave nothing behind: render and demo ended by SIGTERM while their
+// temporary folder is being filled (core/interrupt.h) leave neither it nor an output.
+TEST(AttackLimits, InterruptedRunsLeaveNothingBehind) {
+  const auto d = test::ScratchDir("attack_limits_interrupt");
+  for (const std::string run : {"render -q -o out", "demo -q --no-iso9283 -o out"}) {
+    fs::remove_all(d);
+    fs::create_directories(d);
+    // Started, then killed once its temporary folder exists (polled, at most 60 s).
+    const CliRun r = test::Shell(d, std::string("{ '").append(MCMS_CLI).append("' ").append(run).append(
+                                        " & pid=$!; for i in $(seq 1 1200); do ls -a | grep -q '^.out.partial-' && break; "
+                                        "sleep 0.05; done; sleep 0.5; kill -TERM $pid; wait $pid; echo \"exit=$?\"; }"));
+    EXPECT_NE(r.out.find("exit=143"), std::string::npos) << run << ": " << r.out << r.err;
+    for (const auto& e : fs::directory_iterator(d)) {
+      const std::string name = e.path().filename().string();
+      EXPECT_TRUE(name == "stdout.txt" || name == "stderr.txt") << run << " left " << name;
+    }
+  }
 }
 
 }  // namespace

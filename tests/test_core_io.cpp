@@ -1,6 +1,9 @@
 // File helpers (core/io.h): atomic output leaves no partial file, CSV reading names the
 // file, line and column of every problem, output paths are refused before any work.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -8,6 +11,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/interrupt.h"
 #include "core/io.h"
 #include "tests/test_util.h"
 
@@ -115,6 +119,38 @@ TEST(Io, OutputPathsAreCheckedBeforeWork) {
   EXPECT_NO_THROW(RequireWritableFolder(dir / "folder", "-o"));
   EXPECT_NO_THROW(RequireWritableFolder(dir / "new_folder", "-o"));
   EXPECT_FALSE(fs::exists(dir / "new")) << "checking creates nothing";
+}
+
+// A run ended by a signal leaves none of its registered temporaries (core/interrupt.h): a
+// child process registers a folder tree and a file, is interrupted, and ends as the signal
+// would have; what it did not register stays.
+TEST(Io, AnInterruptedRunLeavesNoTemporaries) {
+  const fs::path dir = test::ScratchDir("core_io_interrupt");
+  for (int sig : {SIGINT, SIGTERM}) {
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const pid_t pid = ::fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      ::signal(SIGINT, SIG_DFL);  // (a background process may ignore it: set it as a terminal does)
+      InstallInterruptCleanup();
+      fs::create_directories(dir / ".out.partial-1" / "images" / "cam0");
+      for (int k = 0; k < 300; ++k) std::ofstream(dir / ".out.partial-1" / "images" / "cam0" / (std::to_string(k) + ".png")) << k;
+      std::ofstream(dir / "poses.csv.rows.partial-1") << "rows";
+      std::ofstream(dir / "mine.txt") << "the user's";
+      RemovedOnInterrupt folder(dir / ".out.partial-1");
+      RemovedOnInterrupt file(dir / "poses.csv.rows.partial-1");
+      { RemovedOnInterrupt gone(dir / "mine.txt"); }  // unregistered again: stays
+      ::raise(sig);
+      ::_exit(0);
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+    EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == sig) << "status " << status;
+    EXPECT_FALSE(fs::exists(dir / ".out.partial-1"));
+    EXPECT_FALSE(fs::exists(dir / "poses.csv.rows.partial-1"));
+    EXPECT_TRUE(fs::exists(dir / "mine.txt"));
+  }
 }
 
 }  // namespace

@@ -401,6 +401,7 @@ PoseCsvWriter::PoseCsvWriter(fs::path path, std::vector<std::string> extra_colum
     if (ec) Throw("cannot create folder ", path_.parent_path().string(), " for output ", path_.string(), ": ", ec.message());
   }
   rows_path_ = path_.string() + ".rows.partial-" + std::to_string(::getpid());
+  rows_guard_ = std::make_unique<RemovedOnInterrupt>(rows_path_);
   rows_out_ = std::make_unique<std::ofstream>(rows_path_, std::ios::binary | std::ios::trunc);
   if (!*rows_out_) Throw("cannot write output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
 }

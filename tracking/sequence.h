@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/interrupt.h"
 #include "tracking/tracker.h"
 #include "vision/image_file.h"
 
@@ -151,6 +152,7 @@ class PoseCsvWriter {
 
  private:
   std::filesystem::path path_, rows_path_;
+  std::unique_ptr<RemovedOnInterrupt> rows_guard_;  // the rows file goes if the run is interrupted
   std::vector<std::string> extra_columns_;
   std::unique_ptr<std::ofstream> rows_out_;
   size_t rows_ = 0;
