@@ -1,5 +1,7 @@
 #include "audit/fusion_log_audit.h"
 
+#include "fusion/stream_fusion.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -51,6 +53,25 @@ void CheckTiltUnits(const Inclinometer& incl, const std::vector<OrientationRefer
           " times the tilts the tracker measured, "
           "57.3: readings in degrees under _rad headers? (give tilt_x_rad, tilt_y_rad in radians, or "
           "tilt_x_deg, tilt_y_deg in degrees)");
+  // The two columns exchanged: the readings follow the tracker's tilts with x and y
+  // swapped (a reflection, which no mounting of the sensor produces) far better than as
+  // logged. Compared after removing each fit's mean (a bias).
+  const auto rms = [&](bool swapped) {
+    const auto d = [&](size_t i) -> Vec2 { return (swapped ? Vec2(r[i].y(), r[i].x()) : r[i]) - p[i]; };
+    Vec2 mean = Vec2::Zero();
+    for (size_t i = 0; i < p.size(); ++i) mean += d(i) / p.size();
+    double ss = 0;
+    for (size_t i = 0; i < p.size(); ++i) ss += (d(i) - mean).squaredNorm();
+    return std::sqrt(ss / p.size());
+  };
+  const double as_logged = rms(false), exchanged = rms(true);
+  if (as_logged > 10 * incl.sigma && exchanged < 0.3 * as_logged) {
+    char m[160];
+    std::snprintf(m, sizeof m, "%.3g mrad RMS as logged, %.3g mrad with the columns exchanged", 1e3 * as_logged,
+                  1e3 * exchanged);
+    Throw(log.source.string(), ": the inclinometer's readings follow the tilts the tracker measured with tilt_x and "
+          "tilt_y exchanged (", m, "): are the two columns swapped? (tilt_x is the sensor's x axis)");
+  }
 }
 
 }  // namespace
@@ -114,6 +135,11 @@ void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const s
   const bool with_incl = !a.inclinometer.empty();
   InclinometerLog incl_log;
   if (with_incl) incl_log = ReadInclinometerLog(a.inclinometer);
+  {
+    SensorLogs logs{tracker, joints, std::nullopt};
+    if (with_incl) logs.inclinometer = incl_log;
+    CheckTimeOverlap(logs);  // one clock, one unit of time (fusion/stream_fusion.h)
+  }
   RobotModel robot = setup.robot;
   robot.SetT_flange_tool(setup.T_flange_target);
   const RobotLog log = TrackerAgainstJoints(tracker, joints, a.tracker, a.robot);

@@ -40,6 +40,10 @@ double NonNegative(const CsvTable& t, size_t row, int col) {
 // A measured standard deviation (mm) of Table 1: beyond 1 m no photogrammetry rig's
 // repeatability is plausible (and the variance fit overflows near 1e154 mm).
 constexpr double kMaxSigmaMm = 1000;
+// The median standard deviation of a table (mm): the best photogrammetry rigs repeat a
+// position to some 10 um at 1-2 m; a median below 2 um is not of a camera rig in mm (the
+// paper's Table 1 in metres under _mm headers: its median, 0.3 mm, reads 0.0003).
+constexpr double kMinMedianSigmaMm = 2e-3;
 // A measured position (m, rig frame): a rig sees a few metres; a point beyond 10 m is
 // outside any camera rig's field of view (a wrong unit or a broken row).
 constexpr double kMaxPositionM = 10;
@@ -130,6 +134,15 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
       p.variance = (s * 1e-3).cwiseAbs2();
       m.points.push_back(p);
     }
+    // Metres under _mm headers (kMinMedianSigmaMm).
+    std::vector<double> all;
+    for (const MeasuredPoint& p : m.points)
+      for (int k = 0; k < 3; ++k) all.push_back(std::sqrt(p.variance[k]) * 1e3);
+    std::nth_element(all.begin(), all.begin() + all.size() / 2, all.end());
+    if (!all.empty() && all[all.size() / 2] < kMinMedianSigmaMm)
+      Throw(path.string(), ": its standard deviations have a median of ", all[all.size() / 2], " mm, below ",
+            kMinMedianSigmaMm, " mm, finer than any camera rig repeats a position: values in metres under the _mm "
+            "headers? expected mm");
   } else {
     // A raw CSV (point,repeat,x_m,y_m,z_m) or mcms track's poses.csv with a point column:
     // the repeat is then the frame, and lost frames (status lost, empty pose) are skipped.

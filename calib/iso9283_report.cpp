@@ -58,6 +58,28 @@ Iso9283Report EvaluateIso9283Files(const std::filesystem::path& poses_file, cons
     it->second.cycles.push_back(cycle);
   }
   if (poses.empty()) Throw(poses_file.string(), ": no rows; expected one row per attained pose");
+  {
+    // Attained (or commanded) positions in another unit than metres: the attained ones lie
+    // 100s of times as far from the commanded ones' centre as those do (a robot misses its
+    // commanded pose by mm, not by 100 times the size of its workspace).
+    Vec3 centre = Vec3::Zero();
+    for (const auto& id : order) centre += poses.at(id).commanded.t / order.size();
+    double cmd = 0, att = 0;
+    for (const auto& id : order) {
+      const PoseRows& p = poses.at(id);
+      for (const auto& [cycle, a] : p.by_cycle) cmd += (p.commanded.t - centre).norm(), att += (a.t - centre).norm();
+    }
+    if (cmd > 0 && att > 0) {
+      const double ratio = att / cmd;
+      const char* unit = ratio > 100    ? "the attained positions x_m, y_m, z_m in mm?"
+                         : ratio < 0.01 ? "the commanded positions cmd_x_m.. in mm?"
+                                        : nullptr;
+      if (unit)
+        Throw(poses_file.string(), ": the attained positions lie ", std::lround(ratio > 1 ? ratio : 1 / ratio),
+              " times as ", ratio > 1 ? "far from" : "close to", " the commanded poses' centre as the commanded ones: ",
+              unit, " expected metres");
+    }
+  }
 
   std::ostringstream out, csv;
   char buf[512];

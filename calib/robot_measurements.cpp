@@ -537,6 +537,8 @@ void CheckRigid(const RobotLog& log) {
         " (elsewhere within ", Num4(limit * 1e3), " mm); a marker lost or swapped, or points of different bodies?");
 }
 
+void CheckRowsFitTheRobot(const RobotModel& robot, const RobotLog& log);  // below
+
 }  // namespace
 
 void CheckRobotLogPlausible(const RobotLog& log, const RobotModel& robot) {
@@ -545,6 +547,7 @@ void CheckRobotLogPlausible(const RobotLog& log, const RobotModel& robot) {
   CheckOutlyingRow(log);
   CheckScale(robot, log);
   CheckRigid(log);
+  CheckRowsFitTheRobot(robot, log);
 }
 
 namespace {
@@ -567,6 +570,46 @@ Pose Align(const Eigen::Matrix3Xd& ref, const Eigen::Matrix3Xd& P) {
   T.R = svd.matrixU() * S * svd.matrixV().transpose();
   T.t = cp - T.R * cr;
   return T;
+}
+
+// Rows of another layout among the others (x and y exchanged in some rows, a row in
+// another unit): once the scale is right, the best rigid registration and tool position
+// leave residuals of the size of the motion itself, where any robot the description
+// fits (every DH term off, sag, backlash) leaves a few mm. Named when the RMS is beyond
+// 10 % of the positions' spread and 20 mm, with the row farthest off.
+void CheckRowsFitTheRobot(const RobotModel& robot, const RobotLog& log) {
+  const int N = log.rows.size();
+  if (N < 4) return;
+  std::vector<Pose> flange(N);
+  Eigen::Matrix3Xd dst(3, N), src(3, N);
+  for (int i = 0; i < N; ++i) flange[i] = robot.T_base_flange(log.rows[i].q), dst.col(i) = log.rows[i].p_meas;
+  Vec3 tool = robot.T_flange_tool().t;
+  Pose T;  // T_meas_base
+  for (int round = 0; round < 20; ++round) {  // registration and tool point in turn
+    for (int i = 0; i < N; ++i) src.col(i) = flange[i] * tool;
+    T = Align(src, dst);
+    Vec3 sum = Vec3::Zero();
+    for (int i = 0; i < N; ++i) sum += flange[i].R.transpose() * (T.R.transpose() * (dst.col(i) - T.t) - flange[i].t);
+    tool = sum / N;
+  }
+  for (int i = 0; i < N; ++i) src.col(i) = flange[i] * tool;
+  T = Align(src, dst);
+  double ss = 0, worst = -1;
+  int far = 0;
+  for (int i = 0; i < N; ++i) {
+    const double e = (T * Vec3(src.col(i)) - dst.col(i)).norm();
+    ss += e * e;
+    if (e > worst) worst = e, far = i;
+  }
+  const double rms = std::sqrt(ss / N);
+  const double spread = std::sqrt((dst.colwise() - dst.rowwise().mean()).squaredNorm() / N);
+  if (!(rms > std::max(0.1 * spread, 0.02))) return;
+  Throw(log.source.empty() ? std::string("robot log") : log.source.string(),
+        ": with the best registration and tool position, robot '", robot.Name(),
+        "' explains the measured positions only to ", Num4(1e3 * rms), " mm RMS while they spread over ",
+        Num4(1e3 * spread), " mm (the row farthest off, ", log.Where(far), ", by ", Num4(1e3 * worst),
+        " mm); a robot its description fits leaves a few mm: check the rows' columns (x and y swapped in some?) and "
+        "units, and --robot");
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <tuple>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -372,20 +373,38 @@ void CheckTimeOverlap(const SensorLogs& logs) {
   const TrackerLog& tr = logs.tracker;
   if (tr.samples.empty()) Throw("fusion: the tracker log ", tr.source.string(), " has no tracked frame");
   const double a0 = tr.samples.front().time_s, a1 = tr.samples.back().time_s;
-  const auto check = [&](const std::filesystem::path& file, double b0, double b1) {
+  const auto check = [&](const std::filesystem::path& file, const auto& samples) {
+    const double b0 = samples.front().time_s, b1 = samples.back().time_s;
     if (std::max(a0, b0) > std::min(a1, b1))
       Throw("no time overlap between the sensors: ", Range(tr.source, a0, a1), " (tracked frames), ",
             Range(file, b0, b1));
+    // Times in ms in one log: it spans about 1000 times as long as the other, which then
+    // holds all its samples within two of the longer one's (a robot logged longer than the
+    // cameras ran still has many samples while they ran).
+    const auto within = [](const auto& in, double t0, double t1) {
+      int n = 0;
+      for (const auto& x : in) n += x.time_s >= t0 && x.time_s <= t1;
+      return n;
+    };
+    const double span = (b1 - b0) / (a1 - a0);
+    const bool file_longer = span > 300 && span < 3000 && tr.samples.size() >= 10 && within(samples, a0, a1) <= 2;
+    const bool tracker_longer = 1 / span > 300 && 1 / span < 3000 && samples.size() >= 10 &&
+                                within(tr.samples, b0, b1) <= 2;
+    if (file_longer || tracker_longer)
+      Throw(file_longer ? file.string() : tr.source.string(), ": its times span ",
+            std::lround(file_longer ? span : 1 / span), " times as long as those of ",
+            file_longer ? tr.source.string() : file.string(),
+            ", which all fall between two of its samples: are its times in ms? expected time_s in seconds on the "
+            "same clock");
   };
   if (logs.robot) {
     if (logs.robot->samples.empty()) Throw("fusion: the joint log ", logs.robot->source.string(), " is empty");
-    check(logs.robot->source, logs.robot->samples.front().time_s, logs.robot->samples.back().time_s);
+    check(logs.robot->source, logs.robot->samples);
   }
   if (logs.inclinometer) {
     if (logs.inclinometer->samples.empty())
       Throw("fusion: the inclinometer log ", logs.inclinometer->source.string(), " is empty");
-    check(logs.inclinometer->source, logs.inclinometer->samples.front().time_s,
-          logs.inclinometer->samples.back().time_s);
+    check(logs.inclinometer->source, logs.inclinometer->samples);
   }
 }
 

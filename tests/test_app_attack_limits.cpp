@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -271,6 +272,89 @@ TEST(AttackLimits, InterruptedRunsLeaveNothingBehind) {
       const std::string name = e.path().filename().string();
       EXPECT_TRUE(name == "stdout.txt" || name == "stderr.txt") << run << " left " << name;
     }
+  }
+}
+
+// A CSV with `change` applied to every data row's cells (given the header's cells);
+// comment lines are kept.
+std::string ChangedCsv(const fs::path& file,
+                       const std::function<void(const std::vector<std::string>&, std::vector<std::string>&, int)>& change) {
+  std::istringstream in(test::ReadAll(file));
+  std::string line, out;
+  std::vector<std::string> header;
+  for (int row = 0; std::getline(in, line);) {
+    if (line.empty() || line[0] == '#') {
+      out += line + "\n";
+      continue;
+    }
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+    if (header.empty()) {
+      header = cells;
+    } else {
+      change(header, cells, row++);
+      line.clear();
+      for (size_t k = 0; k < cells.size(); ++k) line += (k ? "," : "") + cells[k];
+    }
+    out += line + "\n";
+  }
+  return out;
+}
+
+size_t Col(const std::vector<std::string>& header, const std::string& name) {
+  return std::find(header.begin(), header.end(), name) - header.begin();
+}
+
+// Units and layouts that used to turn into answers (issue 37, 3): each refused naming the
+// file and the likely cause, nothing written.
+TEST(AttackLimits, UnitsAndSwappedColumnsAreNamedNotAnswered) {
+  const auto d = test::ScratchDir("attack_limits_more_units");
+  for (const char* f : {"tracker_poses.csv", "robot_joints.csv", "inclinometer.csv", "fusion_setup.yaml"})
+    fs::copy_file(kSource / "examples" / "fusion" / f, d / f, fs::copy_options::overwrite_existing);
+  const auto times1000 = [](const std::vector<std::string>& h, std::vector<std::string>& c, int,
+                            const std::vector<std::string>& cols) {
+    for (const auto& name : cols) c[Col(h, name)] = std::to_string(1000.0 * std::stod(c[Col(h, name)]));
+  };
+  test::WriteText(d / "joints_ms.csv", ChangedCsv(d / "robot_joints.csv", [&](const auto& h, auto& c, int r) {
+                    times1000(h, c, r, {"time_s"});
+                  }));
+  test::WriteText(d / "incl_swapped.csv", ChangedCsv(d / "inclinometer.csv", [](const auto& h, auto& c, int) {
+                    std::swap(c[Col(h, "tilt_x_rad")], c[Col(h, "tilt_y_rad")]);
+                  }));
+  ExpectRefused(d,
+                "fuse --tracker tracker_poses.csv --robot joints_ms.csv --inclinometer inclinometer.csv "
+                "--setup fusion_setup.yaml -o fused.csv",
+                {"joints_ms.csv: its times span 10", "times as long as those of tracker_poses.csv", "in ms?"});
+  ExpectRefused(d, "audit fusion --tracker tracker_poses.csv --robot joints_ms.csv --setup fusion_setup.yaml -q",
+                {"joints_ms.csv: its times span", "in ms?"});
+  ExpectRefused(d,
+                "audit fusion --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer incl_swapped.csv "
+                "--setup fusion_setup.yaml -q",
+                {"incl_swapped.csv", "tilt_x and tilt_y exchanged", "columns swapped?"});
+  // The untouched logs pass both.
+  EXPECT_EQ(test::Mcms(d, "audit fusion --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer "
+                          "inclinometer.csv --setup fusion_setup.yaml -q")
+                .code,
+            0);
+
+  // ISO 9283 attained positions in mm.
+  test::WriteText(d / "iso_mm.csv", ChangedCsv(kSource / "examples" / "iso9283" / "poses.csv",
+                                               [&](const auto& h, auto& c, int r) { times1000(h, c, r, {"x_m", "y_m", "z_m"}); }));
+  ExpectRefused(d, "iso9283 iso_mm.csv", {"iso_mm.csv", "attained positions x_m, y_m, z_m in mm?"});
+  // x and y exchanged in every other row of a robot log: 880 mm RMS, no joint offset named.
+  test::WriteText(d / "xy_half.csv", ChangedCsv(kSource / "examples" / "robot_log.csv", [](const auto& h, auto& c, int r) {
+                    if (r % 2) std::swap(c[Col(h, "x_m")], c[Col(h, "y_m")]);
+                  }));
+  ExpectRefused(d, "audit robot xy_half.csv -q", {"xy_half.csv", "mm RMS", "x and y swapped in some?"});
+  // The paper's Table 1 in metres under its _mm headers.
+  // (the real table when ../shared/data is there)
+  const fs::path table = test::DataRoot() / "paper" / "table1_point_repeatability.csv";
+  if (fs::exists(table)) {
+    test::WriteText(d / "t1_m.csv", ChangedCsv(table, [](const auto&, auto& c, int) {
+                      for (size_t k = 2; k < c.size(); ++k) c[k] = std::to_string(std::stod(c[k]) / 1000);
+                    }));
+    ExpectRefused(d, "fov-map --quiet --measured t1_m.csv -o fm", {"t1_m.csv", "median", "metres under the _mm"});
   }
 }
 
