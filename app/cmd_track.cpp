@@ -59,7 +59,7 @@ namespace {
 struct TrackArgs {
   std::string dir;
   std::string images, rig, target, frames_csv, output, truth;
-  double rate = 10.0;
+  double rate = 0;  // not given
   bool quiet = false;
   TrackerCli tracker;
 };
@@ -110,7 +110,10 @@ McmsCommand track_command([](CLI::App& app) {
   cmd->add_option("--rig", args->rig, "rig file (default DIR/rig.yaml)");
   cmd->add_option("--target", args->target, "target file (default DIR/target.yaml)");
   cmd->add_option("--frames", args->frames_csv, "frame times CSV with columns frame,time_s (default DIR/frames.csv)");
-  cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames CSV")->check(CLI::PositiveNumber);
+  cmd->add_option("--rate", args->rate,
+                  "frame rate in Hz when there is no frames CSV (0.001 to 1e6); without either, frames are taken "
+                  "10 Hz apart and the run says so")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("-o,--output", args->output, "output CSV (default DIR/poses.csv)");
   cmd->add_option("--truth", args->truth,
                   "truth file of T_rig_target per frame with columns frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz (what "

@@ -15,6 +15,7 @@
 #include <zlib.h>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/io.h"
 #include "vision/camera_model.h"
 
@@ -382,7 +383,7 @@ std::map<std::string, std::string> Unzip(const std::string& zip) {
     cd = Get64(zip, e64 + 48);
   }
   std::map<std::string, std::string> members;
-  size_t at = cd;
+  size_t at = cd, inflated = 0;
   for (uint64_t e = 0; e < entries; ++e) {
     if (Get32(zip, at) != 0x02014b50u) Throw("zip central directory entry ", e, " is corrupt");
     const uint32_t method = Get16(zip, at + 10);
@@ -404,6 +405,11 @@ std::map<std::string, std::string> Unzip(const std::string& zip) {
     if (Get32(zip, local) != 0x04034b50u) Throw("zip member ", name, ": bad local header");
     const size_t data = local + 30 + Get16(zip, local + 26) + Get16(zip, local + 28);
     if (data + csize > zip.size()) Throw("zip member ", name, " truncated");
+    // Bounded before anything is allocated: a deflate bomb states gigabytes.
+    if (usize > kMaxInflatedBytes - std::min<uint64_t>(inflated, kMaxInflatedBytes))
+      Throw("zip member ", name, " states ", usize, " bytes inflated (", inflated, " before it), beyond the ",
+            kMaxInflatedBytes >> 20, " MB an mrcal calibration's arrays may take (core/limits.h): a corrupt or hostile archive");
+    inflated += usize;
     const std::string raw = zip.substr(data, csize);
     if (method == 0) members[name] = raw;
     else if (method == 8) members[name] = Inflate(raw, usize);

@@ -3,6 +3,8 @@
 // limit (never a crash, an allocation failure or hours of work later).
 #pragma once
 
+#include <cstddef>
+
 #include <string>
 
 namespace mcms {
@@ -29,6 +31,13 @@ constexpr double kMinTemperatureC = -100.0, kMaxTemperatureC = 300.0;
 // How far a camera rig measures, and how far from a robot it stands (m): a tracker pose or
 // a rig registration farther is a length in mm read as metres, not a measurement.
 constexpr double kMaxRigRangeM = 100.0;
+// What a compressed input may inflate to, in all (a zip inside a .cameramodel's
+// optimization_inputs): a large real calibration's arrays are some 50 MB; a deflate bomb
+// states gigabytes in a few MB.
+constexpr size_t kMaxInflatedBytes = size_t{1} << 30;
+// What an HTML report embeds in all (figures and text files): beyond it the rest are
+// listed, not embedded, so the page stays one a browser opens.
+constexpr size_t kMaxEmbeddedBytes = size_t{64} << 20;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 

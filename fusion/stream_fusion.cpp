@@ -377,7 +377,7 @@ void CheckTimeOverlap(const SensorLogs& logs) {
     const double b0 = samples.front().time_s, b1 = samples.back().time_s;
     if (std::max(a0, b0) > std::min(a1, b1))
       Throw("no time overlap between the sensors: ", Range(tr.source, a0, a1), " (tracked frames), ",
-            Range(file, b0, b1));
+            Range(file, b0, b1), " (are the logs on the same clock, in seconds?)");
     // Times in ms in one log: it spans about 1000 times as long as the other, which then
     // holds all its samples within two of the longer one's (a robot logged longer than the
     // cameras ran still has many samples while they ran).

@@ -18,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/limits.h"
 #include "core/output_folder.h"
 #include "core/pose_math.h"
 #include "core/statistics.h"
@@ -1297,12 +1298,14 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
 
   // Figures: the SVG files, then plots made from tracker pose tables.
   std::ostringstream figs;
+  size_t embedded = 0;  // bytes of figures in the page: bounded in all (kMaxEmbeddedBytes)
   for (const File* f : svgs) {
     if (f->size > kMaxSvgBytes) {
       figs << Note(f->name + ": " + Bytes(f->size) + ", larger than " + Bytes(kMaxSvgBytes) + "; not embedded");
       c.listed.push_back(f->name);
       continue;
     }
+
     const std::string svg = ReadTextFile(f->path);
     const auto open = svg.find("<svg");
     if (open == std::string::npos || svg.rfind("</svg>") == std::string::npos || svg.rfind("</svg>") < open) {
@@ -1310,7 +1313,15 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
       c.listed.push_back(f->name);
       continue;
     }
-    figs << FigureHtml(svg, f->name);
+    const std::string figure = FigureHtml(svg, f->name);
+    if (embedded + figure.size() > kMaxEmbeddedBytes) {
+      figs << Note(f->name + ": " + Bytes(figure.size()) + " more would take the page's figures beyond " +
+                   Bytes(kMaxEmbeddedBytes) + "; not embedded (open it beside the page)");
+      c.listed.push_back(f->name);
+      continue;
+    }
+    embedded += figure.size();
+    figs << figure;
     ++c.figures;
   }
   std::ostringstream track;

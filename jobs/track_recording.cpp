@@ -94,7 +94,9 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
   if (!dir.empty() && !fs::is_directory(dir))
     Throw("recording folder ", dir.string(), ": ", fs::exists(dir) ? "not a folder" : "does not exist");
   in.tracker.Check();
-  if (!(in.rate_hz > 0 && std::isfinite(in.rate_hz))) Throw("frame rate: expected > 0 Hz, got ", in.rate_hz);
+  // A camera's frame rate: from a frame every 1000 s to a million a second.
+  if (!(in.rate_hz == 0 || (in.rate_hz >= 1e-3 && in.rate_hz <= 1e6)))
+    Throw("frame rate (--rate): expected 0.001 to 1e6 Hz, got ", in.rate_hz);
   TrackRecordingResult res;
   res.images = pick(in.images, "images", "--images");
   const fs::path rig_file = pick(in.rig, "rig.yaml", "--rig");
@@ -113,7 +115,8 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
                             {res.images, rig_file, target_file, frames, fs::path(res.truth)});
   RequireWritableFile(res.output, in.output_what);  // before the sequence, not after it
 
-  const ImageSequence seq = ScanImageSequence({res.images, frames, in.rate_hz}, rig);
+  const bool assumed_rate = in.rate_hz == 0 && (frames.empty() || !fs::exists(frames));
+  const ImageSequence seq = ScanImageSequence({res.images, frames, in.rate_hz > 0 ? in.rate_hz : 10.0}, rig);
   // The truth, checked against the recording's frames before the long work.
   std::map<size_t, TruthPose> truth;
   if (!res.truth.empty()) {
@@ -124,6 +127,10 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
     res.notes.push_back(line);
     if (on_note) on_note(line);
   };
+  if (assumed_rate)
+    note("frame times: no frames CSV (" + (frames.empty() ? std::string("none given") : frames.string() + " is absent") +
+         ") and no frame rate given: frame k is at k / 10 s, an assumed 10 Hz; give --rate (or a frames CSV "
+         "frame,time_s) for the recording's real times");
   std::vector<std::string> noise_notes;
   Tracker tracker(rig, target, in.tracker.Options(seq, rig, &noise_notes));
   for (const auto& line : noise_notes) note(line);

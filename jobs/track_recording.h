@@ -25,7 +25,9 @@ struct TrackRecordingInput {
   // Truth of T_rig_target per frame (ReadTruthPoses); empty: none. "auto": DIR/truth/poses.csv
   // when that file exists, else none.
   std::string truth;
-  double rate_hz = 10.0;  // frame rate when there is no frames CSV
+  // Frame rate (Hz) when there is no frames CSV; 0 = not given: frames are then 10 Hz
+  // apart, an assumption the run states in its notes (and the output's '#' lines).
+  double rate_hz = 0;
   RecordingTrackerSettings tracker;
 };
 

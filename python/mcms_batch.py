@@ -193,7 +193,9 @@ def parse_args(argv):
     p.add_argument("--truth", default="auto", metavar="auto|none|PATH",
                    help="truth of each recording for err_pos_rms_mm and nees: auto = <recording>/truth/poses.csv when "
                         "present; PATH relative to each recording folder, or absolute")
-    p.add_argument("--rate", type=float, default=10.0, help="frame rate in Hz of recordings without frames.csv")
+    p.add_argument("--rate", type=float, default=0.0,
+                   help="frame rate in Hz of recordings without frames.csv (default: not given; such a recording's "
+                        "frames are taken 10 Hz apart and its notes say so)")
     p.add_argument("--gain", type=float, help="camera gain in e-/DN (default: measured per recording)")
     p.add_argument("--read-noise", type=float, default=0.0, help="background pixel noise in DN (0 = measured)")
     p.add_argument("--polarity", choices=["bright", "dark"], default="bright")

@@ -930,11 +930,12 @@ void BindFieldOfViewGridAndJobs(py::module_& m) {
       },
       py::arg("dir") = py::none(), py::kw_only(), py::arg("output") = py::none(), py::arg("truth") = py::none(),
       py::arg("images") = py::none(), py::arg("rig") = py::none(), py::arg("target") = py::none(),
-      py::arg("frames_csv") = py::none(), py::arg("frame_rate_hz") = 10.0, py::arg("gain_e_per_dn") = py::none(),
+      py::arg("frames_csv") = py::none(), py::arg("frame_rate_hz") = 0.0, py::arg("gain_e_per_dn") = py::none(),
       py::arg("read_noise_dn") = 0.0, py::arg("polarity") = "bright", py::arg("threshold_dn") = 0.0,
       py::arg("noise_frames") = 12, py::arg("threads") = 1,
       "Tracks one recording folder as `mcms track DIR` does (images/, rig.yaml, target.yaml, frames.csv; each can "
-      "be given instead) and writes the pose CSV (default DIR/poses.csv). truth: a truth CSV of T_rig_target "
+      "be given instead; frame_rate_hz 0 = not given: without a frames CSV frames are taken 10 Hz apart and the "
+      "notes say so) and writes the pose CSV (default DIR/poses.csv). truth: a truth CSV of T_rig_target "
       "(what `mcms render` writes as truth/poses.csv), 'auto' (DIR/truth/poses.csv when it exists) or None. "
       "Returns a dict: output, images, truth, frames, ok, degraded, lost, residual_chi2_per_dof, residuals_in_band, "
       "errors (with a truth: as evaluate_poses returns, else None), notes (the CSV's '#' lines), seconds. Bad input "

@@ -358,5 +358,25 @@ TEST(AttackLimits, UnitsAndSwappedColumnsAreNamedNotAnswered) {
   }
 }
 
+// A recording without frames.csv tracked without --rate: frames 10 Hz apart, said in the
+// output and on stderr (it used to be silent); an implausible --rate is refused.
+TEST(AttackLimits, TrackWithoutFrameTimesSaysWhatItAssumes) {
+  const auto d = test::ScratchDir("attack_limits_rate");
+  fs::remove_all(d / "rec");
+  ASSERT_EQ(test::Mcms(d, "render --frames 3 -q -o rec").code, 0);
+  fs::remove(d / "rec" / "frames.csv");
+  fs::remove(d / "rec" / ".mcms-output");
+  const CliRun r = test::Mcms(d, "track rec -o p.csv");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE((r.out + r.err).find("an assumed 10 Hz; give --rate"), std::string::npos) << r.out << r.err;
+  EXPECT_NE(test::ReadAll(d / "p.csv").find("# frame times: no frames CSV"), std::string::npos);
+  const CliRun given = test::Mcms(d, "track rec --rate 25 -o p25.csv");
+  ASSERT_EQ(given.code, 0) << given.err;
+  EXPECT_EQ((given.out + given.err).find("assumed"), std::string::npos) << given.out << given.err;
+  EXPECT_NE(test::ReadAll(d / "p25.csv").find("\n2,0.08,"), std::string::npos) << "frame 2 at 2 / 25 s";
+  ExpectRefused(d, "track rec --rate 1e-300 -o q.csv", {"--rate", "0.001 to 1e6 Hz"});
+  ExpectRefused(d, "track rec --rate 1e300 -o q.csv", {"--rate", "0.001 to 1e6 Hz"});
+}
+
 }  // namespace
 }  // namespace mcms

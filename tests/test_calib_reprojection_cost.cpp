@@ -14,6 +14,7 @@
 
 #include "calib/mrcal_optimization_inputs.h"
 #include "calib/reprojection_cost.h"
+#include "tests/test_util.h"
 #include "core/error.h"
 #include "vision/camera_model.h"
 
@@ -157,6 +158,19 @@ TEST(CalibMrcalOptimizationInputs, Base85IsPythons) {
   EXPECT_EQ(mrcal_io::B85Encode("hello"), "Xk~0{Zv");
   EXPECT_EQ(mrcal_io::B85Encode(std::string("\x00\x01\x02\x03\xff\xfe\xfd", 7)), "009C6|Ni{");
   EXPECT_EQ(mrcal_io::B85Encode(""), "");
+}
+
+// A deflate bomb (a member stating 3.75 GB inflated in a few bytes) is refused before
+// anything is allocated (core/limits.h kMaxInflatedBytes; issue 37: 11.8 GB RSS, 68 s).
+TEST(CalibMrcalOptimizationInputs, AZipMemberStatingGigabytesIsRefused) {
+  std::string zip = mrcal_io::Zip({{"a.npy", mrcal_io::Npy("<f8", {2}, std::string(16, '\0'))}});
+  ASSERT_EQ(mrcal_io::Unzip(zip).size(), 1u);
+  const size_t cd = zip.find("PK\x01\x02");
+  ASSERT_NE(cd, std::string::npos);
+  for (int k = 0; k < 4; ++k) zip[cd + 24 + k] = static_cast<char>(k == 3 ? 0xF0 : 0x00);  // usize 0xF0000000
+  const std::string e = test::ErrorOf([&] { mrcal_io::Unzip(zip); });
+  EXPECT_NE(e.find("zip member a.npy states 4026531840 bytes inflated"), std::string::npos) << e;
+  EXPECT_NE(e.find("a corrupt or hostile archive"), std::string::npos) << e;
 }
 
 // numpy's .npy 1.0: magic, version, little-endian header length, a dict literal padded

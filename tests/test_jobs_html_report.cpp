@@ -309,6 +309,22 @@ TEST(HtmlReport, BinaryFilesNamedLikeTextAreNotPasted) {
   EXPECT_NE(html.find("caf\xc3\xa9: 3 runs"), std::string::npos) << "UTF-8 text is shown";
 }
 
+// Figures each under the per-file cap but many: the page embeds them up to 64 MB in all
+// (core/limits.h kMaxEmbeddedBytes) and lists the rest (issue 37: 40 SVGs made a 412 MB page).
+TEST(HtmlReport, FiguresAreEmbeddedUpToABoundInAll) {
+  const fs::path d = test::ScratchDir("html_report_many_svgs");
+  const std::string big = "<svg xmlns=\"http://www.w3.org/2000/svg\"><!--" + std::string(7u << 20, 'x') + "--></svg>\n";
+  for (int k = 0; k < 12; ++k) test::WriteText(d / ("fig" + std::to_string(10 + k) + ".svg"), big);
+  HtmlReportContents c;
+  const std::string html = BuildHtmlReport({d}, &c);
+  EXPECT_GE(c.figures, 6);
+  EXPECT_LT(c.figures, 12);
+  EXPECT_LT(html.size(), size_t{66} << 20);
+  EXPECT_NE(html.find("fig21.svg: "), std::string::npos);
+  EXPECT_NE(html.find("more would take the page"), std::string::npos);
+  EXPECT_NE(html.find("figures beyond 67 MB; not embedded"), std::string::npos);
+}
+
 // The first screen of a page (section#answer), "" when it has none; it comes before every
 // other section.
 std::string AnswerOf(const std::string& html) {
