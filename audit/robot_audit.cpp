@@ -13,6 +13,7 @@
 #include "audit/robot_audit_problem.h"
 #include "audit/robot_audit_selection.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/statistics.h"
 
 namespace mcms {
@@ -460,6 +461,18 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   Problem pb = MakeProblem(robot, log, o);
   std::vector<Option> geo_opts, other_opts;
   MakeLayout(&pb, log, o, &geo_opts, &other_opts, &rep.notes);
+  {
+    // The linearised problem holds the Jacobian (m N x P) and the normal matrices of every
+    // fold (m^2 (K + 1) of P x P): bounded before the work, with what to do instead.
+    const double P = pb.P, m = pb.m, bytes = 8.0 * (m * pb.N * P + m * m * (pb.K + 1) * P * P);
+    if (bytes > static_cast<double>(kMaxAuditBytes))
+      Throw("audit robot: ", log.source.empty() ? std::string("the robot log") : log.source.string(), " (",
+            pb.N, " measurements) with the catalog of robot '", robot.Name(), "' (", robot.NumJoints(),
+            " joints, ", pb.P, " parameters) would take ", std::lround(bytes / (1 << 20)),
+            " MB to linearise, beyond the ", kMaxAuditBytes >> 20,
+            " MB limit (core/limits.h): test fewer effects (--only), audit a shorter chain (--tip-link), or thin "
+            "the log (a few hundred poses identify a robot)");
+  }
   say("nominal fit");
   const Eigen::MatrixXd noise0 = FitNominal(&pb);
   say("linearising " + std::to_string(pb.P) + " parameters over " + std::to_string(pb.N) + " measurements");

@@ -38,6 +38,10 @@ constexpr size_t kMaxInflatedBytes = size_t{1} << 30;
 // What an HTML report embeds in all (figures and text files): beyond it the rest are
 // listed, not embedded, so the page stays one a browser opens.
 constexpr size_t kMaxEmbeddedBytes = size_t{64} << 20;
+// What the robot audit's linearised problem may take (its Jacobian and every fold's normal
+// matrices): a 7-joint arm with 1000 poses needs some 300 MB; a 50-joint chain's catalog
+// would need 15 GB.
+constexpr size_t kMaxAuditBytes = size_t{2} << 30;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 

@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "core/random.h"
+#include "model/robot_model.h"
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"
 
@@ -376,6 +378,39 @@ TEST(AttackLimits, TrackWithoutFrameTimesSaysWhatItAssumes) {
   EXPECT_NE(test::ReadAll(d / "p25.csv").find("\n2,0.08,"), std::string::npos) << "frame 2 at 2 / 25 s";
   ExpectRefused(d, "track rec --rate 1e-300 -o q.csv", {"--rate", "0.001 to 1e6 Hz"});
   ExpectRefused(d, "track rec --rate 1e300 -o q.csv", {"--rate", "0.001 to 1e6 Hz"});
+}
+
+// A 50-joint chain: its whole catalog (5961 parameters) would need some 15 GB to
+// linearise (it took 170 s); refused before any work with what to do, and audited in
+// seconds with the effects the user names (--only).
+TEST(AttackLimits, AuditRobotOfAVeryLongChainIsBoundedAndSaysHow) {
+  const auto d = test::ScratchDir("attack_limits_long_chain");
+  std::string yaml = "name: snake50\nconvention: standard_dh\nencoder_sigma_rad: 1.0e-5\njoints:\n";
+  for (int j = 0; j < 50; ++j)
+    yaml += "  - {name: J" + std::to_string(j + 1) + ", d_m: 0, a_m: 0.03, theta_offset_rad: 0, alpha_deg: " + (j % 2 ? "90" : "-90") +
+            ", limits_deg: [-90, 90]}\n";
+  test::WriteText(d / "r50.yaml", yaml);
+  const RobotModel robot = RobotModel::Read(d / "r50.yaml");
+  Rng rng(50);
+  std::string log = "time_s";
+  for (int j = 0; j < 50; ++j) log += ",q" + std::to_string(j + 1) + "_rad";
+  log += ",x_m,y_m,z_m\n";
+  for (int i = 0; i < 120; ++i) {
+    Eigen::VectorXd q(50);
+    for (int j = 0; j < 50; ++j) q[j] = rng.Uniform(-0.5, 0.5);
+    const Vec3 p = robot.T_base_tool(q).t + Vec3(rng.Normal(), rng.Normal(), rng.Normal()) * 2e-5;
+    std::ostringstream row;
+    row.precision(12);
+    row << 10 * i;
+    for (int j = 0; j < 50; ++j) row << "," << q[j];
+    row << "," << p.x() << "," << p.y() << "," << p.z() << "\n";
+    log += row.str();
+  }
+  test::WriteText(d / "log50.csv", log);
+  ExpectRefused(d, "audit robot log50.csv --robot r50.yaml -q -o out",
+                {"log50.csv (120 measurements)", "50 joints, 5961 parameters", "MB to linearise", "--only"});
+  const CliRun only = test::Mcms(d, "audit robot log50.csv --robot r50.yaml --only joint_offset -q -o out");
+  EXPECT_EQ(only.code, 0) << only.err;
 }
 
 }  // namespace
