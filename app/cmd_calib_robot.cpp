@@ -83,10 +83,11 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "--tool-guess");
   job.fixed = a.fixed;
   job.error_motion_harmonics = a.error_motion;
-  if (!std::isfinite(a.position_sigma_mm) || !(a.position_sigma_mm > 0))
-    Throw("calib-robot: --position-sigma-mm is ", a.position_sigma_mm, "; expected a positive finite number");
-  if (!std::isfinite(a.rotation_sigma_deg) || !(a.rotation_sigma_deg > 0))
-    Throw("calib-robot: --rotation-sigma-deg is ", a.rotation_sigma_deg, "; expected a positive finite number");
+  // From a nanometre-class interferometer to a tape measure; beyond, the weights overflow.
+  if (!(a.position_sigma_mm >= 1e-6 && a.position_sigma_mm <= 1e3))
+    Throw("calib-robot: --position-sigma-mm is ", a.position_sigma_mm, "; expected 1e-6 to 1000 mm");
+  if (!(a.rotation_sigma_deg >= 1e-6 && a.rotation_sigma_deg <= 90))
+    Throw("calib-robot: --rotation-sigma-deg is ", a.rotation_sigma_deg, "; expected 1e-6 to 90 deg");
   job.position_sigma_m = a.position_sigma_mm * 1e-3;
   job.rotation_sigma_rad = a.rotation_sigma_deg * kDeg;
   job.folds = a.folds;

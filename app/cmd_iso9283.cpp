@@ -72,7 +72,8 @@ const McmsCommand kIso9283([](CLI::App& app) {
       "camera-only and a MOIFA correction, and prints the four conditions' tables.");
   sub->add_option("POSES", args->poses, "Pose CSV (required unless --simulate)")->check(CLI::ExistingFile);
   sub->add_flag("--simulate", args->simulate, "Run the forward-model experiment instead of reading POSES");
-  sub->add_option("--cycles", args->cycles, "--simulate: cycles P1..P5 (ISO 9283: 30; at least 2)");
+  sub->add_option("--cycles", args->cycles, "--simulate: cycles P1..P5 (ISO 9283: 30; 2 to 100000)")
+      ->check(CLI::Range(2, 100000));
   sub->add_option("--seed", args->seed, "--simulate: random seed");
   sub->add_option("--write-measurements", args->simulate_dir,
                   "--simulate: folder for attained_<k>.csv and path_<k>.csv per condition k = 1..4")

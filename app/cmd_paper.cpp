@@ -31,6 +31,12 @@ int RunPaperFusion(const PaperFusionArgs& a) {
   o.repetitions = a.repetitions;
   o.num_points = a.points;
   o.cube_size = a.cube_mm * 1e-3;
+  // The simulation keeps every point of every repetition: bounded in all (some 0.5 kB each).
+  if (static_cast<double>(a.repetitions) * a.points > 1e7)
+    Throw("paper fusion: --repetitions ", a.repetitions, " x --points ", a.points,
+          " simulated points, more than the 1e7 this simulation holds in memory; the paper's figures need 200 x 100");
+  // A cube a robot's workspace holds (the paper's 100 mm).
+  if (!(a.cube_mm <= 1e4)) Throw("paper fusion: --cube-mm ", a.cube_mm, ": expected up to 10000 mm (a robot's workspace)");
   std::string why;
   if (!o.IsValid(&why)) Throw(why);
   // Resolve (and check) every input before printing anything.

@@ -465,6 +465,11 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     // The linearised problem holds the Jacobian (m N x P) and the normal matrices of every
     // fold (m^2 (K + 1) of P x P): bounded before the work, with what to do instead.
     const double P = pb.P, m = pb.m, bytes = 8.0 * (m * pb.N * P + m * m * (pb.K + 1) * P * P);
+    if (pb.N > kMaxAuditRows)
+      Throw("audit robot: ", log.source.empty() ? std::string("the robot log") : log.source.string(), " has ", pb.N,
+            " measurements, more than the ", kMaxAuditRows,
+            " the audit takes (core/limits.h; its cost grows with them, and a few hundred poses identify a robot): "
+            "thin the log (every k-th row) or audit its sessions apart (--validate scores one against another)");
     if (bytes > static_cast<double>(kMaxAuditBytes))
       Throw("audit robot: ", log.source.empty() ? std::string("the robot log") : log.source.string(), " (",
             pb.N, " measurements) with the catalog of robot '", robot.Name(), "' (", robot.NumJoints(),

@@ -23,6 +23,12 @@ struct PoseRows {
   std::vector<std::string> cycles;  // in file order
 };
 
+std::string Num4(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
 Pose RowPose(const CsvTable& t, size_t row, const std::string& prefix) {
   const double qw = t.Number(row, t.Column(prefix + "qw")), qx = t.Number(row, t.Column(prefix + "qx")),
                qy = t.Number(row, t.Column(prefix + "qy")), qz = t.Number(row, t.Column(prefix + "qz"));
@@ -75,7 +81,7 @@ Iso9283Report EvaluateIso9283Files(const std::filesystem::path& poses_file, cons
                          : ratio < 0.01 ? "the commanded positions cmd_x_m.. in mm?"
                                         : nullptr;
       if (unit)
-        Throw(poses_file.string(), ": the attained positions lie ", std::lround(ratio > 1 ? ratio : 1 / ratio),
+        Throw(poses_file.string(), ": the attained positions lie ", Num4(ratio > 1 ? ratio : 1 / ratio),
               " times as ", ratio > 1 ? "far from" : "close to", " the commanded poses' centre as the commanded ones: ",
               unit, " expected metres");
     }

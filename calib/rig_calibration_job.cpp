@@ -229,6 +229,14 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
   // rig.yaml would overwrite an input.
   std::vector<fs::path> inputs = a.folders;
   inputs.push_back(a.board);
+  // Each camera is named by its folder: two folders of one name would be one camera twice
+  // (its model files written over each other).
+  for (size_t c = 0; c < a.folders.size(); ++c)
+    for (size_t d = 0; d < c; ++d)
+      if (CameraNameOfFolder(a.folders[c], c) == CameraNameOfFolder(a.folders[d], d))
+        Throw("calib-rig: image folders ", a.folders[d].string(), " and ", a.folders[c].string(),
+              " both name camera '", CameraNameOfFolder(a.folders[c], c),
+              "' (a camera is named by its folder): give each camera's images a folder of its own name");
   std::vector<RunOutput> outputs{{a.output / "rig.yaml", "calib-rig -o"}, {a.output / "summary.txt", "calib-rig -o"}};
   for (size_t c = 0; c < a.folders.size(); ++c)
     for (const std::string& file : {"residuals-" + CameraNameOfFolder(a.folders[c], c) + ".svg",

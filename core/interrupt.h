@@ -1,6 +1,6 @@
 // What an interrupted run leaves behind: nothing. The temporaries of a run (a file or
 // folder being written under a temporary name beside its output) are registered while
-// they exist; when the process is ended by SIGINT, SIGTERM or SIGHUP, the handler that
+// they exist; when the process is ended by SIGINT, SIGTERM, SIGHUP or SIGQUIT, the handler that
 // InstallInterruptCleanup sets removes every registered one, then ends the process as the
 // signal would have (exit status 128 + signal). The handler uses only async-signal-safe
 // calls (unlinkat, openat, getdents64): it may run at any point of the work.
@@ -10,7 +10,7 @@
 
 namespace mcms {
 
-// Sets the handler for SIGINT, SIGTERM and SIGHUP (the command-line program does, once;
+// Sets the handler for SIGINT, SIGTERM, SIGHUP and SIGQUIT (the command-line program does, once;
 // the Python module does not: Python keeps its own SIGINT handling, and a run stopped by
 // an exception removes its temporaries itself).
 void InstallInterruptCleanup();

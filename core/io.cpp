@@ -1,7 +1,9 @@
 #include "core/io.h"
 
+#include <signal.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -67,8 +69,30 @@ void RequireNotReadThisRun(const fs::path& output, bool folder) {
   }
 }
 
+void RemoveStaleTemporaries(const fs::path& dir, const std::string& prefix) {
+  std::error_code ec;
+  const fs::path d = dir.empty() ? fs::path(".") : dir;
+  for (auto it = fs::directory_iterator(d, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string pid = name.substr(prefix.size());
+    if (pid.empty() || pid.find_first_not_of("0123456789") != std::string::npos || pid.size() > 9) continue;
+    const pid_t p = static_cast<pid_t>(std::stol(pid));
+    if (p > 0 && ::kill(p, 0) != 0 && errno == ESRCH) {
+      std::error_code rm;
+      fs::remove_all(it->path(), rm);
+    }
+  }
+}
+
 void WriteFileAtomically(const fs::path& path, const std::function<void(std::ostream&)>& write) {
   RequireNotReadThisRun(path, false);
+  {
+    std::error_code ec;
+    if (fs::exists(path, ec) && !fs::is_regular_file(path, ec) && !fs::is_directory(path, ec))
+      Throw("output ", path.string(), " is a device, FIFO or socket, not a file; it was not replaced (give a file name)");
+  }
+  RemoveStaleTemporaries(path.parent_path(), path.filename().string() + ".partial-");
   if (path.has_parent_path() && !path.parent_path().empty()) {
     std::error_code ec;
     fs::create_directories(path.parent_path(), ec);
@@ -124,6 +148,10 @@ void RequireWritableFile(const fs::path& path, const std::string& what) {
   std::error_code ec;
   if (fs::is_directory(path, ec))
     Throw(what, " ", path.string(), " is a folder; give a file name (nothing was written)");
+  // An output replaces its file whole (a temporary renamed into place): a device, FIFO or
+  // socket (/dev/null, /dev/stdout) would be replaced by a regular file.
+  if (fs::exists(path, ec) && !fs::is_regular_file(path, ec))
+    Throw(what, " ", path.string(), " is a device, FIFO or socket, not a file; give a file name (nothing was written)");
   if (fs::exists(path, ec) && ::access(path.c_str(), W_OK) != 0)
     Throw(what, " ", path.string(), " exists and is not writable; choose another path (nothing was written)");
   RequireWritableAncestor(path, path.has_parent_path() ? path.parent_path() : fs::path("."), what);

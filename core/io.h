@@ -38,9 +38,14 @@ std::vector<std::filesystem::path> InputsReadThisRun();
 // lies inside a folder it read whole: the last check before an output replaces anything.
 void RequireNotReadThisRun(const std::filesystem::path& output, bool folder);
 
+// Removes the entries of `dir` named `prefix` + a process id of a process that no longer
+// runs: the temporaries a killed run left (".out.partial-PID", "poses.csv.rows.partial-PID").
+void RemoveStaleTemporaries(const std::filesystem::path& dir, const std::string& prefix);
+
 // Writes a file through a temporary name in the same folder and renames it into
 // place only when `write` returned normally, so a failure leaves no partial file.
-// Refused (RequireNotReadThisRun) when the file is one the run read.
+// Refused (RequireNotReadThisRun) when the file is one the run read. What a killed run
+// left beside it ("<name>.partial-PID") is removed first.
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write);
 

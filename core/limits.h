@@ -42,6 +42,9 @@ constexpr size_t kMaxEmbeddedBytes = size_t{64} << 20;
 // matrices): a 7-joint arm with 1000 poses needs some 300 MB; a 50-joint chain's catalog
 // would need 15 GB.
 constexpr size_t kMaxAuditBytes = size_t{2} << 30;
+// Measurements the robot audit takes from one log: 50,000 rows of a 6-joint arm take some
+// 2 minutes; a continuously logged trajectory of 400,000 rows is thinned first.
+constexpr int kMaxAuditRows = 50000;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 

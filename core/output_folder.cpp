@@ -44,28 +44,6 @@ std::pair<std::string, std::set<std::string>> ReadManifest(const std::filesystem
   return m;
 }
 
-// Removes what an interrupted run left beside `out` (".<name>.partial-PID",
-// ".<name>.old-PID" of a process that no longer runs).
-void RemoveStaleTemporaries(const std::filesystem::path& out) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  const std::string stem = std::string(".").append(out.filename().string());
-  for (auto it = fs::directory_iterator(out.parent_path(), ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    for (const char* tag : {".partial-", ".old-"}) {
-      const std::string prefix = stem + tag;
-      if (name.rfind(prefix, 0) != 0) continue;
-      const std::string pid = name.substr(prefix.size());
-      if (pid.empty() || pid.find_first_not_of("0123456789") != std::string::npos || pid.size() > 9) continue;
-      const pid_t p = static_cast<pid_t>(std::stol(pid));
-      if (p > 0 && ::kill(p, 0) != 0 && errno == ESRCH) {
-        std::error_code rm;
-        fs::remove_all(it->path(), rm);
-      }
-    }
-  }
-}
-
 }  // namespace
 
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
@@ -133,7 +111,9 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   namespace fs = std::filesystem;
   fs::path out = fs::absolute(folder).lexically_normal();
   if (!out.has_filename()) out = out.parent_path();
-  RemoveStaleTemporaries(out);
+  // What an interrupted run left beside `out` (of a process that no longer runs).
+  for (const char* tag : {".partial-", ".old-"})
+    RemoveStaleTemporaries(out.parent_path(), std::string(".").append(out.filename().string()).append(tag));
   RequireReplaceableFolder(out, marker_files, kind, what);
   RequireNotReadThisRun(out, true);
   // (not "." + string: GCC 12 reports a false -Wrestrict overlap in that concatenation)

@@ -7,8 +7,16 @@
 namespace mcms {
 namespace {
 
-void CheckUniqueKeys(const YAML::Node& n, const std::string& source, int depth) {
+// Nodes a document may hold once its aliases are expanded: every mcms file has a few
+// thousand; a few hundred bytes of nested aliases (a "billion laughs" file) expand to
+// billions, which every reader would walk.
+constexpr long kMaxYamlNodes = 2000000;
+
+void CheckUniqueKeys(const YAML::Node& n, const std::string& source, int depth, long* nodes) {
   if (depth > 256) Throw(source, ": nested more than 256 levels deep");
+  if (++*nodes > kMaxYamlNodes)
+    Throw(source, ": more than ", kMaxYamlNodes,
+          " values once its aliases (*name) are expanded: nested aliases that multiply (a YAML bomb?)");
   if (n.IsMap()) {
     std::map<std::string, int> seen;  // key -> line (1-based)
     for (const auto& kv : n) {
@@ -20,10 +28,10 @@ void CheckUniqueKeys(const YAML::Node& n, const std::string& source, int depth) 
           Throw(source, " line ", line, ": key '", key, "' appears twice (lines ", it->second, " and ", line,
                 "); a map holds each key once: remove one");
       }
-      CheckUniqueKeys(kv.second, source, depth + 1);
+      CheckUniqueKeys(kv.second, source, depth + 1, nodes);
     }
   } else if (n.IsSequence()) {
-    for (const auto& e : n) CheckUniqueKeys(e, source, depth + 1);
+    for (const auto& e : n) CheckUniqueKeys(e, source, depth + 1, nodes);
   }
 }
 
@@ -31,7 +39,8 @@ void CheckUniqueKeys(const YAML::Node& n, const std::string& source, int depth) 
 
 YAML::Node LoadYaml(const std::string& text, const std::string& source) {
   YAML::Node root = YAML::Load(text);
-  CheckUniqueKeys(root, source, 0);
+  long nodes = 0;
+  CheckUniqueKeys(root, source, 0, &nodes);
   return root;
 }
 

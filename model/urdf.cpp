@@ -247,6 +247,21 @@ RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& cha
 }
 
 RobotModel ParseUrdf(const std::string& xml, const std::string& source, const ChainSelection& chain) {
+  {
+    // The XML parser recurses per nested element: a file nested 100,000 deep overflows the
+    // stack. A URDF nests some 5 levels (robot, link, visual, geometry, mesh).
+    int depth = 0;
+    for (size_t i = xml.find('<'); i != std::string::npos; i = xml.find('<', i + 1)) {
+      if (i + 1 >= xml.size() || xml[i + 1] == '?' || xml[i + 1] == '!') continue;
+      if (xml[i + 1] == '/') {
+        --depth;
+        continue;
+      }
+      const size_t close = xml.find('>', i);
+      if (close != std::string::npos && xml[close - 1] == '/') continue;
+      if (++depth > 100) Throw(source, ": XML elements nested more than 100 deep; a URDF nests a few levels");
+    }
+  }
   urdf::ModelInterfaceSharedPtr model;
   {
     std::lock_guard<std::mutex> lock(ParserMutex());

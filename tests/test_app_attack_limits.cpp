@@ -413,5 +413,64 @@ TEST(AttackLimits, AuditRobotOfAVeryLongChainIsBoundedAndSaysHow) {
   EXPECT_EQ(only.code, 0) << only.err;
 }
 
+// What the second attack (360 new inputs) found, one line each: outputs onto devices and
+// FIFOs, two image folders of one camera name, the user's own report.html, YAML alias
+// bombs, URDFs nested beyond any robot, sigmas and counts no run can hold, and the
+// temporaries a killed track left, removed by the next run.
+TEST(AttackLimits, SecondAttackFindings) {
+  const auto d = test::ScratchDir("attack_limits_second");
+  {
+    // (not through ExpectRefused: its snapshot would read the FIFO and wait for a writer)
+    const auto f = test::ScratchDir("attack_limits_fifo");
+    ASSERT_EQ(::system(("rm -f '" + (f / "fifo.csv").string() + "' && mkfifo '" + (f / "fifo.csv").string() + "'").c_str()), 0);
+    const CliRun r = test::Mcms(f, "iso9283 '" + (kSource / "examples" / "iso9283" / "poses.csv").string() + "' -o fifo.csv");
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("fifo.csv is a device, FIFO or socket"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::is_fifo(f / "fifo.csv"));
+  }
+
+  fs::create_directories(d / "a");
+  fs::create_directories(d / "b");
+  fs::copy(kSource / "examples" / "boards" / "cam0", d / "a" / "cam0", fs::copy_options::recursive | fs::copy_options::skip_existing);
+  fs::copy(kSource / "examples" / "boards" / "cam0", d / "b" / "cam0", fs::copy_options::recursive | fs::copy_options::skip_existing);
+  fs::copy_file(kSource / "examples" / "boards" / "board.yaml", d / "board.yaml", fs::copy_options::overwrite_existing);
+  ExpectRefused(d, "calib-rig board.yaml a/cam0 b/cam0 -o out", {"a/cam0", "b/cam0", "both name camera 'cam0'"});
+
+  fs::create_directories(d / "rp");
+  test::WriteText(d / "rp" / "notes.txt", "run notes\n");
+  test::WriteText(d / "rp" / "report.html", "<html>my own page</html>\n");
+  ExpectRefused(d, "report rp", {"rp/report.html exists and is not a page mcms report wrote"});
+  fs::remove(d / "rp" / "report.html");
+  ASSERT_EQ(test::Mcms(d, "report rp").code, 0);
+  EXPECT_EQ(test::Mcms(d, "report rp").code, 0) << "its own page is replaced";
+
+  // 9 levels of 9 aliases: 387 million values once expanded.
+  std::string bomb = "a0: &a0 [x, x, x, x, x, x, x, x, x]\n";
+  for (int k = 1; k < 10; ++k) {
+    const std::string p = "*a" + std::to_string(k - 1);
+    bomb += "a" + std::to_string(k) + ": &a" + std::to_string(k) + " [" + p;
+    for (int j = 1; j < 9; ++j) bomb += ", " + p;
+    bomb += "]\n";
+  }
+  test::WriteText(d / "bomb.yaml", bomb);
+  ExpectRefused(d, "convert-robot bomb.yaml -o r.urdf", {"bomb.yaml", "aliases", "YAML bomb?"});
+  std::string deep = "<robot name=\"r\">";
+  for (int k = 0; k < 5000; ++k) deep += "<link name=\"l\">";
+  test::WriteText(d / "deep.urdf", deep);
+  ExpectRefused(d, "convert-robot deep.urdf -o r.yaml", {"deep.urdf", "nested more than 100 deep"});
+
+  fs::copy_file(kSource / "examples" / "robot_measurements.yaml", d / "m.yaml", fs::copy_options::overwrite_existing);
+  ExpectRefused(d, "calib-robot m.yaml -o r.yaml --quiet --position-sigma-mm 1e-300", {"--position-sigma-mm", "1e-6 to 1000"});
+  ExpectRefused(d, "iso9283 --simulate --cycles 2000000000 -o x.csv", {"--cycles"});
+  ExpectRefused(d, "paper fusion --repetitions 1000000 --points 1000000", {"--repetitions", "1e7"});
+
+  // A killed track's rows file (a process id that no longer runs) goes with the next run.
+  fs::remove_all(d / "rec");
+  ASSERT_EQ(test::Mcms(d, "render --frames 3 -q -o rec").code, 0);
+  test::WriteText(d / "p.csv.rows.partial-999999999", "0,0\n");
+  ASSERT_EQ(test::Mcms(d, "track rec -q -o p.csv").code, 0);
+  EXPECT_FALSE(fs::exists(d / "p.csv.rows.partial-999999999"));
+}
+
 }  // namespace
 }  // namespace mcms

@@ -2,6 +2,7 @@
 // file, line and column of every problem, output paths are refused before any work.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -126,13 +127,15 @@ TEST(Io, OutputPathsAreCheckedBeforeWork) {
 // would have; what it did not register stays.
 TEST(Io, AnInterruptedRunLeavesNoTemporaries) {
   const fs::path dir = test::ScratchDir("core_io_interrupt");
-  for (int sig : {SIGINT, SIGTERM}) {
+  for (int sig : {SIGINT, SIGTERM, SIGQUIT}) {
     fs::remove_all(dir);
     fs::create_directories(dir);
     const pid_t pid = ::fork();
     ASSERT_GE(pid, 0);
     if (pid == 0) {
       ::signal(SIGINT, SIG_DFL);  // (a background process may ignore it: set it as a terminal does)
+      const struct rlimit no_core = {0, 0};
+      ::setrlimit(RLIMIT_CORE, &no_core);  // (SIGQUIT's default action would dump core)
       InstallInterruptCleanup();
       fs::create_directories(dir / ".out.partial-1" / "images" / "cam0");
       for (int k = 0; k < 300; ++k) std::ofstream(dir / ".out.partial-1" / "images" / "cam0" / (std::to_string(k) + ".png")) << k;

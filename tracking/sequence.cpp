@@ -400,6 +400,7 @@ PoseCsvWriter::PoseCsvWriter(fs::path path, std::vector<std::string> extra_colum
     fs::create_directories(path_.parent_path(), ec);
     if (ec) Throw("cannot create folder ", path_.parent_path().string(), " for output ", path_.string(), ": ", ec.message());
   }
+  RemoveStaleTemporaries(path_.parent_path(), path_.filename().string() + ".rows.partial-");  // of killed runs
   rows_path_ = path_.string() + ".rows.partial-" + std::to_string(::getpid());
   rows_guard_ = std::make_unique<RemovedOnInterrupt>(rows_path_);
   rows_out_ = std::make_unique<std::ofstream>(rows_path_, std::ios::binary | std::ios::trunc);
