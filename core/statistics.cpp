@@ -1,6 +1,8 @@
 #include "core/statistics.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 
 #include <Eigen/Cholesky>
 #include <boost/math/distributions/chi_squared.hpp>
@@ -70,6 +72,70 @@ Vec6 PoseErrorVector(const Pose& estimate, const Pose& truth) { return BoxMinus(
 double PoseNees(const Pose& estimate, const Pose& truth, const Mat6& cov) {
   const Vec6 e = PoseErrorVector(estimate, truth);
   return e.dot(cov.ldlt().solve(e));
+}
+
+namespace {
+
+// The median of v by selection (reorders v).
+double SelectedMedian(std::vector<double>& v) {
+  const size_t h = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(h), v.end());
+  const double upper = v[h];
+  if (v.size() % 2) return upper;
+  const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(h));
+  return 0.5 * (lower + upper);
+}
+
+// The bins holding ranks (n - 1) / 2 and n / 2 of the counts c[0..bins).
+void MiddleBins(const int* c, int bins, size_t n, int* a, int* b) {
+  const size_t lo_rank = (n - 1) / 2, hi_rank = n / 2;
+  size_t seen = 0;
+  *a = *b = -1;
+  for (int i = 0; i < bins && *b < 0; ++i) {
+    seen += static_cast<size_t>(c[i]);
+    if (*a < 0 && seen > lo_rank) *a = i;
+    if (seen > hi_rank) *b = i;
+  }
+}
+
+// MedianAndMad by counting; false (nothing computed) when v is not integers of a small span.
+bool CountedMedianAndMad(const std::vector<double>& v, std::vector<int>* counts, double* median, double* mad) {
+  const size_t n = v.size();
+  const auto [lo_it, hi_it] = std::minmax_element(v.begin(), v.end());
+  const double lo = *lo_it, hi = *hi_it;
+  if (!(hi - lo <= 4.0 * static_cast<double>(n) + 256.0) || !(std::abs(lo) < 1e9)) return false;
+  const int base = static_cast<int>(lo), bins = static_cast<int>(hi - lo) + 1;
+  // counts[0, bins): the values from base; counts[bins, 3 bins): twice the deviations.
+  counts->assign(3 * static_cast<size_t>(bins), 0);
+  int* values = counts->data();
+  int* twice_dev = values + bins;
+  for (const double x : v) {
+    const int k = static_cast<int>(x) - base;
+    if (static_cast<double>(k + base) != x) return false;
+    ++values[k];
+  }
+  // The arithmetic of SelectedMedian on the same values: exact for integers and halves.
+  int a, b;
+  MiddleBins(values, bins, n, &a, &b);
+  const double va = a + base, vb = b + base;
+  *median = n % 2 ? vb : 0.5 * (va + vb);
+  const int twice_m = static_cast<int>(2 * *median) - 2 * base;  // |2 x - 2 median| < 2 bins
+  for (int k = 0; k < bins; ++k)
+    if (values[k]) twice_dev[std::abs(2 * k - twice_m)] += values[k];
+  MiddleBins(twice_dev, 2 * bins, n, &a, &b);
+  const double da = a * 0.5, db = b * 0.5;
+  *mad = n % 2 ? db : 0.5 * (da + db);
+  return true;
+}
+
+}  // namespace
+
+void MedianAndMad(std::vector<double>& v, std::vector<int>* counts, double* median, double* mad) {
+  if (v.empty()) Throw("MedianAndMad: no values");
+  if (CountedMedianAndMad(v, counts, median, mad)) return;
+  *median = SelectedMedian(v);
+  for (double& x : v) x = std::abs(x - *median);
+  *mad = SelectedMedian(v);
 }
 
 }  // namespace mcms

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <utility>
+#include <vector>
 
 #include "core/pose_math.h"
 
@@ -27,6 +28,13 @@ std::pair<double, double> ChiSquareBand(double dof, double p);
 double FisherSurvival(double x, double d1, double d2);
 // P(|Z| > |z|) for Z ~ N(0, 1).
 double TwoSidedNormalP(double z);
+
+// The median of v and the median of the absolute deviations from it (unscaled; 1.4826
+// times it estimates a normal sigma). An even count's median is the mean of its two middle
+// values. Values that are all integers spanning at most 4 n + 256 (pixel values) are
+// counted in `counts` (linear time, v kept); others are selected (nth_element, v
+// reordered). Both give the same figures, to the bit. v must not be empty.
+void MedianAndMad(std::vector<double>& v, std::vector<int>* counts, double* median, double* mad);
 
 // The error of an estimated pose against the truth in the project's [dtheta; dp] layout
 // (docs/conventions.md): BoxMinus(estimate, truth), and its NEES e^T cov^-1 e, which is

@@ -1,7 +1,10 @@
 // The chi-square distribution against tabulated values.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
+#include <vector>
 
 #include "core/error.h"
 #include "core/statistics.h"
@@ -37,6 +40,48 @@ TEST(ChiSquare, BadArguments) {
   EXPECT_THROW(ChiSquareSurvival(NAN, 2.0), InputError);
   EXPECT_THROW(ChiSquareQuantile(1.0, 2.0), InputError);
   EXPECT_THROW(ChiSquareQuantile(-0.1, 2.0), InputError);
+}
+
+// The median and the median absolute deviation, counted for pixel values and selected
+// otherwise, against a sort: the same figures to the bit (the blob detector's background
+// ring depends on it), for odd and even counts, half-integer medians, wide spans (selected)
+// and non-integers.
+TEST(MedianAndMad, CountingAndSelectionGiveTheSortedFigures) {
+  auto sorted_median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    const size_t h = v.size() / 2;
+    return v.size() % 2 ? v[h] : 0.5 * (v[h - 1] + v[h]);
+  };
+  std::mt19937 gen(7);
+  int counted = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const size_t n = 1 + gen() % 300;
+    std::vector<double> v(n);
+    const int kind = trial % 4;
+    for (double& x : v) {
+      if (kind == 0) x = 40 + static_cast<int>(gen() % 9);           // 8-bit background and noise
+      if (kind == 1) x = -3 + static_cast<int>(gen() % 7);           // negative integers
+      if (kind == 2) x = static_cast<int>(gen() % 65536);            // a wide span: selected
+      if (kind == 3) x = (gen() % 1000) / 7.0;                       // not integers: selected
+    }
+    if (trial % 50 == 0) v.back() = 1e12;  // an outlier far beyond the span: selected
+    const double m = sorted_median(v);
+    std::vector<double> dev(n);
+    for (size_t i = 0; i < n; ++i) dev[i] = std::abs(v[i] - m);
+    const double mad = sorted_median(dev);
+    std::vector<double> w = v;
+    std::vector<int> counts;
+    double got_m = -1, got_mad = -1;
+    MedianAndMad(w, &counts, &got_m, &got_mad);
+    EXPECT_EQ(got_m, m) << "trial " << trial << " n " << n;
+    EXPECT_EQ(got_mad, mad) << "trial " << trial << " n " << n;
+    counted += w == v && (kind <= 1) && trial % 50 != 0;  // counting keeps v as given
+  }
+  EXPECT_EQ(counted, 1000 - 20) << "integers of a small span are counted";
+  std::vector<double> none;
+  std::vector<int> counts;
+  double m, mad;
+  EXPECT_THROW(MedianAndMad(none, &counts, &m, &mad), InputError);
 }
 
 }  // namespace

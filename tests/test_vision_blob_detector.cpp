@@ -385,6 +385,9 @@ TEST(BlobDetector, WindowsMeasureAsTheWholeImageAndFlagACutBlob) {
     const std::vector<Blob> in = DetectBlobsInWindows(img, windows, {}, &window_stats);
     EXPECT_EQ(window_stats.threshold_dn, whole_stats.threshold_dn);
     EXPECT_EQ(window_stats.background_dn, whole_stats.background_dn);
+    // The whole image takes its sample during the pass that reads every row; windows take
+    // it alone: the same figures.
+    EXPECT_EQ(window_stats.noise_dn, whole_stats.noise_dn);
     ASSERT_EQ(in.size(), 3u) << "depth " << depth;
     for (const Blob& b : in) {
       const auto same = std::find_if(whole.begin(), whole.end(),

@@ -5,10 +5,12 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace mcms {
 
@@ -161,15 +163,21 @@ inline bool Pass(int v, int t) {
   return kDark ? v < t : v > t;
 }
 
-// True when any of the kChunk pixels at p passes the threshold. Written as a min/max
-// reduction over a fixed count so that the compiler vectorizes it: this is the only code
-// that touches every pixel of the image.
+// The extreme (maximum for bright, minimum for dark) of the kCount pixels at p. Written
+// as a min/max reduction over a fixed count so that the compiler vectorizes it: this is
+// the only code that touches every pixel of the image.
+template <typename T, bool kDark, int kCount>
+inline T Extreme(const T* p) {
+  // Start from the identity so that all kCount elements go through the vector loop.
+  T m = kDark ? std::numeric_limits<T>::max() : 0;
+  for (int k = 0; k < kCount; ++k) m = kDark ? std::min(m, p[k]) : std::max(m, p[k]);
+  return m;
+}
+
+// True when any of the kChunk pixels at p passes the threshold.
 template <typename T, bool kDark, int kChunk>
 inline bool AnyPass(const T* p, int t) {
-  // Start from the identity so that all kChunk elements go through the vector loop.
-  T m = kDark ? std::numeric_limits<T>::max() : 0;
-  for (int k = 0; k < kChunk; ++k) m = kDark ? std::min(m, p[k]) : std::max(m, p[k]);
-  return Pass<kDark>(m, t);
+  return Pass<kDark>(Extreme<T, kDark, kChunk>(p), t);
 }
 
 // True when any pixel of the row passes the threshold.
@@ -184,28 +192,51 @@ bool RowPasses(const T* row, int W, int t) {
   return false;
 }
 
+// The row's extreme pixel: its maximum for bright blobs, its minimum for dark ones (a
+// reduction the compiler vectorizes; a row passes the threshold t when its extreme does).
+// Blocks of 256 bytes are reduced with a fixed count (Extreme: the compiler then keeps
+// several vector accumulators, 2.3 times the rate of one loop over the row, cached).
+template <typename T, bool kDark>
+T RowExtreme(const T* row, int W) {
+  constexpr int kBlock = 256 / sizeof(T);
+  T m = kDark ? std::numeric_limits<T>::max() : 0;
+  int x = 0;
+  for (; x + kBlock <= W; x += kBlock) {
+    const T b = Extreme<T, kDark, kBlock>(row + x);
+    m = kDark ? std::min(m, b) : std::max(m, b);
+  }
+  for (; x < W; ++x) m = kDark ? std::min(m, row[x]) : std::max(m, row[x]);
+  return m;
+}
+
 // The runs of above-threshold pixels of each row, united with the overlapping runs of the
 // previous row (8-connectivity). Returns runs and their parents.
 //
 // With skip_single_rows, regions that lie within one row may be left out (those that
-// touch a row next to a row with a region pixel are still found): a first pass reads only
-// the even rows, and only even rows that hold a pixel beyond the threshold and the odd
-// rows next to them are labelled. Every region that spans two rows or more is found
-// whole, because each of its odd rows has a neighbouring even row in the region. For the
-// detector's usual options no one-row region can be accepted (DetectBlobs), and the
-// first pass tests half of the image's rows.
+// touch a row next to a row with a region pixel are still found): only even rows that
+// hold a pixel beyond the threshold and the odd rows next to them are labelled. Every
+// region that spans two rows or more is found whole, because each of its odd rows has a
+// neighbouring even row in the region. For the detector's usual options no one-row
+// region can be accepted (DetectBlobs).
+//
+// `extremes`, when given, holds each row's extreme pixel (RowExtreme), read beforehand.
 template <typename T, bool kDark>
-void LabelRuns(const cv::Mat& img, int t, bool skip_single_rows, std::vector<Run>* runs, std::vector<int>* parent) {
+void LabelRuns(const cv::Mat& img, int t, bool skip_single_rows, const std::vector<T>* extremes,
+               std::vector<Run>* runs, std::vector<int>* parent) {
   // Blocks of 256 bytes are skipped first (one horizontal reduction per block), then
   // chunks of 64 bytes within the block that passed, then single pixels.
   constexpr int kChunk = 64 / sizeof(T), kBlock = 4 * kChunk;
   const int W = img.cols, H = img.rows;
-  // label[y]: row y is labelled.
-  std::vector<char> label(H, 1);
-  if (skip_single_rows) {
-    for (int y = 0; y < H; y += 2) label[y] = RowPasses<T, kDark>(img.ptr<T>(y), W, t);
-    for (int y = 1; y < H; y += 2) label[y] = label[y - 1] || (y + 1 < H && label[y + 1]);
-  }
+  // label[y]: row y is labelled. A row without a pixel beyond the threshold has no runs,
+  // so leaving it out changes nothing. Every row is tested, in memory order: reading
+  // only the even rows skips half of the bytes but defeats the hardware prefetcher, and
+  // from main memory it took 2.4 times as long as reading them all (143 against 60 us
+  // for a 1280 x 1024 image on the 2-core bench machine).
+  std::vector<char> label(H);
+  for (int y = 0; y < H; ++y)
+    label[y] = extremes ? Pass<kDark>((*extremes)[y], t) : RowPasses<T, kDark>(img.ptr<T>(y), W, t);
+  if (skip_single_rows)  // an odd row only next to an even row with such a pixel
+    for (int y = 1; y < H; y += 2) label[y] = label[y] && (label[y - 1] || (y + 1 < H && label[y + 1]));
   int prev_begin = 0, prev_end = 0;
   for (int y = 0; y < H; ++y) {
     const int row_begin = static_cast<int>(runs->size());
@@ -268,47 +299,6 @@ double MedianOfHistogram(const int* hist, int bins, size_t total) {
   return lo;
 }
 
-// SampleStats for 8-bit images, by histograms of the sampled values and of the signed
-// differences (the same sample and the same results as the general code, without storing
-// or sorting the samples).
-void SampleStatsByte(const cv::Mat& img, int step, double* background, double* noise) {
-  const int W = img.cols, H = img.rows;
-  int values[256] = {0}, diffs[511] = {0};  // diffs[255 + d], d in [-255, 255]
-  size_t nv = 0, nd = 0;
-  for (int y = std::min(step / 2, H - 1); y < H; y += step) {
-    const uint8_t* row = img.ptr<uint8_t>(y);
-    const uint8_t* below = y + 1 < H ? img.ptr<uint8_t>(y + 1) : nullptr;
-    for (int x = std::min(step / 2, W - 1); x < W; x += step) {
-      ++values[row[x]];
-      ++nv;
-      if (x + 1 < W) {
-        ++diffs[255 + row[x + 1] - row[x]];
-        ++nd;
-      } else if (below) {
-        ++diffs[255 + below[x] - row[x]];
-        ++nd;
-      }
-    }
-  }
-  *background = MedianOfHistogram(values, 256, nv);
-  double sigma = 0;
-  if (nd > 0) {
-    int absd[256] = {0};
-    for (int d = -255; d <= 255; ++d) absd[std::abs(d)] += diffs[255 + d];
-    const double scale = 1.4826 * MedianOfHistogram(absd, 256, nd);  // sigma of a difference, robustly
-    const double clip = std::max(3.5 * scale, 2.0);
-    double s2 = 0;
-    int n = 0;
-    for (int d = -255; d <= 255; ++d)
-      if (diffs[255 + d] > 0 && std::abs(d) <= clip) {
-        s2 += static_cast<double>(diffs[255 + d]) * d * d;
-        n += diffs[255 + d];
-      }
-    if (n > 0) sigma = std::sqrt(s2 / n / 2.0);  // a difference has twice a pixel's variance
-  }
-  *noise = std::max(sigma, kQuantSigma);
-}
-
 // The sparse grid's spacing (px) for a W x H image: about 4096 points. Rows
 // min(step / 2, H - 1) + k step are sampled (and the row below each where the last sampled
 // column is the image's last: its difference is vertical); RowsReadInWindows lists them.
@@ -320,46 +310,110 @@ int SampleStep(int W, int H) {
 // comes from differences of horizontal neighbours, which cancel any smooth background: the
 // median absolute difference gives a robust scale, then the RMS of the differences within
 // 3.5 of those scales gives an estimate that is not quantized like the median of integers.
+// Rows are added in increasing order (AddRow of each row for which Samples is true), so
+// that the sample can be taken while a pass reads the image; Finish gives the figures.
+// 8-bit images are counted in histograms of the values and of the signed differences (the
+// same results as the general code, without storing or sorting the samples).
 template <typename T>
-void SampleStats(const cv::Mat& img, double* background, double* noise) {
-  const int W = img.cols, H = img.rows;
-  const int step = SampleStep(W, H);
-  if constexpr (sizeof(T) == 1) {
-    SampleStatsByte(img, step, background, noise);
-    return;
-  }
-  std::vector<int> values, diffs;
-  values.reserve(static_cast<size_t>(W / step + 1) * (H / step + 1));
-  diffs.reserve(values.capacity());
-  // Grid offsets clamped into the image, so that even a 1-pixel-wide image is sampled.
-  for (int y = std::min(step / 2, H - 1); y < H; y += step) {
-    const T* row = img.ptr<T>(y);
-    const T* below = y + 1 < H ? img.ptr<T>(y + 1) : nullptr;
-    for (int x = std::min(step / 2, W - 1); x < W; x += step) {
-      values.push_back(row[x]);
-      if (x + 1 < W)
-        diffs.push_back(static_cast<int>(row[x + 1]) - row[x]);
-      else if (below)
-        diffs.push_back(static_cast<int>(below[x]) - row[x]);
+class SparseSample {
+ public:
+  explicit SparseSample(const cv::Mat& img)
+      : img_(img),
+        step_(SampleStep(img.cols, img.rows)),
+        y0_(std::min(step_ / 2, img.rows - 1)),
+        x0_(std::min(step_ / 2, img.cols - 1)) {
+    if constexpr (!kByte) {
+      values_.reserve(static_cast<size_t>(img.cols / step_ + 1) * (img.rows / step_ + 1));
+      diffs_.reserve(values_.capacity());
     }
   }
-  *background = Median(values);
-  double sigma = 0;
-  if (!diffs.empty()) {
-    std::vector<int> absd(diffs.size());
-    for (size_t i = 0; i < diffs.size(); ++i) absd[i] = std::abs(diffs[i]);
-    const double scale = 1.4826 * Median(absd);  // sigma of a difference, robustly
-    const double clip = std::max(3.5 * scale, 2.0);
-    double s2 = 0;
-    int n = 0;
-    for (int d : diffs)
-      if (std::abs(d) <= clip) {
-        s2 += static_cast<double>(d) * d;
-        ++n;
-      }
-    if (n > 0) sigma = std::sqrt(s2 / n / 2.0);  // a difference has twice a pixel's variance
+  int first_row() const { return y0_; }
+  int step() const { return step_; }
+  bool Samples(int y) const { return y >= y0_ && (y - y0_) % step_ == 0; }
+
+  void AddRow(int y) {
+    const int W = img_.cols, H = img_.rows;
+    const T* row = img_.ptr<T>(y);
+    const T* below = y + 1 < H ? img_.ptr<T>(y + 1) : nullptr;
+    for (int x = x0_; x < W; x += step_) {
+      Value(row[x]);
+      if (x + 1 < W)
+        Diff(static_cast<int>(row[x + 1]) - row[x]);
+      else if (below)
+        Diff(static_cast<int>(below[x]) - row[x]);
+    }
   }
-  *noise = std::max(sigma, kQuantSigma);
+
+  void Finish(double* background, double* noise) {
+    double sigma = 0;
+    if constexpr (kByte) {
+      *background = MedianOfHistogram(values_, 256, nv_);
+      if (nd_ > 0) {
+        int absd[256] = {0};
+        for (int d = -255; d <= 255; ++d) absd[std::abs(d)] += diffs_[255 + d];
+        const double scale = 1.4826 * MedianOfHistogram(absd, 256, nd_);  // sigma of a difference, robustly
+        const double clip = std::max(3.5 * scale, 2.0);
+        double s2 = 0;
+        int n = 0;
+        for (int d = -255; d <= 255; ++d)
+          if (diffs_[255 + d] > 0 && std::abs(d) <= clip) {
+            s2 += static_cast<double>(diffs_[255 + d]) * d * d;
+            n += diffs_[255 + d];
+          }
+        if (n > 0) sigma = std::sqrt(s2 / n / 2.0);  // a difference has twice a pixel's variance
+      }
+    } else {
+      *background = Median(values_);
+      if (!diffs_.empty()) {
+        std::vector<int> absd(diffs_.size());
+        for (size_t i = 0; i < diffs_.size(); ++i) absd[i] = std::abs(diffs_[i]);
+        const double scale = 1.4826 * Median(absd);  // sigma of a difference, robustly
+        const double clip = std::max(3.5 * scale, 2.0);
+        double s2 = 0;
+        int n = 0;
+        for (int d : diffs_)
+          if (std::abs(d) <= clip) {
+            s2 += static_cast<double>(d) * d;
+            ++n;
+          }
+        if (n > 0) sigma = std::sqrt(s2 / n / 2.0);  // a difference has twice a pixel's variance
+      }
+    }
+    *noise = std::max(sigma, kQuantSigma);
+  }
+
+ private:
+  static constexpr bool kByte = sizeof(T) == 1;
+  void Value(T v) {
+    if constexpr (kByte) {
+      ++values_[v];
+      ++nv_;
+    } else {
+      values_.push_back(v);
+    }
+  }
+  void Diff(int d) {
+    if constexpr (kByte) {
+      ++diffs_[255 + d];
+      ++nd_;
+    } else {
+      diffs_.push_back(d);
+    }
+  }
+
+  const cv::Mat& img_;
+  const int step_, y0_, x0_;
+  // 8-bit: histograms of the values and of the signed differences (diffs_[255 + d]).
+  std::conditional_t<kByte, int[256], std::vector<int>> values_{};
+  std::conditional_t<kByte, int[511], std::vector<int>> diffs_{};
+  size_t nv_ = 0, nd_ = 0;
+};
+
+template <typename T>
+void SampleStats(const cv::Mat& img, double* background, double* noise) {
+  SparseSample<T> sample(img);
+  for (int y = sample.first_row(); y < img.rows; y += sample.step()) sample.AddRow(y);
+  sample.Finish(background, noise);
 }
 
 // A pixel of the measurement window or ring, relative to the region centroid.
@@ -379,15 +433,20 @@ struct Background {
   double At(double dx, double dy) const { return beta[0] + beta[1] * dx + beta[2] * dy; }
 };
 
-bool FitBackground(const std::vector<Px>& ring, std::vector<double>* scratch, Background* bg) {
+struct RingScratch {
+  std::vector<double> values;
+  std::vector<int> counts;
+};
+
+bool FitBackground(const std::vector<Px>& ring, RingScratch* scratch, Background* bg) {
   const int n_all = static_cast<int>(ring.size());
   if (n_all < 3) return false;
   // Robust start: median and MAD of the ring.
-  scratch->resize(n_all);
-  for (int i = 0; i < n_all; ++i) (*scratch)[i] = ring[i].v;
-  const double m0 = Median(*scratch);
-  for (int i = 0; i < n_all; ++i) (*scratch)[i] = std::abs(ring[i].v - m0);
-  const double s0 = std::max(1.4826 * Median(*scratch), 2 * kQuantSigma);
+  double m0, mad;
+  scratch->values.resize(n_all);
+  for (int i = 0; i < n_all; ++i) scratch->values[i] = ring[i].v;
+  MedianAndMad(scratch->values, &scratch->counts, &m0, &mad);  // pixel values: counted
+  const double s0 = std::max(1.4826 * mad, 2 * kQuantSigma);
 
   // Least squares over the pixels within `clip` of `ref` (the start, then the first fit).
   Background fit = *bg;
@@ -450,7 +509,7 @@ struct Context {
 
 struct Scratch {
   std::vector<Px> window, ring;
-  std::vector<double> values;
+  RingScratch background;
 };
 
 // Measures one region: window, background, centroid and covariance. False when the window
@@ -509,7 +568,7 @@ bool Measure(const Context& ctx, const Region& r, const RegionShape& shape, Scra
         }
       }
     }
-    return FitBackground(s->ring, &s->values, &bg);
+    return FitBackground(s->ring, &s->background, &bg);
   };
   // Mean signal per pixel in the window's outer shell, and whether it is significant: a
   // blurred tail that the window would cut.
@@ -615,9 +674,10 @@ bool Measure(const Context& ctx, const Region& r, const RegionShape& shape, Scra
 // Labels the regions of `img` (the whole image or a window of it, whose pixel (0,0) is at
 // `origin` in the image) and measures those that pass the shape tests; appends the blobs, in
 // image coordinates, to *blobs. Returns the number of regions.
+// `extremes`: each row's extreme pixel when read beforehand (LabelRuns).
 template <typename T, bool kDark>
 int DetectIn(const cv::Mat& img, const cv::Point& origin, const BlobDetectorOptions& o, int t, double noise,
-             std::vector<Blob>* blobs) {
+             const std::vector<T>* extremes, std::vector<Blob>* blobs) {
   std::vector<Run> runs;
   std::vector<int> parent;
   // A region within one row of length L has circularity 1/L (second moments L^2/12 and
@@ -625,7 +685,7 @@ int DetectIn(const cv::Mat& img, const cv::Point& origin, const BlobDetectorOpti
   // min_area_px * min_circularity > 1 (3 * 0.5 by default). Then one-row regions need not
   // be labelled, and the scan reads only the even rows and the rows next to a hit.
   const bool skip_single_rows = o.min_area_px * o.min_circularity > 1.0 + 1e-6;
-  LabelRuns<T, kDark>(img, t, skip_single_rows, &runs, &parent);
+  LabelRuns<T, kDark>(img, t, skip_single_rows, extremes, &runs, &parent);
 
   std::vector<int> region_of(runs.size(), -1), next_run(runs.size(), -1);
   std::vector<Region> regions;
@@ -687,7 +747,20 @@ template <typename T, bool kDark>
 std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobImageStats* stats,
                          const std::vector<cv::Rect>* windows) {
   double background, noise;
-  SampleStats<T>(img, &background, &noise);
+  // The whole image is read once, in memory order (the rate of main memory), for both the
+  // sparse sample and each row's extreme pixel; windows read the sample's rows only.
+  std::vector<T> extremes;
+  if (!windows) {
+    SparseSample<T> sample(img);
+    extremes.resize(img.rows);
+    for (int y = 0; y < img.rows; ++y) {
+      extremes[y] = RowExtreme<T, kDark>(img.ptr<T>(y), img.cols);
+      if (sample.Samples(y)) sample.AddRow(y);
+    }
+    sample.Finish(&background, &noise);
+  } else {
+    SampleStats<T>(img, &background, &noise);
+  }
   if (o.read_noise_dn > 0) noise = o.read_noise_dn;
   const double thr = o.threshold_dn > 0 ? o.threshold_dn : o.k_sigma * noise;
   // Integer level for Pass<kDark>: v > floor(bg + thr) <=> v > bg + thr for integer v
@@ -698,9 +771,10 @@ std::vector<Blob> Detect(const cv::Mat& img, const BlobDetectorOptions& o, BlobI
   std::vector<Blob> blobs;
   int num_regions = 0;
   if (!windows) {
-    num_regions = DetectIn<T, kDark>(img, cv::Point(0, 0), o, t, noise, &blobs);
+    num_regions = DetectIn<T, kDark>(img, cv::Point(0, 0), o, t, noise, &extremes, &blobs);
   } else {
-    for (const cv::Rect& w : *windows) num_regions += DetectIn<T, kDark>(img(w), w.tl(), o, t, noise, &blobs);
+    for (const cv::Rect& w : *windows)
+      num_regions += DetectIn<T, kDark>(img(w), w.tl(), o, t, noise, nullptr, &blobs);
   }
   if (stats) {
     stats->background_dn = background;

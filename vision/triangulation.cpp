@@ -68,8 +68,16 @@ std::optional<Vec3> NearestPointToRays(const std::vector<Vec3>& origins, const s
     A += P;
     b += P * origins[i];
   }
-  Eigen::SelfAdjointEigenSolver<Mat3> es(A);
-  if (es.eigenvalues()[0] < 1e-8 * es.eigenvalues()[2] || es.eigenvalues()[0] < 1e-10) return std::nullopt;
+  // Two unit rays at an angle t give A the eigenvalues 1 - |cos t|, 1 + |cos t| and 2: far
+  // from the threshold below (1 - |cos t| > 1e-6) the eigen-decomposition cannot decide
+  // otherwise and is skipped (matching calls this for every pair of image points).
+  const bool clearly_apart = dirs.size() == 2 && std::abs(dirs[0].squaredNorm() - 1) < 1e-9 &&
+                             std::abs(dirs[1].squaredNorm() - 1) < 1e-9 &&
+                             1 - std::abs(dirs[0].dot(dirs[1])) > 1e-6;
+  if (!clearly_apart) {
+    Eigen::SelfAdjointEigenSolver<Mat3> es(A);
+    if (es.eigenvalues()[0] < 1e-8 * es.eigenvalues()[2] || es.eigenvalues()[0] < 1e-10) return std::nullopt;
+  }
   return A.ldlt().solve(b);
 }
 
