@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "app/audit_modes.h"
+#include "app/commands.h"
 #include "app/tracking_options.h"
 #include "audit/camera_audit_job.h"
 
@@ -72,7 +73,7 @@ std::pair<CLI::App*, Runner> AddAuditCameras(CLI::App& audit) {
   cmd->add_option("--folds", args->audit.folds, "k of the k-fold cross-validation (blocks of time)")
       ->check(CLI::Range(2, 50))
       ->capture_default_str();
-  cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames.csv")->check(CLI::PositiveNumber);
+  cmd->add_option("--rate", args->rate, "frame rate in Hz when there is no frames.csv")->check(PositiveNumber());
   args->tracker.Add(cmd);
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args] { return RunAudit(*args); }));

@@ -61,18 +61,18 @@ McmsCommand calib_rig_command([](CLI::App& app) {
   cmd->add_option("--max-iterations", args->max_iterations,
                   "iteration limit of each bundle-adjustment solve (default 200); a solve that reaches it has not "
                   "converged and nothing is written")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_option("-o,--output", args->output, "output folder (created; default ./calib-rig)");
   cmd->add_option("--outlier-k", args->outlier_k,
                   "reject points with a coordinate beyond k sigma and re-solve, in rounds where one exceeds "
                   "k + 1 sigma (0 = keep all)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(NonNegativeNumber());
   cmd->add_option("--range", args->range_m, "range in metres for the projection-uncertainty report")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_flag("--board-warp", args->board_warp, "also solve the board's out-of-plane warp (mrcal's calobject_warp)");
   cmd->add_option("--max-rms", args->limits.max_rms_px,
                   "refuse a solution whose residual RMS exceeds this (px per coordinate; default 1)")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_option("--max-noise-ratio", args->limits.max_noise_ratio,
                   "refuse a solution whose residual exceeds the views' own noise floor (each view's board pose "
                   "fitted alone with the solved lens) by more than this factor (default 1.5): the views then do "

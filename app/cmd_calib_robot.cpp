@@ -152,14 +152,14 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
   sub->add_option("--base-guess", args->base_guess, "Starting T_meas_base: x y z qw qx qy qz")->expected(7);
   sub->add_option("--tool-guess", args->tool_guess, "Starting T_flange_tool: x y z qw qx qy qz")->expected(7);
   sub->add_option("--position-sigma-mm", args->position_sigma_mm, "Measurement noise per axis, mm (default 0.05)")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   sub->add_option("--rotation-sigma-deg", args->rotation_sigma_deg,
                   "Orientation noise per axis, deg (default 0.05; 6-D only)")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   sub->add_option("--fix", args->fixed, "Hold these parameters (e.g. A2.a base.z tool.rx)");
-  sub->add_option("--folds", args->folds, "k-fold held-out validation (default 5; 0 = none)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--folds", args->folds, "k-fold held-out validation (default 5; 0 = none)")->check(NonNegativeNumber());
   sub->add_option("--max-iterations", args->max_iterations, "Solver iterations (default 200)")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   sub->add_option("--error-motion", args->error_motion,
                   "Error-motion harmonics to estimate per joint, one count each (e.g. 0 3: joint 2's angle-dependent\n"
                   "tilt, radial, axial and angular errors to the 3rd harmonic; model/robot_model.h)")

@@ -32,10 +32,10 @@ McmsCommand demo_command([](CLI::App& app) {
       ->check(CLI::Range(0.01, 100.0));
   cmd->add_option("--kf-angular-psd", args->experiment.kf_angular_psd,
                   "KF process noise: angular acceleration spectral density, rad^2/s^3")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_option("--kf-linear-psd", args->experiment.kf_linear_psd,
                   "KF process noise: linear acceleration spectral density, m^2/s^3")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_option("--camera-model", *camera_model,
                   "the camera's error model: ideal (the nominal rig, default), paper (the model `mcms fov-map --measured` "
                   "fits to the paper's Table 1: blob-centre noise x11, per-visit rigid error 0.98 mm in y and 0.25 mm in z), or "

@@ -130,21 +130,21 @@ const McmsCommand kFovMap([](CLI::App& app) {
                                          kDefaultFovGrid + ")");
   sub->add_option("--orientation-deg", a->orientation_deg,
                   "target orientation at every grid point: rotation vector rx,ry,rz in degrees (default 0,0,0)");
-  sub->add_option("--gain", a->gain, "camera gain in electrons per DN (default: the scenario's)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--gain", a->gain, "camera gain in electrons per DN (default: the scenario's)")->check(NonNegativeNumber());
   sub->add_option("--read-noise", a->read_noise,
                   "noise std of a background pixel in DN, as in mcms track (default: the scenario's read, photon and "
                   "quantization noise)")
-      ->check(CLI::NonNegativeNumber);
-  sub->add_option("--ball-dn", a->ball_dn, "brightness of a ball image in DN (default: the scenario's)")->check(CLI::NonNegativeNumber);
+      ->check(NonNegativeNumber());
+  sub->add_option("--ball-dn", a->ball_dn, "brightness of a ball image in DN (default: the scenario's)")->check(NonNegativeNumber());
   sub->add_option("--background-dn", a->background_dn, "background level in DN (default: the scenario's)")
-      ->check(CLI::NonNegativeNumber);
-  sub->add_option("--blur-px", a->blur_px, "optical blur sigma in px (default: the scenario's)")->check(CLI::NonNegativeNumber);
+      ->check(NonNegativeNumber());
+  sub->add_option("--blur-px", a->blur_px, "optical blur sigma in px (default: the scenario's)")->check(NonNegativeNumber());
   sub->add_option("--threshold-mm", a->threshold_mm, "report the region where sigma_d is below this, mm (default 0.03)")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   sub->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(CLI::Range(1, kMaxThreads));
-  sub->add_option("--simulate", a->simulate, "Monte Carlo at N grid points (default 0: none)")->check(CLI::NonNegativeNumber);
+  sub->add_option("--simulate", a->simulate, "Monte Carlo at N grid points (default 0: none)")->check(NonNegativeNumber());
   sub->add_option("--repeats", a->repeats, "rendered frames per Monte-Carlo point (default 30)")->check(CLI::Range(2, 100000));
-  sub->add_option("--seed", a->seed, "random seed of the Monte Carlo (default 1)");
+  sub->add_option("--seed", a->seed, "random seed of the Monte Carlo (default 1)")->check(SeedValidator());
   sub->add_option("--measured", a->measured,
                   "repeated measurements: Table 1 CSV (plane,point,sigma_x_mm,sigma_y_mm,sigma_z_mm[,sigma_d_mm]) or raw "
                   "CSV (point,repeat,x_m,y_m,z_m[,plane]) or an mcms track poses.csv with a point column")

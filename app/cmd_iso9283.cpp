@@ -33,19 +33,30 @@ int RunIso9283Simulation(const IsoArgs& a) {
   if (!a.poses.empty() || !a.path.empty())
     Throw("iso9283 --simulate: makes its own measurements; give no POSES file and no --path");
   if (!a.output.empty()) RequireWritableFile(a.output, "iso9283 -o");
-  if (!a.simulate_dir.empty()) RequireWritableFolder(a.simulate_dir, "iso9283 --write-measurements");
+  // The folder is the command's own output: written whole, replacing only an earlier one
+  // (never a folder holding the user's files).
+  const std::vector<std::string> markers = {"attained_1.csv", "path_1.csv"};
+  if (!a.simulate_dir.empty()) {
+    RequireWritableFolder(a.simulate_dir, "iso9283 --write-measurements");
+    RequireReplaceableFolder(a.simulate_dir, markers, "iso9283", "iso9283 --write-measurements");
+  }
   Iso9283ExperimentOptions o;
   o.cycles = a.cycles;
   o.seed = a.seed;
   const Iso9283Experiment e = RunIso9283Experiment(o);
   if (!a.output.empty()) WriteIso9283ExperimentCsv(a.output, e);
-  if (!a.simulate_dir.empty()) WriteIso9283Measurements(a.simulate_dir, "", e);
+  if (!a.simulate_dir.empty())
+    WriteFolderAtomically(a.simulate_dir, markers, "iso9283", "iso9283 --write-measurements",
+                          [&](const std::filesystem::path& dir) { WriteIso9283Measurements(dir, "", e); });
   std::fputs(FormatIso9283Experiment(e).c_str(), stdout);
   return 0;
 }
 
 int RunIso9283(const IsoArgs& a) {
   if (a.simulate) return RunIso9283Simulation(a);
+  if (!a.simulate_dir.empty())
+    Throw("iso9283 --write-measurements writes the measurements of the simulated experiment; give it with "
+          "--simulate (measured POSES are the input, not an output)");
   if (a.poses.empty()) Throw("iso9283: POSES (a pose CSV) is required, or --simulate");
   RequireOutputsSpareInputs({{a.output, "iso9283 -o"}}, {a.poses, a.path});
   if (!a.output.empty()) RequireWritableFile(a.output, "iso9283 -o");
@@ -74,7 +85,7 @@ const McmsCommand kIso9283([](CLI::App& app) {
   sub->add_flag("--simulate", args->simulate, "Run the forward-model experiment instead of reading POSES");
   sub->add_option("--cycles", args->cycles, "--simulate: cycles P1..P5 (ISO 9283: 30; 2 to 100000)")
       ->check(CLI::Range(2, 100000));
-  sub->add_option("--seed", args->seed, "--simulate: random seed");
+  sub->add_option("--seed", args->seed, "--simulate: random seed")->check(SeedValidator());
   sub->add_option("--write-measurements", args->simulate_dir,
                   "--simulate: folder for attained_<k>.csv and path_<k>.csv per condition k = 1..4")
       ->type_name("DIR");

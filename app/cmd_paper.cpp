@@ -57,12 +57,12 @@ McmsCommand paper_command([](CLI::App& app) {
       "fusion",
       "Section 3.3: 100 random points in a 100 mm cube measured by camera and robot, fused by MOIFA and by the "
       "paper's KF scheme; Table 3 by the three-sigma rule and as RMS, with the analytic figures and the paper's.");
-  fusion->add_option("--seed", fa->seed, "random seed (default 1)");
+  fusion->add_option("--seed", fa->seed, "random seed (default 1)")->check(SeedValidator());
   fusion->add_option("--repetitions", fa->repetitions, "Monte-Carlo repetitions (default 200)")
       ->check(CLI::Range(2, 1000000));
   fusion->add_option("--points", fa->points, "points per repetition (default 100)")->check(CLI::Range(2, 1000000));
   fusion->add_option("--cube-mm", fa->cube_mm, "edge of the cube of random points, mm (default 100)")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   fusion->add_option("--paper-results", fa->paper_results,
                      "the paper's figures (default: $MCMS_DATA_DIR/paper/fusion_results.csv or "
                      "../shared/data/paper/fusion_results.csv)");

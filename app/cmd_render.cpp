@@ -75,9 +75,9 @@ const McmsCommand kRender([](CLI::App& app) {
       ->type_name("FILE");
   sub->add_option("-o,--output", args->out, "Output folder (required unless --print-default)")->type_name("DIR");
   sub->add_option("--frames", args->frames, "Render only the first N frames of the scenario")
-      ->check(CLI::PositiveNumber)
+      ->check(PositiveNumber())
       ->type_name("N");
-  sub->add_option("--seed", args->seed, "Random seed, overriding the scenario's")->type_name("S");
+  sub->add_option("--seed", args->seed, "Random seed, overriding the scenario's")->check(SeedValidator())->type_name("S");
   sub->add_option("--threads", args->threads, "Threads rendering frames (0 = all cores); the output does not depend on it")
       ->check(CLI::Range(0, kMaxThreads))
       ->type_name("N");

@@ -18,17 +18,17 @@ void TrackerCli::Add(CLI::App* cmd) {
   cmd->add_option("--gain", gain_e_per_dn,
                   "camera gain in electrons per DN, for the photon-noise part of the centre covariance (0 = leave "
                   "it out); default: measured per camera from the balls' images in the recording")
-      ->check(CLI::NonNegativeNumber);
+      ->check(NonNegativeNumber());
   cmd->add_option("--read-noise", read_noise_dn,
                   "noise std of a background pixel in DN (0 = measure it around each blob)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(NonNegativeNumber());
   cmd->add_option("--polarity", polarity, "blobs brighter (bright) or darker (dark) than the background")
       ->check(CLI::IsMember({"bright", "dark"}));
   cmd->add_option("--threshold", threshold_dn, "detection threshold in DN beyond the background (0 = automatic)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(NonNegativeNumber());
   cmd->add_option("--noise-frames", noise_frames,
                   "frames (spread over the recording) from which the gain is measured when --gain is not given")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_option("--threads", threads, "threads for reading images and detecting blobs (0 = all cores)")
       ->check(CLI::Range(0, kMaxThreads));
   cmd->add_flag("--predicted-windows", predicted_windows,
@@ -113,7 +113,7 @@ McmsCommand track_command([](CLI::App& app) {
   cmd->add_option("--rate", args->rate,
                   "frame rate in Hz when there is no frames CSV (0.001 to 1e6); without either, frames are taken "
                   "10 Hz apart and the run says so")
-      ->check(CLI::PositiveNumber);
+      ->check(PositiveNumber());
   cmd->add_option("-o,--output", args->output, "output CSV (default DIR/poses.csv)");
   cmd->add_option("--truth", args->truth,
                   "truth file of T_rig_target per frame with columns frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz (what "

@@ -1,6 +1,11 @@
 #include "app/commands.h"
 
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
+#include <cstdint>
 #include <memory>
+#include <string>
 
 namespace mcms::app {
 
@@ -20,6 +25,36 @@ McmsCommand::McmsCommand(Registrar r) { Registrars().push_back(std::move(r)); }
 void RegisterCommands(CLI::App& app) {
   for (auto& r : Registrars()) Registered().push_back(r(app));
 }
+
+CLI::Validator SeedValidator() {
+  return CLI::Validator(
+      [](std::string& v) -> std::string {
+        uint64_t seed = 0;
+        const char* end = v.data() + v.size();
+        const auto [p, ec] = std::from_chars(v.data(), end, seed);
+        if (v.empty() || ec != std::errc() || p != end)
+          return "seed '" + v + "' must be a whole number from 0 to 18446744073709551615 (2^64 - 1)";
+        return std::string();
+      },
+      "SEED", "seed");
+}
+
+namespace {
+CLI::Validator NumberAtLeast(bool strictly_positive) {
+  return CLI::Validator(
+      [strictly_positive](std::string& v) -> std::string {
+        char* end = nullptr;
+        const double x = std::strtod(v.c_str(), &end);
+        const bool number = !v.empty() && end == v.c_str() + v.size() && std::isfinite(x);
+        if (number && (strictly_positive ? x > 0 : x >= 0)) return std::string();
+        return std::string("expected a number ") + (strictly_positive ? "> 0" : ">= 0") + ", found '" + v + "'";
+      },
+      strictly_positive ? "POSITIVE" : "NONNEGATIVE", strictly_positive ? "positive" : "non-negative");
+}
+}  // namespace
+
+CLI::Validator PositiveNumber() { return NumberAtLeast(true); }
+CLI::Validator NonNegativeNumber() { return NumberAtLeast(false); }
 
 int RunSelected(CLI::App& app) {
   for (auto& [sub, run] : Registered())

@@ -20,6 +20,14 @@ struct McmsCommand {
 };
 
 void RegisterCommands(CLI::App& app);
+
+// Checks a --seed value: a whole number from 0 to 2^64 - 1 in decimal digits. CLI11 alone
+// would wrap -1 to 2^64 - 1 and saturate larger values, giving one seed for many inputs.
+CLI::Validator SeedValidator();
+// A finite number > 0 (>= 0): CLI11's own checks print their range as 0 to 1.8e308 in
+// 300 digits; these name what was expected and what was found.
+CLI::Validator PositiveNumber();
+CLI::Validator NonNegativeNumber();
 int RunSelected(CLI::App& app);
 
 }  // namespace mcms::app

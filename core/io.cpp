@@ -143,8 +143,24 @@ void RequireWritableAncestor(const fs::path& target, const fs::path& start, cons
 }
 }  // namespace
 
+namespace {
+
+// A symbolic link whose target does not exist: named before any work (writing through it
+// would fail late, or replace the link).
+void RequireNotDanglingLink(const fs::path& path, const std::string& what) {
+  std::error_code ec;
+  if (fs::is_symlink(fs::symlink_status(path, ec)) && !fs::exists(path, ec))
+    Throw(what, " ", path.string(), " is a symbolic link to ", fs::read_symlink(path, ec).string(),
+          ", which does not exist; give an existing folder's path or a new name (nothing was written)");
+}
+
+}  // namespace
+
 void RequireWritableFile(const fs::path& path, const std::string& what) {
   if (path.empty()) Throw(what, ": the output file name is empty");
+  if (!path.has_filename())  // "o.csv/": a folder's name, which a file cannot take
+    Throw(what, " ", path.string(), " ends with '/', which names a folder; give a file name (nothing was written)");
+  RequireNotDanglingLink(path, what);
   std::error_code ec;
   if (fs::is_directory(path, ec))
     Throw(what, " ", path.string(), " is a folder; give a file name (nothing was written)");
@@ -159,6 +175,7 @@ void RequireWritableFile(const fs::path& path, const std::string& what) {
 
 void RequireWritableFolder(const fs::path& path, const std::string& what) {
   if (path.empty()) Throw(what, ": the output folder name is empty");
+  RequireNotDanglingLink(path, what);
   std::error_code ec;
   if (fs::exists(path, ec) && !fs::is_directory(path, ec))
     Throw(what, " ", path.string(), " exists and is not a folder; give a folder for the outputs (nothing was written)");

@@ -136,6 +136,11 @@ bool DemoOptions::IsValid(std::string* why) const {
   };
   if (points < 1) return fail("points must be >= 1, got " + std::to_string(points));
   if (!(camera_rate_hz > 0) || !std::isfinite(camera_rate_hz)) return fail("camera_rate_hz must be positive");
+  // Every point is measured while the robot dwells there: a slower camera misses points.
+  if (const double dwell_s = LabOptions{}.dwell_s; camera_rate_hz * dwell_s < 1)
+    return fail(Format("the camera rate (--camera-rate) %g Hz takes no frame in some of the %g s dwells at the points; "
+                       "give at least %.3g Hz",
+                       camera_rate_hz, dwell_s, 1.0 / dwell_s));
   if (threads < 0 || threads > kMaxThreads)
     return fail("threads must be 0 (the hardware's) to " + std::to_string(kMaxThreads) + ", got " + std::to_string(threads));
   std::string model_why;

@@ -184,6 +184,10 @@ FovGrid FovGrid::Parse(const std::string& text, const std::string& source) {
       return fail(std::string("axis ") + axis[a] + ": the count must be an integer >= 1");
     g.n[a] = static_cast<int>(v[2]);
     if (g.n[a] > 1 && !(v[1] > v[0])) return fail(std::string("axis ") + axis[a] + ": the end must exceed the start");
+    // A camera rig's working volume is metres across; 1 km is beyond any (and keeps the
+    // grid's arithmetic finite: -1e308:1e308 would overflow the spacing).
+    if (std::abs(v[0]) > 1000 || std::abs(v[1]) > 1000)
+      return fail(std::string("axis ") + axis[a] + ": positions beyond 1000 m (metres are expected)");
     g.lo[a] = v[0];
     g.hi[a] = g.n[a] > 1 ? v[1] : v[0];
   }

@@ -41,8 +41,9 @@ bool RenderOptions::IsValid(std::string* why) const {
   if (!finite_nonneg(spurious_per_image) || spurious_per_image > 1000)
     return fail("spurious_per_image must be in [0, 1000]");
   if (!(std::isfinite(spurious_radius_min_px) && spurious_radius_min_px > 0 &&
-        std::isfinite(spurious_radius_max_px) && spurious_radius_max_px >= spurious_radius_min_px))
-    return fail("spurious radius must satisfy 0 < min <= max (px)");
+        std::isfinite(spurious_radius_max_px) && spurious_radius_max_px >= spurious_radius_min_px &&
+        spurious_radius_max_px <= 1000))
+    return fail("spurious radius must satisfy 0 < min <= max <= 1000 (px; a reflection is a spot, not the image)");
   if (!finite_nonneg(spurious_dn)) return fail("spurious_dn must be a number >= 0");
   if (!(occlusion_probability >= 0 && occlusion_probability <= 1))
     return fail("occlusion_probability must be in [0, 1]");

@@ -358,6 +358,15 @@ Target ParseTarget(const Reader& r, const YAML::Node& n) {
   t.balls_target.clear();
   for (size_t i = 0; i < balls.size(); ++i)
     t.balls_target.push_back(r.Vector3(balls[i], "target.balls_m[" + std::to_string(i) + "]"));
+  // Balls that overlap cannot be rendered as separate spheres (the tracker refuses such a
+  // target too, as a target file is refused when read).
+  if (t.balls_target.size() >= 3) {
+    try {
+      t.MinDistanceGap();
+    } catch (const InputError& e) {
+      r.Bad(balls, "target.balls_m", e.what());
+    }
+  }
   return t;
 }
 

@@ -472,5 +472,58 @@ TEST(AttackLimits, SecondAttackFindings) {
   EXPECT_FALSE(fs::exists(d / "p.csv.rows.partial-999999999"));
 }
 
+// The third round (findings of the second attack left for later): answers from wrapped
+// or absurd numbers, outputs that fail late, options that were silently ignored.
+TEST(AttackLimits, ThirdAttackFindings) {
+  const auto d = test::ScratchDir("attack_limits_third");
+  const std::string poses = "'" + (kSource / "examples" / "iso9283" / "poses.csv").string() + "'";
+  // Seeds are whole numbers of 64 bits, not wrapped or saturated.
+  ExpectRefused(d, "render --frames 3 -q -o rec --seed -1", {"seed '-1'", "2^64 - 1"});
+  ExpectRefused(d, "render --frames 3 -q -o rec --seed 18446744073709551616", {"18446744073709551616", "2^64 - 1"});
+  ExpectRefused(d, "fov-map -o fm --quiet --seed 1.5", {"seed '1.5'"});
+  // CLI11's own range message printed 1.8e308 in 300 digits.
+  ExpectRefused(d, "render --frames -3 -q -o rec", {"--frames", "expected a number > 0, found '-3'"});
+  // A file output named like a folder, before any work (it left an empty folder o.csv).
+  ExpectRefused(d, "iso9283 " + poses + " -o o.csv/", {"o.csv/", "ends with '/'"});
+  // --write-measurements is the simulation's; never over the user's files.
+  ExpectRefused(d, "iso9283 " + poses + " --write-measurements w", {"--write-measurements", "--simulate"});
+  fs::create_directories(d / "mine");
+  test::WriteText(d / "mine" / "attained_1.csv", "my own measurements\n");
+  ExpectRefused(d, "iso9283 --simulate --cycles 3 --write-measurements mine", {"mine", "attained_1.csv"});
+  EXPECT_EQ(test::ReadAll(d / "mine" / "attained_1.csv"), "my own measurements\n");
+  fs::remove_all(d / "mine");
+  ASSERT_EQ(test::Mcms(d, "iso9283 --simulate --cycles 3 --write-measurements sim").code, 0);
+  EXPECT_TRUE(fs::exists(d / "sim" / "attained_1.csv"));
+  EXPECT_EQ(test::Mcms(d, "iso9283 --simulate --cycles 3 --write-measurements sim").code, 0) << "its own output is replaced";
+  // Scenario values that rendered nothing, or what the tracker refuses.
+  std::string scenario = test::Mcms(d, "render --print-default").out;
+  ASSERT_NE(scenario.find("target: default"), std::string::npos);
+  ASSERT_NE(scenario.find("spurious_radius_px: [1, 4]"), std::string::npos);
+  std::string coincident = scenario;
+  coincident.replace(coincident.find("target: default"), 15,
+                     "target:\n  ball_radius_m: 0.01\n  balls_m: [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]");
+  test::WriteText(d / "coincident.yaml", coincident);
+  ExpectRefused(d, "render coincident.yaml --frames 3 -q -o rec", {"target.balls_m", "balls 0 and 1 overlap"});
+  std::string huge = scenario;
+  huge.replace(huge.find("spurious_radius_px: [1, 4]"), 26, "spurious_radius_px: [1e6, 1e7]");
+  test::WriteText(d / "huge.yaml", huge);
+  ExpectRefused(d, "render huge.yaml --frames 3 -q -o rec", {"spurious radius", "1000"});
+  ExpectRefused(d, "fov-map -o fm --quiet --grid=-1e308:1e308:3,0:0:1,2:2:1", {"--grid", "beyond 1000 m"});
+  ExpectRefused(d, "demo --camera-rate 0.1 -o dm", {"--camera-rate", "0.143"});
+  // Recordings: a frames.csv without rows, an image folder that is a file.
+  ASSERT_EQ(test::Mcms(d, "render --frames 3 -q -o rec").code, 0);
+  test::WriteText(d / "rec" / "frames.csv", "frame,time_s\n");
+  ExpectRefused(d, "track rec -q -o p.csv", {"frames.csv", "a header and no rows"});
+  ExpectRefused(d, "track rec -q --images /dev/null -o p.csv", {"/dev/null is not a folder"});
+  // An output that is a symbolic link to nothing, named before the work.
+  const auto l = test::ScratchDir("attack_limits_third_link");
+  fs::create_directory_symlink(l / "gone", l / "out");
+  const CliRun r = test::Mcms(l, "render --frames 3 -q -o out");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("is a symbolic link to"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("which does not exist"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(l / "gone"));
+}
+
 }  // namespace
 }  // namespace mcms

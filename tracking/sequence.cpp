@@ -49,7 +49,13 @@ cv::Mat ReadImage(const fs::path& p, const std::array<int, 2>* expected, std::st
 }  // namespace
 
 ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
-  if (!fs::is_directory(in.images_dir)) Throw("image folder ", in.images_dir.string(), " does not exist");
+  if (!fs::is_directory(in.images_dir)) {
+    std::error_code ec;
+    if (fs::exists(in.images_dir, ec))
+      Throw("image folder ", in.images_dir.string(), " is not a folder; expected a folder of one sub-folder of images "
+            "per rig camera");
+    Throw("image folder ", in.images_dir.string(), " does not exist");
+  }
   std::set<std::string> folders;
   for (const auto& e : fs::directory_iterator(in.images_dir))
     if (e.is_directory()) folders.insert(e.path().filename().string());
@@ -75,6 +81,9 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
     const CsvTable t = ReadCsv(in.frames_csv);
     const int cf = t.Column("frame"), ct = t.Column("time_s");
+    if (t.rows.empty())
+      Throw(in.frames_csv.string(), ": a header and no rows; expected one row (frame, time_s) per frame, or no "
+            "frames.csv and the frame rate given");
     double last = -1e300;
     for (size_t r = 0; r < t.rows.size(); ++r) {
       const double f = t.Number(r, cf), time = t.Number(r, ct);
