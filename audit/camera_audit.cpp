@@ -218,6 +218,67 @@ class Auditor {
   const UnitData& CameraSamples(int c) const { return cam_samples_[c]; }
   const UnitData& BallSamples(int b) const { return ball_samples_[b]; }
 
+  // Every camera's blobs of one frame associated with the balls under the model (rig_x,
+  // target_x: extended by `terms` at the frame's time).
+  std::vector<Obs> Associate(const Frame& f, const CameraRig& rig_x, const Target& target_x,
+                             const std::vector<CameraModelTerm>& terms) const {
+    const FrameResult& r = results_[f.result];
+    const int nc = static_cast<int>(rig_.size()), nb = static_cast<int>(target_.balls_target.size());
+    std::vector<Obs> obs;
+    for (int c = 0; c < nc && c < static_cast<int>(r.image_points.size()); ++c) {
+      const CameraModel& cam = rig_x.cameras[c];
+      // A late camera's images: predicted at the shifted pose; its blobs are moved back
+      // by the difference so that the other cameras' poses are not pulled.
+      Pose T_c = f.T;
+      for (const auto& t : terms)
+        if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == c)
+          T_c = ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data()));
+      const auto& blobs = r.image_points[c];
+      std::vector<bool> used(blobs.size(), false);
+      // A ball whose image another ball's crowds may be hidden in part, merged with it or
+      // lit by it inside its measurement window and ring: its centre is the detector's
+      // limit, not a test of the camera model.
+      const std::vector<bool> crowded = CrowdedBallImages(cam, target_x, f.T, kCrowdedGapPx);
+      for (int b = 0; b < nb; ++b) {
+        const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[b]);
+        if (crowded[b] || !cam.Sees(p_cam, 10)) continue;
+        const Vec3 p_cam_c = cam.T_cam_rig() * (T_c * target_x.balls_target[b]);
+        const Vec2 q0 = cam.Project(p_cam);
+        const Vec2 q = cam.Project(p_cam_c) + SphereProjectionBias(cam, p_cam_c, target_x.ball_radius, 32);
+        const int best = ClaimNearest(blobs, q, o_.gate_px, &used);
+        if (best < 0) continue;
+        obs.push_back({c, b, blobs[best].q - (cam.Project(p_cam_c) - q0), blobs[best].cov});
+      }
+    }
+    return obs;
+  }
+
+  // The log-likelihood (up to a constant) of every ball image under the model (terms,
+  // per-camera noise scales), each frame's pose fitted to all cameras at once: the joint
+  // fit a change to one camera is judged by. Unlike the leave-one-out residuals, where a
+  // camera's fault pulls the poses its neighbours are tested against (and a neighbour made
+  // to agree with the pulled poses also lowers the faulty camera's residuals), a fault
+  // here costs what it costs once, and only its own correction removes all of it.
+  double JointLogLik(const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale) const {
+    const Target target_x = ExtendTarget(target_, terms);
+    PoseRefinementOptions po;
+    po.outlier_sigma = 1e9;
+    double ll = 0;
+    for (const Frame& f : frames_) {
+      const CameraRig rig_x = ExtendRig(rig_, terms, f.t);
+      std::vector<BallObservation> all;
+      std::set<int> balls;
+      for (const Obs& x : Associate(f, rig_x, target_x, terms)) {
+        all.push_back({x.camera, x.ball, x.q, x.cov * scale[x.camera] * scale[x.camera]});
+        balls.insert(x.ball);
+        ll -= 2 * std::log(scale[x.camera]);
+      }
+      if (balls.size() < 3) continue;
+      ll -= 0.5 * RefinePose(rig_x, target_x, f.T, all, po).chi2;
+    }
+    return ll;
+  }
+
   // Associates every camera's blobs with the balls and re-fits the leave-one-out poses
   // under the model (terms, per-camera noise scales).
   void Rebuild(const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale) {
@@ -228,34 +289,8 @@ class Auditor {
     PoseRefinementOptions po;
     po.outlier_sigma = 1e9;
     for (const Frame& f : frames_) {
-      const FrameResult& r = results_[f.result];
       const CameraRig rig_x = ExtendRig(rig_, terms, f.t);
-      std::vector<Obs> obs;
-      for (int c = 0; c < nc && c < static_cast<int>(r.image_points.size()); ++c) {
-        const CameraModel& cam = rig_x.cameras[c];
-        // A late camera's images: predicted at the shifted pose; its blobs are moved back
-        // by the difference so that the other cameras' poses are not pulled.
-        Pose T_c = f.T;
-        for (const auto& t : terms)
-          if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == c)
-            T_c = ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data()));
-        const auto& blobs = r.image_points[c];
-        std::vector<bool> used(blobs.size(), false);
-        // A ball whose image another ball's crowds may be hidden in part, merged with it or
-        // lit by it inside its measurement window and ring: its centre is the detector's
-        // limit, not a test of the camera model.
-        const std::vector<bool> crowded = CrowdedBallImages(cam, target_x, f.T, kCrowdedGapPx);
-        for (int b = 0; b < nb; ++b) {
-          const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[b]);
-          if (crowded[b] || !cam.Sees(p_cam, 10)) continue;
-          const Vec3 p_cam_c = cam.T_cam_rig() * (T_c * target_x.balls_target[b]);
-          const Vec2 q0 = cam.Project(p_cam);
-          const Vec2 q = cam.Project(p_cam_c) + SphereProjectionBias(cam, p_cam_c, target_x.ball_radius, 32);
-          const int best = ClaimNearest(blobs, q, o_.gate_px, &used);
-          if (best < 0) continue;
-          obs.push_back({c, b, blobs[best].q - (cam.Project(p_cam_c) - q0), blobs[best].cov});
-        }
-      }
+      const std::vector<Obs> obs = Associate(f, rig_x, target_x, terms);
       // Leave one camera out, then one ball out.
       for (int pass = 0; pass < 2; ++pass) {
         const int units = pass == 0 ? nc : nb;
@@ -455,6 +490,8 @@ struct Candidate {
   int unit = 0;
   int k = 0;           // parameters it adds (a change time counts as one)
   bool step = false;   // camera_moved from a change time on
+  bool pair = false;   // two intrinsic effects of one camera at once: term and term2
+  CameraModelTerm term2;
   double lr = 0, bic_gain = 0, heldout_gain = 0, rms_before = 0, rms_after = 0, p_value = 1;
   bool eligible = false;
   std::vector<CameraModelTerm> fitted;  // the unit's terms fitted on all data
@@ -575,15 +612,33 @@ void FitNoiseScales(Auditor& a, const CameraRig& rig, int nb, const CameraAuditO
 
 }
 
+// The indices of the terms of one unit (a camera: every effect but target_geometry at it;
+// a ball: its target_geometry).
+std::vector<int> UnitTerms(const std::vector<CameraModelTerm>& terms, bool cam_unit, int u) {
+  std::vector<int> f;
+  for (size_t k = 0; k < terms.size(); ++k)
+    if ((terms[k].extension.effect != Effect::kTargetGeometry) == cam_unit && terms[k].extension.index == u)
+      f.push_back(static_cast<int>(k));
+  return f;
+}
+
+// How a unit's fit treats the camera's noise scale: free once named, else within the band;
+// a ball unit has none.
+ScaleMode UnitScaleMode(bool cam_unit, int u, const std::vector<bool>& noise_named) {
+  if (!cam_unit) return ScaleMode::kFixed;
+  return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
+}
+
 // The candidates of one selection round, each fitted on all data and on the folds, with
-// its likelihood ratio and held-out gain against its unit's current model.
+// its likelihood ratio and held-out gain against its unit's current model; *tested
+// receives the number of single candidates (the pairs fitted count on top of it).
 std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb, const CameraAuditOptions& options,
                                        const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale,
                                        const std::set<std::pair<bool, int>>& blocked,
-                                       const std::vector<bool>& noise_named) {
+                                       const std::vector<bool>& noise_named, int* tested) {
   const int nc = static_cast<int>(rig.size());
   // The candidates.
-  std::vector<Candidate> cands;
+  std::vector<Candidate> cands, pairs;
   auto has = [&](Effect e, int idx) {
     for (const auto& t : terms)
       if (t.extension.effect == e && t.extension.index == idx) return true;
@@ -607,6 +662,26 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
         cands.push_back(x);
       }
     }
+    // Two effects of the camera's own at once: a camera whose focal length and principal
+    // point (or any two of these) are both off is fitted by a 6-parameter move better than
+    // by either alone; the pair, with fewer parameters than the move, is its own candidate.
+    const Effect own[] = {Effect::kFocalLength, Effect::kPrincipalPoint, Effect::kRadialDistortion,
+                          Effect::kCameraTimeOffset};
+    for (size_t i = 0; i < 4; ++i)
+      for (size_t j = i + 1; j < 4; ++j) {
+        const Effect e1 = own[i], e2 = own[j];
+        if (has(e1, c) || has(e2, c)) continue;
+        if ((e1 == Effect::kRadialDistortion || e2 == Effect::kRadialDistortion) && !HasK1(rig.cameras[c])) continue;
+        Candidate x;
+        x.term.extension = Extension{e1, c, 0};
+        x.term.parameters = x.term.extension.InitialParameters();
+        x.term2.extension = Extension{e2, c, 0};
+        x.term2.parameters = x.term2.extension.InitialParameters();
+        x.pair = true;
+        x.unit = c;
+        x.k = x.term.extension.NumParameters() + x.term2.extension.NumParameters();
+        pairs.push_back(x);
+      }
   }
   for (int b = 0; b < nb; ++b) {
     if (blocked.count({false, b}) || has(Effect::kTargetGeometry, b) || a.BallSamples(b).empty()) continue;
@@ -618,23 +693,12 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
     x.k = 3;
     cands.push_back(x);
   }
+  *tested = static_cast<int>(cands.size());
   if (cands.empty()) return cands;
 
   // The current model of each unit, fitted on all data and on each fold, once.
-  auto unit_free = [&](bool cam_unit, int u) {
-    std::vector<int> f;
-    for (size_t k = 0; k < terms.size(); ++k) {
-      const auto& e = terms[k].extension;
-      if (cam_unit ? (e.effect != Effect::kTargetGeometry && e.index == u)
-                   : (e.effect == Effect::kTargetGeometry && e.index == u))
-        f.push_back(static_cast<int>(k));
-    }
-    return f;
-  };
-  auto mode_of = [&](bool cam_unit, int u) {
-    if (!cam_unit) return ScaleMode::kFixed;
-    return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
-  };
+  auto unit_free = [&](bool cam_unit, int u) { return UnitTerms(terms, cam_unit, u); };
+  auto mode_of = [&](bool cam_unit, int u) { return UnitScaleMode(cam_unit, u, noise_named); };
   // Held-out evaluation of a unit model `t_all` with its free terms `free`: sum over folds.
   auto heldout = [&](bool cam_unit, int u, const std::vector<CameraModelTerm>& t0, const std::vector<int>& free,
                      ScaleMode mode, double* ll, double* sq, long* n) {
@@ -671,12 +735,16 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
     base[key] = bs;
   }
 
-  for (auto& x : cands) {
+  auto fit_candidate = [&](Candidate& x) {
     const auto& s = x.camera_unit ? a.CameraSamples(x.unit) : a.BallSamples(x.unit);
     std::vector<CameraModelTerm> t = terms;
-    t.push_back(x.term);
     std::vector<int> free = unit_free(x.camera_unit, x.unit);
+    t.push_back(x.term);
     free.push_back(static_cast<int>(t.size()) - 1);
+    if (x.pair) {
+      t.push_back(x.term2);
+      free.push_back(static_cast<int>(t.size()) - 1);
+    }
     const bool noise = x.term.extension.effect == Effect::kPixelNoiseScale;
     const ScaleMode mode = noise ? ScaleMode::kFree : mode_of(x.camera_unit, x.unit);
     const int cu = x.camera_unit ? x.unit : -1;
@@ -717,23 +785,62 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
     x.rms_after = n_h > 0 ? std::sqrt(sq_h / n_h) : 0;
     x.fitted = fit.terms;
     x.scale = fit.scale;
-    x.term = fit.terms.back();
+    x.term = fit.terms[fit.terms.size() - (x.pair ? 2 : 1)];
+    if (x.pair) x.term2 = fit.terms.back();
     if (noise) {
       // s from a sample variance: sd(s) = s / sqrt(2 n) for n residuals.
       x.sigma = {fit.scale / std::sqrt(4.0 * s.size())};
     } else {
-      // The candidate's block is the last in the fitted covariance.
-      const int np = x.term.extension.NumParameters();
+      // The candidate's blocks are the last in the fitted covariance.
+      const int np = x.term.extension.NumParameters() + (x.pair ? x.term2.extension.NumParameters() : 0);
       for (int i = 0; i < np; ++i) {
         const int j = static_cast<int>(cov.rows()) - np + i;
         x.sigma.push_back(j >= 0 ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
       }
     }
     x.label = x.term.extension.Label(rig.names);
+    if (x.pair) x.label = std::string(Name(x.term.extension.effect)) + " + " + x.term2.extension.Label(rig.names);
     if (x.step)
       x.label += " from t = " + std::to_string(x.term.from_time_s) + " s";
-  }
+  };
+  for (auto& x : cands) fit_candidate(x);
+  // Pairs are fitted only at cameras where a single candidate passes its test (the others
+  // have no residual two effects could explain). On a clean recording a pair is therefore
+  // tested only after a single candidate passed, which happens at the designed rate: the
+  // gate keeps the family-wise rate, and the pairs fitted count in the round's m.
+  std::set<int> residual_at;
+  for (const auto& x : cands)
+    if (x.camera_unit && ChiSquareSurvival(x.lr, x.k) < options.false_alarm / 2 / *tested) residual_at.insert(x.unit);
+  for (auto& x : pairs)
+    if (residual_at.count(x.unit)) {
+      fit_candidate(x);
+      cands.push_back(x);
+    }
   return cands;
+}
+
+// After an effect is taken: every unit's terms fitted again on the poses re-fitted with
+// it, and the poses again, `iterations` times. A term fitted while another camera's fault
+// was still unmodelled carries that fault's pull on the leave-one-out poses; once the
+// fault is in the model the pull is gone, and the term must be fitted without it, or its
+// stale part is charged to the next round's candidates elsewhere.
+void RefitUnits(Auditor& a, const std::vector<bool>& noise_named, int iterations,
+                std::vector<CameraModelTerm>* terms_out, std::vector<double>* scale_out) {
+  std::vector<CameraModelTerm>& terms = *terms_out;
+  std::vector<double>& scale = *scale_out;
+  std::set<std::pair<bool, int>> units;
+  for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
+  for (int it = 0; it < iterations; ++it) {
+    for (const auto& [cam_unit, u] : units) {
+      const std::vector<int> free = UnitTerms(terms, cam_unit, u);
+      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+      if (s.empty()) continue;
+      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, UnitScaleMode(cam_unit, u, noise_named), -1);
+      for (int k : free) terms[k].parameters = fit.terms[k].parameters;
+      if (cam_unit) scale[u] = fit.scale;
+    }
+    a.Rebuild(terms, scale);
+  }
 }
 
 // Backward pruning: an effect named early (e.g. the noise scale, taking up the residual of
@@ -757,15 +864,9 @@ void PruneNamedEffects(Auditor& a, const CameraRig& rig, int nb, const CameraAud
       const auto& s = cam_unit ? a.CameraSamples(x.index) : a.BallSamples(x.index);
       std::vector<CameraModelTerm> without = terms;
       without.erase(without.begin() + static_cast<long>(k));
-      auto free_of = [&](const std::vector<CameraModelTerm>& t) {
-        std::vector<int> f;
-        for (size_t i = 0; i < t.size(); ++i)
-          if ((t[i].extension.effect != Effect::kTargetGeometry) == cam_unit && t[i].extension.index == x.index)
-            f.push_back(static_cast<int>(i));
-        return f;
-      };
+      auto free_of = [&](const std::vector<CameraModelTerm>& t) { return UnitTerms(t, cam_unit, x.index); };
       const bool noise = x.effect == Effect::kPixelNoiseScale;
-      const ScaleMode with_mode = !cam_unit ? ScaleMode::kFixed : noise_named[x.index] ? ScaleMode::kFree : ScaleMode::kBand;
+      const ScaleMode with_mode = UnitScaleMode(cam_unit, x.index, noise_named);
       const ScaleMode without_mode = noise ? ScaleMode::kBand : with_mode;
       const UnitFit f1 = a.Fit(s, cam_unit ? x.index : -1, terms, free_of(terms), scale, with_mode, -1);
       const UnitFit f0 = a.Fit(s, cam_unit ? x.index : -1, without, free_of(without), scale, without_mode, -1);
@@ -803,14 +904,10 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
   std::set<std::pair<bool, int>> units;
   for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
   for (const auto& [cam_unit, u] : units) {
-    std::vector<int> free;
-    for (size_t k = 0; k < terms.size(); ++k)
-      if ((terms[k].extension.effect != Effect::kTargetGeometry) == cam_unit && terms[k].extension.index == u)
-        free.push_back(static_cast<int>(k));
+    const std::vector<int> free = UnitTerms(terms, cam_unit, u);
     const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
     Eigen::MatrixXd cov;
-    const ScaleMode mode = !cam_unit ? ScaleMode::kFixed : noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
-    const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, mode, -1, &cov);
+    const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, UnitScaleMode(cam_unit, u, noise_named), -1, &cov);
     if (cam_unit) scale[u] = fit.scale;
     int j = 0;
     for (int k : free) {
@@ -861,7 +958,8 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
   std::set<std::pair<bool, int>> blocked;  // units in an undecided group
   std::vector<bool> noise_named(nc, false);
   for (int round = 0; round < options.max_effects; ++round) {
-    std::vector<Candidate> cands = RoundCandidates(a, rig, nb, options, terms, scale, blocked, noise_named);
+    int tested = 0;
+    std::vector<Candidate> cands = RoundCandidates(a, rig, nb, options, terms, scale, blocked, noise_named, &tested);
     if (cands.empty()) break;
 
     // The decision (audit/model_selection.h): candidates on the same data (the same camera,
@@ -880,8 +978,30 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       sel[i].group = cands[i].camera_unit ? cands[i].unit : -1 - cands[i].unit;
       sel[i].multiplicity = cands[i].step ? options.change_points : 1;
       sel[i].heldout_gain = cands[i].heldout_gain;
+      sel[i].tier = cands[i].pair ? 1 : 0;  // a pair only where neither alone nor a move explains as much
     }
-    const StepDecision dec = DecideStep(sel, static_cast<int>(cands.size()), rule);
+    StepDecision dec = DecideStep(sel, tested, rule);
+    // The candidates that pass on their own unit's residuals are then judged by what they
+    // do to the whole rig: a camera's fault pulls the leave-one-out poses its neighbours
+    // are tested against, so a neighbour's candidate (or a move mimicking an intrinsic
+    // error plus that pull) also fits its own unit. The likelihood ratio of each passing
+    // candidate becomes that of the joint fit (every frame's pose fitted to all cameras;
+    // Auditor::JointLogLik), where only the faulty camera's correction removes the whole
+    // cost of its fault; the test, BIC and held-out rules then decide as before.
+    if (dec.outcome == StepOutcome::kNamed || dec.outcome == StepOutcome::kUndecided) {
+      std::vector<size_t> pool;
+      for (size_t i = 0; i < cands.size(); ++i)
+        if (sel[i].passes) pool.push_back(i);
+      if (pool.size() > 1) {
+        const double base = a.JointLogLik(terms, scale);
+        for (size_t i : pool) {
+          std::vector<double> sc = scale;
+          if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
+          cands[i].lr = sel[i].lr = 2 * (a.JointLogLik(cands[i].fitted, sc) - base);
+        }
+        dec = DecideStep(sel, tested, rule);
+      }
+    }
     for (size_t i = 0; i < cands.size(); ++i) {
       cands[i].bic_gain = sel[i].bic_gain;
       cands[i].p_value = sel[i].p_value;
@@ -906,7 +1026,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     for (int i : dec.group) tie.push_back(&cands[i]);
     if (tie.size() > 1) {
       std::vector<std::string> group;
-      for (const Candidate* c : tie) group.push_back(c->term.extension.Label(rig.names));
+      for (const Candidate* c : tie) group.push_back(c->label);
       rep.undecided.push_back(group);
       // The best of the group stays in the model, unnamed, so that its residual does not
       // leak into the other cameras' leave-one-out poses; the group's places are not
@@ -914,30 +1034,37 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
       for (const Candidate* c : tie) blocked.insert({c->camera_unit, c->unit});
       terms = best.fitted;
       terms.back().undecided = true;
+      if (best.pair) terms[terms.size() - 2].undecided = true;
       if (best.camera_unit) scale[best.unit] = best.scale;
       a.Rebuild(terms, scale);
       continue;
     }
-    // Name it: the unit's terms as fitted with it, the noise scale, and re-fit the poses.
-    AuditEffect ef;
-    ef.name = Name(best.term.extension.effect);
-    ef.where = best.term.extension.Where(rig.names);
-    const auto names = best.term.extension.ParameterNames();
-    for (size_t i = 0; i < names.size(); ++i) {
-      ef.parameters.push_back({names[i], best.term.parameters[i]});
-      ef.sigma.push_back({names[i], best.sigma[i]});
+    // Name it (a pair: both): the unit's terms as fitted with it, the noise scale, and
+    // re-fit the poses.
+    size_t first_sigma = 0;
+    for (const CameraModelTerm* term : {&best.term, best.pair ? &best.term2 : nullptr}) {
+      if (!term) continue;
+      AuditEffect ef;
+      ef.name = Name(term->extension.effect);
+      ef.where = term->extension.Where(rig.names);
+      const auto names = term->extension.ParameterNames();
+      for (size_t i = 0; i < names.size(); ++i) {
+        ef.parameters.push_back({names[i], term->parameters[i]});
+        ef.sigma.push_back({names[i], best.sigma[first_sigma + i]});
+      }
+      first_sigma += names.size();
+      if (best.step) ef.parameters.push_back({"from_time_s", term->from_time_s});
+      ef.heldout_rms_before = best.rms_before;
+      ef.heldout_rms_after = best.rms_after;
+      ef.heldout_loglik_gain = best.heldout_gain;
+      ef.bic_gain = best.bic_gain;
+      rep.effects.push_back(ef);
     }
-    if (best.step)
-      ef.parameters.push_back({"from_time_s", best.term.from_time_s});
-    ef.heldout_rms_before = best.rms_before;
-    ef.heldout_rms_after = best.rms_after;
-    ef.heldout_loglik_gain = best.heldout_gain;
-    ef.bic_gain = best.bic_gain;
-    rep.effects.push_back(ef);
     terms = best.fitted;
     if (best.camera_unit) scale[best.unit] = best.scale;
     if (best.term.extension.effect == Effect::kPixelNoiseScale) noise_named[best.unit] = true;
     a.Rebuild(terms, scale);
+    RefitUnits(a, noise_named, 2, &terms, &scale);
   }
   PruneNamedEffects(a, rig, nb, options, ln_n, &terms, &scale, &noise_named, &rep);
   RefitNamedUnits(a, rig, noise_named, &terms, &scale, &rep);

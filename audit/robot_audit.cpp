@@ -429,6 +429,35 @@ void AddValidationPlots(const RobotModel& robot, const RobotLog& v, const Proble
   }
 }
 
+// Which masses the gravity-compliance candidates assume and which they fit (issue 35):
+// the reader of a report that names the arm's weight must know whether its torque came
+// from the robot file or from the log.
+std::string MassesNote(const RobotModel& robot, const RobotLog& log, const std::vector<Option>& others) {
+  bool tested = false;
+  for (const Option& op : others) tested = tested || op.ext.effect == Effect::kGravityCompliance;
+  if (!tested) return "gravity compliance not tested (not in the catalog of this audit)";
+  const std::string payload =
+      log.has_payload ? "the log's payload column adds its weight at the tool point"
+                      : "the log has no payload column: no payload beyond the tool's mass is assumed";
+  char b[600];
+  if (robot.HasMasses()) {
+    double total = 0;
+    for (const Joint& j : robot.Joints()) total += j.mass_kg;
+    std::snprintf(b, sizeof b,
+                  "gravity compliance: the links' masses are the robot file's (%.3g kg in all; the tool %.3g kg), "
+                  "so each joint's gravity torque is known and only its compliance is fitted; %s",
+                  total, robot.Tool().mass_kg, payload.c_str());
+  } else {
+    std::snprintf(b, sizeof b,
+                  "gravity compliance: the robot file gives no masses, so each joint's gravity torque is fitted as "
+                  "lumped mass moments (the tool point and the link frames outboard of the joint, each >= 0) times "
+                  "its compliance; %s",
+                  log.has_payload ? "the tool point's moment scales with the log's payload column"
+                                  : "the log has no payload column: the tool point's moment is one constant");
+  }
+  return b;
+}
+
 }  // namespace
 
 RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& o,
@@ -461,6 +490,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   Problem pb = MakeProblem(robot, log, o);
   std::vector<Option> geo_opts, other_opts;
   MakeLayout(&pb, log, o, &geo_opts, &other_opts, &rep.notes);
+  rep.notes.push_back(MassesNote(robot, log, other_opts));
   {
     // The linearised problem holds the Jacobian (m N x P) and the normal matrices of every
     // fold (m^2 (K + 1) of P x P): bounded before the work, with what to do instead.

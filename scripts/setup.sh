@@ -14,6 +14,7 @@ case "$mode" in
   *) echo "usage: scripts/setup.sh demo|test" >&2; exit 2 ;;
 esac
 
+# What building and running `mcms` needs (both modes).
 packages=(
   build-essential cmake pkg-config
   ninja-build  # the generator: starts compiling sooner than make and keeps both cores busy
@@ -21,13 +22,19 @@ packages=(
   libeigen3-dev libopencv-dev libceres-dev libapriltag-dev libmrcal-dev
   libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libboost-dev
   liburdfdom-dev  # robots as ROS describes them (model/urdf.h): urdfdom, with TinyXML and console_bridge
-  libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
+  zlib1g-dev
   libisal-dev  # the PNG frame reader (vision/image_file.h): ISA-L inflate and CRC-32
+)
+# What only the tests, benchmarks and the Python module need (test mode): the demo does
+# not wait for Chromium, Dask or the Python references to download.
+test_packages=(
+  libgtest-dev libgmock-dev libbenchmark-dev
   libspng-dev  # bench_throughput's comparison row of PNG readers (skipped without it)
   mrcal python3-mrcal python3-opencv python3-numpy pybind11-dev python3-dev
   python3-distributed  # `mcms batch`: Dask distributed (its test runs a local cluster)
   chromium  # the HTML report's test opens `mcms report` pages in headless Chromium (skipped without it)
 )
+if [ "$mode" = test ]; then packages+=("${test_packages[@]}"); fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -46,7 +53,12 @@ if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCH
 generator=()
 # Ninja for a new build tree; an existing one keeps the generator it was made with.
 if [ ! -f build/CMakeCache.txt ] && command -v ninja >/dev/null 2>&1; then generator=(-G Ninja); fi
-cmake -S . -B build "${generator[@]}" -DCMAKE_BUILD_TYPE=Release -DMCMS_WERROR=ON "${launcher[@]}"
+# The demo configures no tests or benchmarks (their packages may be missing); test mode
+# turns them, and the Python module, on again in the same build tree (a demo configured
+# before pybind11 was installed cached the module as off).
+parts=(-DMCMS_BUILD_TESTS=ON -DMCMS_BUILD_BENCH=ON -DMCMS_BUILD_PYTHON=ON)
+if [ "$mode" = demo ]; then parts=(-DMCMS_BUILD_TESTS=OFF -DMCMS_BUILD_BENCH=OFF); fi
+cmake -S . -B build "${generator[@]}" -DCMAKE_BUILD_TYPE=Release -DMCMS_WERROR=ON "${parts[@]}" "${launcher[@]}"
 if [ "$mode" = demo ]; then
   cmake --build build -j"$jobs" --target mcms  # only the program: no tests, benchmarks or fuzz targets
   ./build/app/mcms demo -o mcms-demo

@@ -317,12 +317,18 @@ namespace {
 // different cameras of the default rig (4 cameras) and of a 3-camera rig (its first three),
 // and every pair of different effects on one camera: both named at the right cameras,
 // nothing else. NOT YET MET, so disabled (run it with --gtest_also_run_disabled_tests):
-// measured 38 of 57 pass. The failures: a neighbour charged with another camera's fault
-// (the leave-one-camera-out poses still lean on the faulty camera, and a round compares
-// candidates on their own camera's samples only, not on what fixing them does to the
-// others'); two intrinsics of one camera named as one camera_moved (a 6-parameter move
-// mimics focal length + principal point better than either alone; a tilt and a principal
-// point are the same image shift at these sizes); a weak second effect missed.
+// measured 42 of 57 pass (38 before the joint-fit likelihood ratio, the refit after each
+// effect and the pair candidates). What still fails, and why:
+//  - two cameras moved in a 3-camera rig: not identifiable from the images at all (the
+//    target's poses are free, so camera 0 moved by M0 and camera 2 by M2 give the same
+//    images as camera 1 moved by M0^-1 and camera 2 by M0^-1 M2); any two are named;
+//  - a move and an intrinsic of one camera: a tilt is the same image shift as a principal
+//    point and a shift along the axis nearly a focal length at these sizes, so the move
+//    alone explains both;
+//  - a weaker second effect elsewhere (principal point, radial term, time offset in a
+//    3-camera rig): the first effect's leave-one-out fit carries part of the second's pull,
+//    and the candidates are fitted on leave-one-out poses; a joint fit of the named terms
+//    with every frame's pose would be the remedy (not built).
 struct Pair {
   std::string a, b;
   size_t cameras;
@@ -341,10 +347,11 @@ std::vector<Pair> AllPairs() {
   return out;
 }
 
-class TwoEffects : public ::testing::TestWithParam<Pair> {};
+std::string PairName(const Pair& p) {
+  return p.a + "_" + p.b + (p.same ? "_one_camera" : "") + "_" + std::to_string(p.cameras) + "cams";
+}
 
-TEST_P(TwoEffects, DISABLED_BothNamedAtTheirCamerasNothingElse) {
-  const Pair& p = GetParam();
+void CheckBothNamed(const Pair& p) {
   const uint64_t seed = p.seed;
   const int ca = static_cast<int>(seed % p.cameras);
   const int cb = p.same ? ca : static_cast<int>((ca + 1 + seed / 7 % (p.cameras - 1)) % p.cameras);
@@ -362,11 +369,30 @@ TEST_P(TwoEffects, DISABLED_BothNamedAtTheirCamerasNothingElse) {
   EXPECT_TRUE(r.report.undecided.empty()) << what;
 }
 
+class TwoEffects : public ::testing::TestWithParam<Pair> {};
+
+TEST_P(TwoEffects, DISABLED_BothNamedAtTheirCamerasNothingElse) { CheckBothNamed(GetParam()); }
+
+// The pairs the joint-fit likelihood ratio and the pair candidates decide (issue 35):
+// focal length + principal point of one camera (a 6-parameter move fitted them better than
+// either alone), focal length + time offset of one camera, and a focal length whose pull on
+// the poses had a neighbour's move named.
+TEST(AuditCameras, TwoEffectsOfOneCameraAndANeighbourNotCharged) {
+  for (const char* name : {"focal_length_principal_point_one_camera_4cams", "focal_length_camera_time_offset_one_camera_4cams",
+                           "focal_length_principal_point_4cams"}) {
+    SCOPED_TRACE(name);
+    bool found = false;
+    for (const Pair& p : AllPairs())
+      if (PairName(p) == name) {
+        found = true;
+        CheckBothNamed(p);
+      }
+    EXPECT_TRUE(found);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Catalog, TwoEffects, ::testing::ValuesIn(AllPairs()),
-                         [](const ::testing::TestParamInfo<Pair>& i) {
-                           return i.param.a + "_" + i.param.b + (i.param.same ? "_one_camera" : "") + "_" +
-                                  std::to_string(i.param.cameras) + "cams";
-                         });
+                         [](const ::testing::TestParamInfo<Pair>& i) { return PairName(i.param); });
 
 }  // namespace
 }  // namespace mcms

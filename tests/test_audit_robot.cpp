@@ -170,6 +170,16 @@ Hidden PickEffect(int kind, Rng& rng) {
   }
 }
 
+// Whether one of the report's notes holds every one of `parts`.
+bool SaysNote(const AuditReport& rep, const std::vector<std::string>& parts) {
+  for (const std::string& n : rep.notes) {
+    bool all = true;
+    for (const std::string& p : parts) all = all && n.find(p) != std::string::npos;
+    if (all) return true;
+  }
+  return false;
+}
+
 TEST(RobotAudit, FindsEachHiddenEffect) {
   const char* kinds[7] = {"joint_offset", "link_length", "link_twist", "joint_scale", "thermal_drift", "backlash",
                           "error_motion"};
@@ -277,6 +287,10 @@ TEST(RobotAudit, GravityOfTheArmWithoutMassesInTheRobotFile) {
     const RobotLog log = MakeRobotLog(robot, 3100 + s, {}, spec);
     const RobotAuditResult res = AuditRobot(robot, log);
     std::printf("gravity seed %d at joint %d:\n%s", 3100 + s, joint + 1, res.report.Text().c_str());
+    // The report says which masses were fitted (issue 35).
+    EXPECT_TRUE(SaysNote(res.report, {"the robot file gives no masses", "lumped mass moments",
+                                      s < 2 ? "scales with the log's payload column" : "the log has no payload column"}))
+        << res.report.Text();
     const AuditEffect* e = Find(res.report, "gravity_compliance", "joint " + std::to_string(joint + 1));
     ASSERT_NE(e, nullptr) << res.report.Text();
     EXPECT_GT(e->heldout_loglik_gain, 0.0);
@@ -440,6 +454,8 @@ TEST(RobotAudit, SecondRobotFromItsFile) {
     const RobotLog log = MakeRobotLog(ur10, seed, cases[c].hidden, spec);
     const RobotAuditResult res = AuditRobot(ur10, log);
     const std::string what = "UR10-like " + cases[c].what + " seed " + std::to_string(seed);
+    EXPECT_TRUE(SaysNote(res.report, {"the links' masses are the robot file's", "only its compliance is fitted"}))
+        << res.report.Text();
     std::printf("%s:\n%s", what.c_str(), res.report.Text().c_str());
     for (size_t j = 0; j < cases[c].compliance.size(); ++j) {
       if (cases[c].compliance[j] <= 0) continue;
