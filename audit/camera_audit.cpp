@@ -629,6 +629,10 @@ ScaleMode UnitScaleMode(bool cam_unit, int u, const std::vector<bool>& noise_nam
   return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
 }
 
+// Units (cameras, balls) per round whose strongest candidate's joint likelihood ratio is also
+// computed with every named term refitted beside it (by their first joint ratio's BIC gain).
+constexpr size_t kProfiled = 4;
+
 // The candidates of one selection round, each fitted on all data and on the folds, with
 // its likelihood ratio and held-out gain against its unit's current model; *tested
 // receives the number of single candidates (the pairs fitted count on top of it).
@@ -820,7 +824,9 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
 }
 
 // After an effect is taken: every unit's terms fitted again on the poses re-fitted with
-// it, and the poses again, `iterations` times. A term fitted while another camera's fault
+// it, and the poses again, until the cameras' leave-one-out log-likelihood gains less than
+// half a nat in a sweep (at most `iterations` sweeps: two moved cameras pull each other's
+// poses, and the sweeps converge by a constant factor each). A term fitted while another camera's fault
 // was still unmodelled carries that fault's pull on the leave-one-out poses; once the
 // fault is in the model the pull is gone, and the term must be fitted without it, or its
 // stale part is charged to the next round's candidates elsewhere.
@@ -830,6 +836,7 @@ void RefitUnits(Auditor& a, const std::vector<bool>& noise_named, int iterations
   std::vector<double>& scale = *scale_out;
   std::set<std::pair<bool, int>> units;
   for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
+  double last = -std::numeric_limits<double>::infinity();
   for (int it = 0; it < iterations; ++it) {
     for (const auto& [cam_unit, u] : units) {
       const std::vector<int> free = UnitTerms(terms, cam_unit, u);
@@ -840,6 +847,10 @@ void RefitUnits(Auditor& a, const std::vector<bool>& noise_named, int iterations
       if (cam_unit) scale[u] = fit.scale;
     }
     a.Rebuild(terms, scale);
+    double ll = 0;
+    for (int c = 0; c < static_cast<int>(scale.size()); ++c) ll += a.Evaluate(a.CameraSamples(c), terms, scale, -1, false).ll;
+    if (std::abs(ll - last) < 0.5) break;
+    last = ll;
   }
 }
 
@@ -930,6 +941,41 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
   }
 }
 
+// Moves for the whole recording at all cameras but one (or at all) are not identifiable:
+// the target's poses are free, so camera a moved by Ma and camera b by Mb give the same
+// images as every other camera moved by Ma^-1 and b by Ma^-1 Mb (two cameras: a move of
+// either). The images cannot say which cameras moved; the moves stay in the model (the
+// poses need them) but are reported as one undecided group of every camera seen.
+void UndecideUnidentifiableMoves(const Auditor& a, const CameraRig& rig, std::vector<CameraModelTerm>* terms,
+                                 AuditReport* rep) {
+  const int nc = static_cast<int>(rig.size());
+  int seen = 0;
+  for (int c = 0; c < nc; ++c) seen += a.CameraSamples(c).empty() ? 0 : 1;
+  std::vector<CameraModelTerm*> moves;
+  for (auto& t : *terms)
+    if (!t.undecided && t.extension.effect == Effect::kCameraMoved &&
+        !(t.from_time_s > -std::numeric_limits<double>::infinity()))
+      moves.push_back(&t);
+  if (seen < 2 || moves.empty() || static_cast<int>(moves.size()) < seen - 1) return;
+  std::vector<std::string> group;
+  for (int c = 0; c < nc; ++c)
+    if (!a.CameraSamples(c).empty()) group.push_back(Extension{Effect::kCameraMoved, c, 0}.Label(rig.names));
+  std::string named;
+  for (CameraModelTerm* t : moves) {
+    t->undecided = true;
+    const std::string where = t->extension.Where(rig.names);
+    named += (named.empty() ? "" : ", ") + where;
+    auto& ef = rep->effects;
+    ef.erase(std::remove_if(ef.begin(), ef.end(),
+                            [&](const AuditEffect& e) { return e.name == Name(Effect::kCameraMoved) && e.where == where; }),
+             ef.end());
+  }
+  rep->undecided.push_back(group);
+  rep->notes.push_back("camera_moved fitted at " + named + " of " + std::to_string(seen) +
+                       " cameras: moves at all cameras but one are not identifiable (the target's poses are free, so "
+                       "the same images come from the other cameras moved instead); which moved is undecided");
+}
+
 }  // namespace
 
 CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, const std::vector<FrameResult>& results,
@@ -999,6 +1045,26 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
           if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
           cands[i].lr = sel[i].lr = 2 * (a.JointLogLik(cands[i].fitted, sc) - base);
         }
+        // The strongest few again with every named term refitted beside them: a term named
+        // while this candidate's fault was unmodelled carries part of it, and only refitted
+        // does it give that part back.
+        std::sort(pool.begin(), pool.end(), [&](size_t x, size_t y) {
+          return sel[x].lr - sel[x].k * ln_n > sel[y].lr - sel[y].k * ln_n;
+        });
+        std::set<std::pair<bool, int>> profiled;
+        if (!terms.empty())
+          for (size_t i : pool) {
+            if (profiled.size() >= kProfiled || !profiled.insert({cands[i].camera_unit, cands[i].unit}).second) continue;
+            std::vector<double> sc = scale;
+            if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
+            std::vector<CameraModelTerm> t = cands[i].fitted;
+            std::vector<bool> nn = noise_named;
+            if (cands[i].camera_unit && cands[i].term.extension.effect == Effect::kPixelNoiseScale) nn[cands[i].unit] = true;
+            a.Rebuild(t, sc);
+            RefitUnits(a, nn, 10, &t, &sc);
+            cands[i].lr = sel[i].lr = std::max(sel[i].lr, 2 * (a.JointLogLik(t, sc) - base));
+          }
+        a.Rebuild(terms, scale);
         dec = DecideStep(sel, tested, rule);
       }
     }
@@ -1064,10 +1130,11 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     if (best.camera_unit) scale[best.unit] = best.scale;
     if (best.term.extension.effect == Effect::kPixelNoiseScale) noise_named[best.unit] = true;
     a.Rebuild(terms, scale);
-    RefitUnits(a, noise_named, 2, &terms, &scale);
+    RefitUnits(a, noise_named, 10, &terms, &scale);
   }
   PruneNamedEffects(a, rig, nb, options, ln_n, &terms, &scale, &noise_named, &rep);
   RefitNamedUnits(a, rig, noise_named, &terms, &scale, &rep);
+  UndecideUnidentifiableMoves(a, rig, &terms, &rep);
   // The named terms with their sigmas.
   for (const auto& t : terms) {
     if (t.undecided) continue;

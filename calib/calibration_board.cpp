@@ -22,6 +22,7 @@ extern "C" {
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/limits.h"
 #include "core/yaml.h"
 
 namespace mcms {
@@ -53,11 +54,17 @@ bool CalibrationBoard::IsValid(std::string* why) const {
     else if (cols > kMaxChessboardSide || rows > kMaxChessboardSide)
       s << "a chessboard has at most " << kMaxChessboardSide << " inner corners per side (got " << cols << "x" << rows << ")";
     else if (!(square_m > 0.0) || !std::isfinite(square_m)) s << "chessboard square size must be > 0 m (got " << square_m << ")";
+    else if (square_m > kMaxBoardSquareM)
+      s << "chessboard square size " << square_m << " m is beyond " << kMaxBoardSquareM
+        << " m (millimetres where metres are expected?); give the square in metres";
   } else {
     if (tag_cols < 1 || tag_rows < 1) s << "an AprilGrid needs at least 1x1 tags (got " << tag_cols << "x" << tag_rows << ")";
     // In 64 bits: tagCols: 100000 x tagRows: 100000 overflowed int (found by fuzz/fuzz_target).
     else if (int64_t{tag_cols} * tag_rows > 587) s << "tag36h11 has 587 ids; the grid has " << int64_t{tag_cols} * tag_rows;
     else if (!(tag_size_m > 0.0) || !std::isfinite(tag_size_m)) s << "tagSize must be > 0 m (got " << tag_size_m << ")";
+    else if (tag_size_m > kMaxBoardSquareM)
+      s << "tagSize " << tag_size_m << " m is beyond " << kMaxBoardSquareM
+        << " m (millimetres where metres are expected?); give the tag size in metres";
     else if (!(tag_spacing >= 0.0) || !std::isfinite(tag_spacing)) s << "tagSpacing must be >= 0 (got " << tag_spacing << ")";
   }
   if (why) *why = s.str();

@@ -206,16 +206,44 @@ std::string ReadTextFile(const fs::path& path) {
 }
 
 namespace {
+// One line's cells, comma-separated, each trimmed of blanks; a cell in double quotes (RFC
+// 4180, as CsvQuoted writes it: a reason holding a comma) keeps its commas and blanks, and
+// "" inside it is one quote.
 std::vector<std::string> SplitCsvLine(const std::string& line) {
   std::vector<std::string> cells;
-  std::string cell;
-  std::istringstream s(line);
-  while (std::getline(s, cell, ',')) {
-    const auto b = cell.find_first_not_of(" \t\r");
-    const auto e = cell.find_last_not_of(" \t\r");
-    cells.push_back(b == std::string::npos ? std::string() : cell.substr(b, e - b + 1));
+  const size_t n = line.size();
+  if (n == 0) return cells;
+  for (size_t i = 0;;) {
+    size_t j = line.find_first_not_of(" \t", i);
+    if (j != std::string::npos && line[j] == '"') {
+      std::string cell;
+      for (++j; j < n; ++j) {
+        if (line[j] != '"') {
+          cell += line[j];
+        } else if (j + 1 < n && line[j + 1] == '"') {
+          cell += '"';
+          ++j;
+        } else {
+          ++j;
+          break;
+        }
+      }
+      cells.push_back(cell);
+      j = std::min(line.find(',', j), n);
+    } else {
+      j = std::min(line.find(',', i), n);
+      const std::string cell = line.substr(i, j - i);
+      const auto b = cell.find_first_not_of(" \t\r");
+      const auto e = cell.find_last_not_of(" \t\r");
+      cells.push_back(b == std::string::npos ? std::string() : cell.substr(b, e - b + 1));
+    }
+    if (j >= n) break;
+    i = j + 1;
+    if (i == n) {
+      cells.emplace_back();  // a trailing comma: an empty last cell
+      break;
+    }
   }
-  if (!line.empty() && line.back() == ',') cells.emplace_back();
   return cells;
 }
 }  // namespace

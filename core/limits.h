@@ -48,4 +48,10 @@ constexpr int kMaxAuditRows = 50000;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 
+// A camera's name names its image folder (and a part of output file names): at most this
+// many characters (file systems allow 255 bytes per name).
+constexpr size_t kMaxCameraNameLength = 100;
+// A calibration board's square (or tag): beyond this many metres it is a unit mistake.
+constexpr double kMaxBoardSquareM = 2.0;
+
 }  // namespace mcms

@@ -33,6 +33,8 @@ FramePoseError PoseErrorAccumulator::Add(const FrameResult& f, const Pose& truth
   nees_ += fe.nees;
   pp_ += f.cov.bottomRightCorner<3, 3>().trace();
   pr_ += f.cov.topLeftCorner<3, 3>().trace();
+  dt_ += truth.t.norm();
+  de_ += f.T_rig_target->t.norm();
   return fe;
 }
 
@@ -48,8 +50,18 @@ PoseErrorSummary PoseErrorAccumulator::Summary() const {
     Chi2Band(6 * n, 0.95, &s.nees_band_lo, &s.nees_band_hi);
     s.nees_band_lo /= n;
     s.nees_band_hi /= n;
+    if (de_ > 0) s.truth_to_estimate_distance = dt_ / de_;
   }
   return s;
+}
+
+void CheckTruthDistances(const PoseErrorSummary& s, const std::string& truth_file) {
+  const double r = s.truth_to_estimate_distance;
+  if (s.evaluated == 0 || (r >= 0.2 && r <= 5)) return;
+  const bool mm = r > 300 && r < 3000;
+  Throw("truth file ", truth_file, ": its positions are on average ", r, " times as far from the rig as the tracked ",
+        "ones over ", s.evaluated, " frames", mm ? " (millimetres under metre headers?)" : "",
+        "; give the truth of this recording in metres (columns x_m, y_m, z_m)");
 }
 
 PoseErrorSummary EvaluatePoses(const std::vector<FrameResult>& results, const std::vector<Pose>& truth) {

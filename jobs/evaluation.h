@@ -26,6 +26,9 @@ struct PoseErrorSummary {
   double mean_nees = 0, nees_band_lo = 0, nees_band_hi = 0;
   // RMS of the errors predicted by the covariances (sqrt of mean trace of the blocks).
   double predicted_position_rms_m = 0, predicted_rotation_rms_rad = 0;
+  // Mean distance of the true positions from the rig origin over that of the estimated
+  // ones (the evaluated frames): about 1 for a truth of this recording in the same unit.
+  double truth_to_estimate_distance = 1;
   bool NeesInBand() const { return evaluated > 0 && mean_nees >= nees_band_lo && mean_nees <= nees_band_hi; }
 };
 
@@ -46,8 +49,13 @@ class PoseErrorAccumulator {
 
  private:
   PoseErrorSummary s_;
-  double p2_ = 0, r2_ = 0, nees_ = 0, pp_ = 0, pr_ = 0;
+  double p2_ = 0, r2_ = 0, nees_ = 0, pp_ = 0, pr_ = 0, dt_ = 0, de_ = 0;
 };
+
+// InputError when a truth file's positions are not in the unit of the tracked ones or not
+// of this recording: the true positions on average more than 5 times as far from the rig
+// as the tracked ones, or less than a fifth (millimetres under metre headers give 1000).
+void CheckTruthDistances(const PoseErrorSummary& s, const std::string& truth_file);
 
 // truth[i] is the true T_rig_target of results[i].
 PoseErrorSummary EvaluatePoses(const std::vector<FrameResult>& results, const std::vector<Pose>& truth);

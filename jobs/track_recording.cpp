@@ -51,7 +51,9 @@ PoseErrorSummary EvaluateAgainstTruth(const std::vector<FrameResult>& results,
             " has it at ", r.time_s, " s; give the truth of this recording");
     acc.Add(r, it->second.T_rig_target);
   }
-  return acc.Summary();
+  const PoseErrorSummary s = acc.Summary();
+  CheckTruthDistances(s, truth_file);
+  return s;
 }
 
 std::vector<std::string> DescribeTruthErrors(const PoseErrorSummary& s, const std::string& file) {
@@ -168,6 +170,7 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
   }
   if (with_truth) {
     res.errors = errors.Summary();
+    CheckTruthDistances(*res.errors, res.truth);  // before the output is committed
     for (const std::string& line : DescribeTruthErrors(*res.errors, res.truth)) note(line);
   }
   writer.Finish(res.notes);

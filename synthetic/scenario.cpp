@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/limits.h"
 #include "core/yaml.h"
 
 namespace mcms {
@@ -639,6 +640,9 @@ bool Scenario::IsValid(std::string* why) const {
     const std::string& n = rig.names[i];
     if (!SafeName(n))
       return fail("camera name '" + n + "' must be a folder name of letters, digits, '_', '-' or '.'");
+    if (n.size() > kMaxCameraNameLength)
+      return fail("camera name '" + n.substr(0, 20) + "...' has " + std::to_string(n.size()) +
+                  " characters, at most " + std::to_string(kMaxCameraNameLength) + " (it names the camera's image folder)");
     if (!seen.insert(n).second) return fail("camera name '" + n + "' is used twice");
     if (rig.cameras[i].Width() <= 0 || rig.cameras[i].Height() <= 0)
       return fail("camera '" + n + "' has an image size of 0");

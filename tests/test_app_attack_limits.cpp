@@ -509,12 +509,38 @@ TEST(AttackLimits, ThirdAttackFindings) {
   test::WriteText(d / "huge.yaml", huge);
   ExpectRefused(d, "render huge.yaml --frames 3 -q -o rec", {"spurious radius", "1000"});
   ExpectRefused(d, "fov-map -o fm --quiet --grid=-1e308:1e308:3,0:0:1,2:2:1", {"--grid", "beyond 1000 m"});
+  // A camera name too long for a folder name (it blamed -o: 'File name too long').
+  std::string long_name = scenario;
+  ASSERT_NE(long_name.find("names: [cam0, cam1"), std::string::npos);
+  long_name.replace(long_name.find("names: [cam0, cam1"), 18, "names: [cam0, " + std::string(300, 'c'));
+  test::WriteText(d / "long_name.yaml", long_name);
+  ExpectRefused(d, "render long_name.yaml --frames 3 -q -o rec", {"camera name", "300 characters, at most 100"});
   ExpectRefused(d, "demo --camera-rate 0.1 -o dm", {"--camera-rate", "0.143"});
   // Recordings: a frames.csv without rows, an image folder that is a file.
   ASSERT_EQ(test::Mcms(d, "render --frames 3 -q -o rec").code, 0);
   test::WriteText(d / "rec" / "frames.csv", "frame,time_s\n");
   ExpectRefused(d, "track rec -q -o p.csv", {"frames.csv", "a header and no rows"});
   ExpectRefused(d, "track rec -q --images /dev/null -o p.csv", {"/dev/null is not a folder"});
+  // A truth file in millimetres under metre headers: named, nothing written (it printed a
+  // position error of 769511 mm and a mean NEES of 3.8e15 and exited 0).
+  ASSERT_EQ(test::Mcms(d, "render --frames 4 -q -o rec_mm").code, 0);
+  {
+    std::istringstream in(test::ReadAll(d / "rec_mm" / "truth" / "poses.csv"));
+    std::string line, out;
+    std::getline(in, line);
+    out = line + "\n";
+    while (std::getline(in, line)) {
+      std::vector<std::string> f;
+      std::stringstream ss(line);
+      for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+      ASSERT_EQ(f.size(), 9u) << line;
+      for (int k = 2; k < 5; ++k) f[k] = std::to_string(1e3 * std::stod(f[k]));
+      for (size_t k = 0; k < f.size(); ++k) out += f[k] + (k + 1 < f.size() ? "," : "\n");
+    }
+    test::WriteText(d / "truth_mm.csv", out);
+  }
+  ExpectRefused(d, "track rec_mm -q --truth truth_mm.csv -o p.csv", {"truth_mm.csv", "millimetres under metre headers"});
+  EXPECT_EQ(test::Mcms(d, "track rec_mm -q --truth rec_mm/truth/poses.csv -o p.csv").code, 0) << "the truth in metres";
   // An output that is a symbolic link to nothing, named before the work.
   const auto l = test::ScratchDir("attack_limits_third_link");
   fs::create_directory_symlink(l / "gone", l / "out");

@@ -10,6 +10,7 @@
 // seconds; the rendered path is covered by tests/test_app_audit.cpp and test_app_noise.cpp.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <boost/math/distributions/binomial.hpp>
 #include <boost/math/distributions/normal.hpp>
 #include <cstdio>
@@ -317,18 +318,19 @@ namespace {
 // different cameras of the default rig (4 cameras) and of a 3-camera rig (its first three),
 // and every pair of different effects on one camera: both named at the right cameras,
 // nothing else. NOT YET MET, so disabled (run it with --gtest_also_run_disabled_tests):
-// measured 42 of 57 pass (38 before the joint-fit likelihood ratio, the refit after each
-// effect and the pair candidates). What still fails, and why:
-//  - two cameras moved in a 3-camera rig: not identifiable from the images at all (the
-//    target's poses are free, so camera 0 moved by M0 and camera 2 by M2 give the same
-//    images as camera 1 moved by M0^-1 and camera 2 by M0^-1 M2); any two are named;
+// measured 45 of 57 pass (38 before the joint-fit likelihood ratio, the refits and the pair
+// candidates). Two cameras moved in a 3-camera rig are not identifiable from the images at
+// all (the target's poses are free, so camera 0 moved by M0 and camera 2 by M2 give the
+// same images as camera 1 moved by M0^-1 and camera 2 by M0^-1 M2): there the right
+// answer is undecided, and that is what is checked. What still fails, and why:
 //  - a move and an intrinsic of one camera: a tilt is the same image shift as a principal
 //    point and a shift along the axis nearly a focal length at these sizes, so the move
 //    alone explains both;
 //  - a weaker second effect elsewhere (principal point, radial term, time offset in a
-//    3-camera rig): the first effect's leave-one-out fit carries part of the second's pull,
-//    and the candidates are fitted on leave-one-out poses; a joint fit of the named terms
-//    with every frame's pose would be the remedy (not built).
+//    3-camera rig; a move with a principal point of another camera): the first effect's
+//    leave-one-out fit carries part of the second's pull, and the candidates and the named
+//    terms are fitted on leave-one-out poses; a joint fit of the named terms with every
+//    frame's pose (a bundle adjustment of the rig) would be the remedy (not built).
 struct Pair {
   std::string a, b;
   size_t cameras;
@@ -363,6 +365,16 @@ void CheckBothNamed(const Pair& p) {
   std::printf("%s\n%s", what.c_str(), r.report.Text().c_str());
   std::set<std::string> named;
   for (const auto& e : r.report.effects) named.insert(e.name + " at " + e.where);
+  if (p.a == "camera_moved" && p.b == "camera_moved" && p.cameras == 3) {
+    // Not identifiable (any two of three cameras moved give the same images): undecided,
+    // the group holding both, nothing named.
+    EXPECT_TRUE(named.empty()) << what;
+    ASSERT_EQ(r.report.undecided.size(), 1u) << what;
+    const auto& g = r.report.undecided[0];
+    for (const Hidden* h : {&ha, &hb})
+      EXPECT_TRUE(std::find(g.begin(), g.end(), "camera_moved at " + Where(*h, rec.rig)) != g.end()) << what;
+    return;
+  }
   EXPECT_TRUE(named.count(p.a + " at " + Where(ha, rec.rig))) << what;
   EXPECT_TRUE(named.count(p.b + " at " + Where(hb, rec.rig))) << what;
   EXPECT_EQ(named.size(), 2u) << what << ": only the two hidden effects";
@@ -373,13 +385,17 @@ class TwoEffects : public ::testing::TestWithParam<Pair> {};
 
 TEST_P(TwoEffects, DISABLED_BothNamedAtTheirCamerasNothingElse) { CheckBothNamed(GetParam()); }
 
-// The pairs the joint-fit likelihood ratio and the pair candidates decide (issue 35):
-// focal length + principal point of one camera (a 6-parameter move fitted them better than
-// either alone), focal length + time offset of one camera, and a focal length whose pull on
-// the poses had a neighbour's move named.
-TEST(AuditCameras, TwoEffectsOfOneCameraAndANeighbourNotCharged) {
+// The pairs the joint-fit likelihood ratio, the refits and the pair candidates decide
+// (issue 35), each failing before: focal length + principal point of one camera (a
+// 6-parameter move fitted them better than either alone), focal length + time offset of one
+// camera, a focal length whose pull on the poses had a neighbour's move named, two moved
+// cameras (the first move fitted under the second's pull left a principal point named
+// elsewhere), two principal points of a 4-camera rig, and two moved cameras of a 3-camera
+// rig (not identifiable: undecided, nothing named).
+TEST(AuditCameras, TwoEffectsTheJointFitDecides) {
   for (const char* name : {"focal_length_principal_point_one_camera_4cams", "focal_length_camera_time_offset_one_camera_4cams",
-                           "focal_length_principal_point_4cams"}) {
+                           "focal_length_principal_point_4cams", "camera_moved_camera_moved_4cams",
+                           "principal_point_principal_point_4cams", "camera_moved_camera_moved_3cams"}) {
     SCOPED_TRACE(name);
     bool found = false;
     for (const Pair& p : AllPairs())

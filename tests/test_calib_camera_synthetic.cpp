@@ -266,6 +266,10 @@ TEST(CalibCameraSynthetic, BoardGeometryAndFile) {
   EXPECT_FALSE(CalibrationBoard::Chessboard(100000, 100000, 0.025).IsValid(&why));
   EXPECT_NE(why.find("at most 500 inner corners per side"), std::string::npos) << why;
   EXPECT_TRUE(CalibrationBoard::Chessboard(500, 2, 0.025).IsValid(&why)) << why;
+  // A square of 60 "metres" (millimetres under the metre key) is a unit mistake, not a board.
+  EXPECT_FALSE(CalibrationBoard::Chessboard(9, 6, 60.0).IsValid(&why));
+  EXPECT_NE(why.find("millimetres where metres are expected"), std::string::npos) << why;
+  EXPECT_TRUE(CalibrationBoard::Chessboard(9, 6, 1.5).IsValid(&why)) << why;
   EXPECT_THROW(CalibrationBoard::Read("/nonexistent/board.yaml"), InputError);
 }
 

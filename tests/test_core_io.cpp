@@ -76,6 +76,21 @@ TEST(Io, ReadCsvSkipsCommentsAndBlankLinesTrimsCellsAndKeepsLineNumbers) {
   EXPECT_EQ(t.rows[1][2], "b b");
 }
 
+// Quoted cells as CsvQuoted writes them (a tracker's degraded reason holding a comma was
+// refused by `mcms fuse` as a row with one column too many).
+TEST(Io, ReadCsvReadsQuotedCellsAsCsvQuotedWritesThem) {
+  const fs::path p = test::ScratchDir("core_io_csv_quoted") / "t.csv";
+  const std::string reason = "only 2 balls seen, \"cam1\" blind";
+  test::WriteText(p, "frame,reason,x_m\n1," + CsvQuoted(reason) + ",0.5\n2, \"a,b\" ,3\n3,,\n");
+  const CsvTable t = ReadCsv(p);
+  ASSERT_EQ(t.rows.size(), 3u);
+  EXPECT_EQ(t.rows[0][1], reason);
+  EXPECT_EQ(t.Number(0, 2), 0.5);
+  EXPECT_EQ(t.rows[1][1], "a,b");
+  EXPECT_EQ(t.Number(1, 2), 3);
+  EXPECT_EQ(t.rows[2], (std::vector<std::string>{"3", "", ""}));
+}
+
 TEST(Io, ReadCsvErrorsNameFileLineAndColumn) {
   const fs::path dir = test::ScratchDir("core_io_csv_errors");
   test::WriteText(dir / "short.csv", "a,b,c\n1,2,3\n4,5\n");

@@ -15,6 +15,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/limits.h"
 #include "core/yaml.h"
 #include "vision/mrcal_c.h"
 
@@ -469,6 +470,9 @@ CameraRig CameraRig::Read(const fs::path& path) {
     if (!c.IsMap()) Throw(path.string(), " line ", c.Mark().line + 1, ": camera ", i, " must be a map (name, model or lensmodel, ...)");
     if (c["name"] && !c["name"].IsScalar()) Throw(path.string(), " line ", c.Mark().line + 1, ": camera ", i, ": 'name' must be a text");
     const std::string name = c["name"] ? c["name"].as<std::string>() : "cam" + std::to_string(i);
+    if (name.size() > kMaxCameraNameLength)
+      Throw(path.string(), " line ", c.Mark().line + 1, ": camera name '", name.substr(0, 20), "...' has ", name.size(),
+            " characters, at most ", kMaxCameraNameLength, " (it names the camera's image folder)");
     if (std::find(rig.names.begin(), rig.names.end(), name) != rig.names.end())
       Throw(path.string(), " line ", c.Mark().line + 1, ": camera name '", name,
             "' is used twice; every camera needs its own name (its image folder)");
