@@ -1,5 +1,6 @@
 #include "audit/camera_audit_job.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -117,6 +118,13 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
     }
     if (more > 0) print("... and " + std::to_string(more) + " more frames with unreadable images\n");
   }
+  // No pose at all: the rig does not describe these images (camera folders swapped, the
+  // wrong rig or target); say so, as `mcms track` does, not "too few frames".
+  if (std::none_of(results.begin(), results.end(), [](const FrameResult& r) { return r.T_rig_target.has_value(); }))
+    Throw("audit cameras: the target was never found in any of the ", results.size(), " frames of ",
+          (dir / "images").string(), results.empty() ? std::string() : " (first frame: " + results.front().reason + ")",
+          "; check that the image folders are those of ", (dir / "rig.yaml").string(),
+          "'s cameras (two folders swapped?) and that target.yaml is the target seen");
   print(CheckPoseResiduals(results).Describe() + "\n");
   const CameraAuditResult audit = AuditCameraModel(rig, target, results, a.audit, [&](const std::string& line) {
     if (!a.quiet) std::fprintf(stderr, "audit: %s\n", line.c_str());

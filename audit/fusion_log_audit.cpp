@@ -53,6 +53,18 @@ void CheckTiltUnits(const Inclinometer& incl, const std::vector<OrientationRefer
           " times the tilts the tracker measured, "
           "57.3: readings in degrees under _rad headers? (give tilt_x_rad, tilt_y_rad in radians, or "
           "tilt_x_deg, tilt_y_deg in degrees)");
+  // Another scale: the readings' spread against the tilts' (a ratio no mounting angle
+  // changes), beyond what a sensor's scale error (a few %) could be: degrees/100, gon or
+  // mrad under _rad headers. Judged only where the tilt varies by far more than the noise.
+  double srr = 0;
+  for (size_t i = 0; i < p.size(); ++i) srr += (r[i] - rm).squaredNorm();
+  const double spread = std::sqrt(srr / sxx);
+  if (std::sqrt(sxx / p.size()) > 20 * incl.sigma && std::abs(spread - 1.0) > 0.3) {
+    std::snprintf(b, sizeof b, "%.4g", spread);
+    Throw(log.source.string(), ": the inclinometer's readings vary ", b,
+          " times as much as the tilts the tracker measured: not a sensor's scale error (a few %) but another unit "
+          "(degrees/100, gon, mrad?); give tilt_x_rad, tilt_y_rad in radians or tilt_x_deg, tilt_y_deg in degrees");
+  }
   // The two columns exchanged: the readings follow the tracker's tilts with x and y
   // swapped (a reflection, which no mounting of the sensor produces) far better than as
   // logged. Compared after removing each fit's mean (a bias).

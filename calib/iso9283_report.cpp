@@ -10,6 +10,7 @@
 #include "calib/iso9283.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/statistics.h"
 
 namespace mcms {
 
@@ -85,6 +86,27 @@ Iso9283Report EvaluateIso9283Files(const std::filesystem::path& poses_file, cons
               " times as ", ratio > 1 ? "far from" : "close to", " the commanded poses' centre as the commanded ones: ",
               unit, " expected metres");
     }
+    // Attained orientations in another quaternion order: a robot misses its commanded
+    // orientation by a fraction of a degree, not by tens of degrees; read scalar-last
+    // (x, y, z, w under qw..qz) they would agree.
+    std::vector<double> angle, angle_xyzw;
+    for (const auto& id : order) {
+      const PoseRows& p = poses.at(id);
+      for (const auto& [cycle, a] : p.by_cycle) {
+        const Eigen::Quaterniond q(a.R);
+        const Eigen::Quaterniond alt(q.z(), q.w(), q.x(), q.y());  // the same four numbers, scalar last
+        angle.push_back(Eigen::AngleAxisd(p.commanded.R.transpose() * a.R).angle());
+        angle_xyzw.push_back(Eigen::AngleAxisd(p.commanded.R.transpose() * alt.toRotationMatrix()).angle());
+      }
+    }
+    const double deg = 180 / std::numbers::pi;
+    const double median = SelectedMedian(angle) * deg, median_xyzw = SelectedMedian(angle_xyzw) * deg;
+    if (median > 10)
+      Throw(poses_file.string(), ": the attained orientations differ from the commanded ones by ", Num4(median),
+            " deg (median)", median_xyzw < 1 ? ", and by " + Num4(median_xyzw) +
+                                                   " deg read scalar-last: quaternions x, y, z, w under qw, qx, qy, qz?"
+                                             : std::string("; are the attained poses those of these commanded poses?"),
+            " expected qw, qx, qy, qz (scalar first)");
   }
 
   std::ostringstream out, csv;

@@ -74,10 +74,8 @@ double PoseNees(const Pose& estimate, const Pose& truth, const Mat6& cov) {
   return e.dot(cov.ldlt().solve(e));
 }
 
-namespace {
-
-// The median of v by selection (reorders v).
 double SelectedMedian(std::vector<double>& v) {
+  if (v.empty()) return std::nan("");
   const size_t h = v.size() / 2;
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(h), v.end());
   const double upper = v[h];
@@ -85,6 +83,8 @@ double SelectedMedian(std::vector<double>& v) {
   const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(h));
   return 0.5 * (lower + upper);
 }
+
+namespace {
 
 // The bins holding ranks (n - 1) / 2 and n / 2 of the counts c[0..bins).
 void MiddleBins(const int* c, int bins, size_t n, int* a, int* b) {

@@ -29,6 +29,10 @@ double FisherSurvival(double x, double d1, double d2);
 // P(|Z| > |z|) for Z ~ N(0, 1).
 double TwoSidedNormalP(double z);
 
+// The median of v by selection (nth_element; v reordered); an even count's median is the
+// mean of its two middle values; NaN when v is empty.
+double SelectedMedian(std::vector<double>& v);
+
 // The median of v and the median of the absolute deviations from it (unscaled; 1.4826
 // times it estimates a normal sigma). An even count's median is the mean of its two middle
 // values. Values that are all integers spanning at most 4 n + 256 (pixel values) are

@@ -541,6 +541,38 @@ TEST(AttackLimits, ThirdAttackFindings) {
   }
   ExpectRefused(d, "track rec_mm -q --truth truth_mm.csv -o p.csv", {"truth_mm.csv", "millimetres under metre headers"});
   EXPECT_EQ(test::Mcms(d, "track rec_mm -q --truth rec_mm/truth/poses.csv -o p.csv").code, 0) << "the truth in metres";
+  // Attained quaternions scalar-last under qw..qz: named, not reported as AP_a = -180 deg.
+  {
+    std::istringstream in(test::ReadAll(kSource / "examples" / "iso9283" / "poses.csv"));
+    std::string line, out;
+    std::vector<std::string> head;
+    std::getline(in, line);
+    out = line + "\n";
+    {
+      std::stringstream ss(line);
+      for (std::string c; std::getline(ss, c, ',');) head.push_back(c);
+    }
+    const auto col = [&](const std::string& n) { return std::find(head.begin(), head.end(), n) - head.begin(); };
+    const long w = col("qw"), x = col("qx"), y = col("qy"), z = col("qz");
+    ASSERT_LT(z, static_cast<long>(head.size()));
+    while (std::getline(in, line)) {
+      std::vector<std::string> f;
+      std::stringstream ss(line);
+      for (std::string c; std::getline(ss, c, ',');) f.push_back(c);
+      const std::vector<std::string> q = {f[w], f[x], f[y], f[z]};
+      f[w] = q[1], f[x] = q[2], f[y] = q[3], f[z] = q[0];  // x, y, z, w
+      for (size_t k = 0; k < f.size(); ++k) out += f[k] + (k + 1 < f.size() ? "," : "\n");
+    }
+    test::WriteText(d / "xyzw.csv", out);
+  }
+  ExpectRefused(d, "iso9283 xyzw.csv", {"xyzw.csv", "read scalar-last", "x, y, z, w under qw, qx, qy, qz?"});
+  // Two camera folders swapped: the audit names the folders, not a short recording ('0
+  // tracked frames, expected at least 10').
+  ASSERT_EQ(test::Mcms(d, "render --frames 12 -q -o swapped").code, 0);
+  fs::rename(d / "swapped" / "images" / "cam0", d / "swapped" / "images" / "tmp");
+  fs::rename(d / "swapped" / "images" / "cam1", d / "swapped" / "images" / "cam0");
+  fs::rename(d / "swapped" / "images" / "tmp", d / "swapped" / "images" / "cam1");
+  ExpectRefused(d, "audit cameras swapped -q", {"never found in any of the 12 frames", "two folders swapped?"});
   // An output that is a symbolic link to nothing, named before the work.
   const auto l = test::ScratchDir("attack_limits_third_link");
   fs::create_directory_symlink(l / "gone", l / "out");

@@ -325,5 +325,27 @@ TEST(BadInput, InclinometerRadiansUnderDegreeHeadersAreNamed) {
   EXPECT_FALSE(fs::exists(d / "out"));
 }
 
+// The attack's AF01: readings in degrees/100 under _rad headers (0.573 times the radians)
+// were named as an 83 deg bias and an 81 deg misalignment: now named as another unit.
+TEST(BadInput, InclinometerInAnotherScaleIsNamed) {
+  const fs::path d = test::ScratchDir("audit_fusion_incl_scale");
+  test::Logs l = test::MovingLogs(test::AuditLogOptions(4));
+  auto& rows = l.files["incl.csv"];
+  ASSERT_EQ(rows[0], "time_s,tilt_x_rad,tilt_y_rad");
+  for (size_t i = 1; i < rows.size(); ++i) {
+    std::vector<std::string> c;
+    std::stringstream ss(rows[i]);
+    for (std::string x; std::getline(ss, x, ',');) c.push_back(x);
+    ASSERT_EQ(c.size(), 3u) << rows[i];
+    rows[i] = c[0] + "," + std::to_string(0.573 * std::stod(c[1])) + "," + std::to_string(0.573 * std::stod(c[2]));
+  }
+  test::Write(d, l);
+  const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv -o out"));
+  EXPECT_EQ(run.code, 2) << run.out << run.err;
+  EXPECT_NE(run.err.find("incl.csv: the inclinometer's readings vary 0.57"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("another unit"), std::string::npos) << run.err;
+  EXPECT_FALSE(fs::exists(d / "out"));
+}
+
 }  // namespace
 }  // namespace mcms
