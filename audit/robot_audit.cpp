@@ -267,11 +267,13 @@ AuditEffect EffectOf(const Problem& pb, const Option& op, const std::vector<int>
     const std::string name = geometric ? names.front() : names[p - pb.offset[k]];
     if (AtBound(fit, p)) {
       const bool low = std::abs(fit.theta[p] - pb.lower[p]) <= std::abs(fit.theta[p] - pb.upper[p]);
+      const char* why = op.ext.effect == Effect::kGravityCompliance
+                            ? "no joint sags by more than 0.1 rad or 5 mm under the arm's weight"
+                            : "no gear ratio is off by more, no joint has more play";
       e.held.push_back({name, low && pb.lower[p] == 0.0
                                   ? "at its physical bound 0 (no negative mass, compliance or backlash)"
-                                  : "at its physical bound " + Num4(low ? pb.lower[p] : pb.upper[p]) +
-                                        " (no gear ratio is off by more, no joint has more play): the data ask for "
-                                        "more than a physical " + name});
+                                  : "at its physical bound " + Num4(low ? pb.lower[p] : pb.upper[p]) + " (" + why +
+                                        "): the data ask for more than a physical " + name});
       continue;
     }
     e.parameters.push_back({name, fit.theta[p]});
@@ -445,13 +447,14 @@ std::string MassesNote(const RobotModel& robot, const RobotLog& log, const std::
     for (const Joint& j : robot.Joints()) total += j.mass_kg;
     std::snprintf(b, sizeof b,
                   "gravity compliance: the links' masses are the robot file's (%.3g kg in all; the tool %.3g kg), "
-                  "so each joint's gravity torque is known and only its compliance is fitted; %s",
+                  "so each joint's gravity torque is known and only its compliance is fitted (>= 0, sagging the "
+                  "joint by at most 0.1 rad or 5 mm); %s",
                   total, robot.Tool().mass_kg, payload.c_str());
   } else {
     std::snprintf(b, sizeof b,
                   "gravity compliance: the robot file gives no masses, so each joint's gravity torque is fitted as "
-                  "lumped mass moments (the tool point and the link frames outboard of the joint, each >= 0) times "
-                  "its compliance; %s",
+                  "lumped mass moments (the tool point and the link frames outboard of the joint, each >= 0 and "
+                  "none sagging the joint by more than 0.1 rad or 5 mm alone) times its compliance; %s",
                   log.has_payload ? "the tool point's moment scales with the log's payload column"
                                   : "the log has no payload column: the tool point's moment is one constant");
   }

@@ -99,6 +99,20 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
     }
     if (B[k].effect == Effect::kBacklash)
       pb->upper[pb->offset[k]] = robot.Joints()[B[k].index].type == JointType::kRevolute ? 0.1 : 0.005;
+    // Nor a compliance that sags a joint by more than kMaxGravityDeflection: each parameter
+    // (the compliance, or one lumped mass moment) alone, at its largest lever in the log.
+    if (B[k].effect == Effect::kGravityCompliance) {
+      const int j = B[k].index;
+      const double most = robot.Joints()[j].type == JointType::kRevolute ? kMaxGravityDeflectionRad
+                                                                         : kMaxGravityDeflectionM;
+      for (int c = 0; c < B[k].NumParameters(); ++c) {
+        double lever = 0.0;
+        for (const RowData& r : pb->rows)
+          lever = std::max(lever, std::abs(B[k].variant == 0 ? (r.c.gravity_torque.size() > j ? r.c.gravity_torque[j] : 0.0)
+                                                             : (r.c.gravity_lever.rows() > j ? r.c.gravity_lever(j, c) : 0.0)));
+        if (lever > 0) pb->upper[pb->offset[k] + c] = most / lever;
+      }
+    }
     if (B[k].effect == Effect::kThermalDrift && B[k].variant == 0) pb->warmup = pb->offset[k];
   }
 

@@ -23,6 +23,13 @@ namespace mcms {
 // calib/robot_measurements.h ReadRobotLog: one point, K >= 3 points of a rigid body (then
 // each row's measured pose of the body), or a pose per row.
 constexpr int kMinRobotMeasurements = 12;
+// The largest deflection a joint's gravity compliance may give the robot audit (at the
+// largest lever the log holds; each lumped mass alone): a revolute joint that sags by more
+// than 0.1 rad (5.7 deg) under the arm's weight is broken, not compliant, as a joint with
+// more play is (industrial arms sag 0.1-5 mrad; the real TIAGo's wrist about 30 mrad,
+// docs/tiago.md); a prismatic one by more than 5 mm.
+constexpr double kMaxGravityDeflectionRad = 0.1;
+constexpr double kMaxGravityDeflectionM = 0.005;
 
 struct RobotAuditOptions {
   // Designed probability that the audit calls a clean log not clean (any test failed or

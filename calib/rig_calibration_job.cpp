@@ -70,8 +70,19 @@ Detected DetectBoards(const RigCalibrationJob& a, const CalibrationBoard& board)
   for (size_t c = 0; c < a.folders.size(); ++c) {
     const fs::path dir = a.folders[c];
     if (!fs::is_directory(dir)) Throw("image folder ", dir.string(), " does not exist or is not a folder");
-    for (const auto& e : fs::directory_iterator(dir))
-      if (e.is_regular_file() && IsImage(e.path())) images[c].push_back(e.path());
+    for (const auto& e : fs::directory_iterator(dir)) {
+      if (!IsImage(e.path())) continue;
+      std::error_code ec;
+      if (e.is_regular_file(ec)) {
+        images[c].push_back(e.path());
+      } else if (!e.is_directory(ec)) {
+        // A pipe, device, socket or dangling link named like an image: reading it would block
+        // or fail, and skipping it would silently drop a view.
+        Throw("image ", e.path().string(), " is not a regular file (",
+              e.is_fifo(ec) ? "a FIFO" : e.is_symlink(ec) ? "a link to nothing" : "a device or socket",
+              "); remove it or copy the image there; no output written");
+      }
+    }
     std::sort(images[c].begin(), images[c].end());
     if (images[c].empty())
       Throw("image folder ", dir.string(), " holds no images (.png, .jpg, .bmp, .tif, .pgm)");

@@ -179,26 +179,55 @@ class KalmanRun {
       start_ = {k, e.t, true};
       return;
     }
+    if (left_out_[k] && start_.alone) {
+      // A sensor left out at a restart is not let back in while the restarted state rests on
+      // one sample alone: its unknown velocity would let the odd one in and pull the state back.
+      const PoseKalmanFilter::Prediction p = kf_.Predict(e.t);
+      const Vec6 b = BoxMinus(m.T, p.T);
+      PoseKalmanFilter::UpdateResult held;
+      held.accepted = false;
+      held.dof = 6;
+      held.nis = b.dot((p.covariance + m.covariance).ldlt().solve(b));
+      Note(k, held);
+      return;
+    }
     const PoseKalmanFilter::UpdateResult u = kf_.UpdatePose(e.t, m.T, m.covariance);
     Note(k, u);
-    if (!u.accepted && setup_.exclude_faults && StateIsTheOutlier()) {
+    if (!u.accepted && setup_.exclude_faults && !left_out_[k] && StateIsTheOutlier()) {
       // Two sensors keep disagreeing with the state, not necessarily with each other:
       // start again from this measurement.
       std::string who;
       for (int j = 0; j < 3; ++j)
-        if (streak_[j] >= 2) who += (who.empty() ? "" : " and ") + std::string(ToString(static_cast<StreamSensor>(j)));
+        if (streak_[j] >= 2 && !left_out_[j]) who += (who.empty() ? "" : " and ") + std::string(ToString(static_cast<StreamSensor>(j)));
       std::string text = "filter restarted at " + Num(e.t, 9) + " s: " + who + " kept contradicting its state";
-      if (start_.alone) {
+      if (start_.alone && start_.kind != k) {
         // The state was that one sample and nothing since vouched for it: it was the fault.
+        // (Contradicted by the next sample of its own sensor, it is as likely the motion since.)
         const std::string name = ToString(static_cast<StreamSensor>(start_.kind));
         text += " (which came from one " + name + " sample at " + Num(start_.t, 9) + " s alone: left out)";
         restart_culprits_.push_back(name);
+        left_out_[start_.kind] = true;
+        used_[start_.kind] = false;
+      } else {
+        // A full-pose sensor that kept agreeing with the state while two others contradicted
+        // it is the one the state followed: it is the odd one out (a frozen joint log).
+        for (const StreamSensor kind : {StreamSensor::kRobot, StreamSensor::kCamera}) {
+          const int j = static_cast<int>(kind);
+          if (streak_[j] > 0 || agreed_while_contradicted_[j] == 0) continue;
+          const std::string name = ToString(kind);
+          text += " (which followed the " + name + " alone, " + std::to_string(agreed_while_contradicted_[j]) +
+                  " of its updates agreeing meanwhile: left out)";
+          restart_culprits_.push_back(name);
+          left_out_[j] = true;
+          used_[j] = false;
+        }
       }
       restart_text_ = Joined(restart_text_, text);
       kf_.Initialize(e.t, m.T, m.covariance);
       used_[k] = true;
       start_ = {k, e.t, true};
       for (int& c : streak_) c = 0;
+      for (int& c : agreed_while_contradicted_) c = 0;
     }
   }
 
@@ -273,11 +302,16 @@ class KalmanRun {
       nis_[k] += u.nis;
       dof_[k] += u.dof;
       ++rejected_[k].accepted;
-      // An accepted full pose vouches for the state; a tilt alone does not (no position).
-      if (k != static_cast<int>(StreamSensor::kInclinometer)) {
-        for (int& c : streak_) c = 0;
-        start_.alone = false;
-      }
+      // A sensor's streak ends when it agrees again; another sensor agreeing does not end it
+      // (the state may be following that one). An accepted full pose vouches for the state's
+      // start; a tilt alone does not (no position).
+      streak_[k] = 0;
+      left_out_[k] = false;
+      if (std::any_of(std::begin(streak_), std::end(streak_), [](int c) { return c > 0; }))
+        ++agreed_while_contradicted_[k];
+      else
+        for (int& c : agreed_while_contradicted_) c = 0;
+      if (k != static_cast<int>(StreamSensor::kInclinometer)) start_.alone = false;
     } else {
       Rejected& x = rejected_[k];
       ++x.count;
@@ -287,9 +321,12 @@ class KalmanRun {
     }
   }
 
+  // Two sensors keep contradicting the state, each at least twice running (one chance
+  // rejection beside a faulty sensor is not enough); a sensor left out at a restart (and not
+  // agreeing since) is no witness: its disagreement is expected.
   bool StateIsTheOutlier() const {
     int sensors = 0;
-    for (const int c : streak_) sensors += c >= 2 ? 1 : 0;
+    for (int j = 0; j < 3; ++j) sensors += !left_out_[j] && streak_[j] >= 2 ? 1 : 0;
     return sensors >= 2;
   }
 
@@ -301,7 +338,9 @@ class KalmanRun {
   int dof_[3] = {0, 0, 0};
   bool used_[3] = {false, false, false};
   Rejected rejected_[3];
-  int streak_[3] = {0, 0, 0};  // rejections per sensor since the last accepted update
+  int streak_[3] = {0, 0, 0};  // rejections per sensor since its last accepted update
+  int agreed_while_contradicted_[3] = {0, 0, 0};  // accepted while another's streak ran
+  bool left_out_[3] = {false, false, false};       // named at a restart, not accepted since
   RangeRejects range_;
   struct Start {
     int kind = 0;

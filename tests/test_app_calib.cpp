@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <numbers>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -538,6 +539,17 @@ TEST(AppCalibRig, BadInputIsRefusedWithoutOutput) {
                   {d / "out" / "empty.cameramodel"});
     LinkLeftViews(data, d / "left");
     ExpectRefused(Mcms(d, "calib-rig -q noboard.yaml left -o out"), d, {"noboard.yaml"},
+                  {d / "out" / "left.cameramodel"});
+  }
+  {
+    // The second attack's CG12: a FIFO named like an image was skipped without a word (a view
+    // silently dropped); reading it would block.
+    SCOPED_TRACE("a FIFO among the images");
+    const fs::path d = test::ScratchDir("app_calib_rig_fifo");
+    WriteText(d / "board.yaml", kChessboardYaml);
+    LinkLeftViews(data, d / "left");
+    ASSERT_EQ(mkfifo((d / "left" / "zz_pipe.png").c_str(), 0600), 0);
+    ExpectRefused(Mcms(d, "calib-rig -q board.yaml left -o out"), d, {"zz_pipe.png", "not a regular file", "FIFO"},
                   {d / "out" / "left.cameramodel"});
   }
 }

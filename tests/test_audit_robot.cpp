@@ -678,6 +678,33 @@ TEST(RobotAudit, UrdfRobotWithWristBacklashAndTheArmsWeight) {
   }
 }
 
+// Issue 35 item 1: a compliance is bounded by what a joint can physically sag (0.1 rad at
+// the largest gravity torque of the log). A joint that sags twice that is not "compliant":
+// the fit holds it at the bound and the report says the data ask for more than a physical
+// compliance, instead of quoting a value no gearbox has.
+TEST(RobotAudit, ASagBeyondAnyGearboxIsHeldAtThePhysicalBound) {
+  const RobotModel seven = SevenJoints();
+  RobotLogSpec spec = SevenSpec();
+  spec.masses = &seven;
+  spec.poses = 60;
+  // The largest gravity torque on j2 over the poses this spec draws.
+  const RobotLog probe = MakeRobotLog(seven, 6300, {}, spec);
+  double torque = 0;
+  for (const auto& r : probe.rows)
+    torque = std::max(torque, std::abs(GravityTorque(seven, r.q, spec.payload_kg)[2]));
+  ASSERT_GT(torque, 1.0);
+  spec.compliance = {0, 0, 1.2 * kMaxGravityDeflectionRad / torque, 0, 0, 0, 0};
+  const RobotLog log = MakeRobotLog(seven, 6300, {}, spec);
+  const RobotAuditResult res = AuditRobot(seven, log);
+  std::printf("largest j2 torque %.1f N m, compliance %.3g rad/(N m):\n%s", torque, spec.compliance[2],
+              res.report.Text().c_str());
+  const AuditEffect* e = Find(res.report, "gravity_compliance", "j2");
+  ASSERT_NE(e, nullptr) << res.report.Text();
+  ASSERT_FALSE(e->held.empty()) << res.report.Text();
+  EXPECT_NE(e->held.front().second.find("physical bound"), std::string::npos) << e->held.front().second;
+  EXPECT_NE(e->held.front().second.find("sags"), std::string::npos) << e->held.front().second;
+}
+
 TEST(RobotAudit, CleanLogsOfAUrdfRobotAreCleanAtTheDesignedRate) {
   const RobotModel seven = SevenJoints();
   int alarms = 0;
