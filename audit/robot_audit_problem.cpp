@@ -706,7 +706,7 @@ Eigen::MatrixXd FitNominal(Problem* pb) {
   po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(po);
   for (const RowData& r : pb->rows) {
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<NominalResidual, 12>(new NominalResidual{pb, &r, Linv.get()});
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<NominalResidual, 16>(new NominalResidual{pb, &r, Linv.get()});
     cost->AddParameterBlock(6);
     cost->AddParameterBlock(pb->ts);
     cost->SetNumResiduals(pb->m);
