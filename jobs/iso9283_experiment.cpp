@@ -508,8 +508,12 @@ std::string FormatIso9283Experiment(const Iso9283Experiment& e) {
   std::string out;
   char buf[512];
   auto add = [&](const char* fmt, auto... args) {
-    std::snprintf(buf, sizeof(buf), fmt, args...);
-    out += buf;
+    if constexpr (sizeof...(args) == 0) {
+      out += fmt;  // plain text (a format string without arguments would be a format to clang)
+    } else {
+      std::snprintf(buf, sizeof(buf), fmt, args...);
+      out += buf;
+    }
   };
   const auto& o = e.options;
   add("ISO 9283 on the forward model: KR 5 arc with DH errors %.1f-%.1f mm / %.2f-%.2f deg, base %.1f mm / %.2f "
