@@ -1,6 +1,7 @@
 #include "audit/camera_audit.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -79,8 +80,9 @@ Target ExtendTarget(const Target& target, const std::vector<CameraModelTerm>& te
 
 struct Obs {
   int camera, ball;
-  Vec2 q;
+  Vec2 q;  // a late camera's blob moved back by its time offset's shift (see Associate)
   Mat2 cov;
+  Vec2 raw;  // the blob as detected
 };
 
 struct Frame {
@@ -173,6 +175,34 @@ struct GroupResidual {
   }
 };
 
+// One ball image's whitened residual in the joint fit, as a function of its frame's pose
+// (a rotation vector and a translation on the tracker's pose: R = Exp(dr) R0, t = t0 + dt)
+// and of the free terms' parameter blocks.
+struct JointResidual {
+  const CameraRig* rig;
+  const Target* target;
+  Sample s;  // its pose is the tracker's, T0
+  Vec2 q;
+  Mat2 W;  // L^-1 of the blob covariance times the camera's s^2
+  const std::vector<CameraModelTerm>* terms;
+  std::vector<int> free;
+  mutable std::vector<CameraModel> cams;
+  mutable std::vector<CameraModelTerm> work;
+  bool operator()(double const* const* p, double* r) const {
+    work = *terms;
+    for (size_t k = 0; k < free.size(); ++k) {
+      auto& v = work[free[k]].parameters;
+      std::copy(p[k + 1], p[k + 1] + v.size(), v.begin());
+    }
+    Sample x = s;
+    x.T = Pose{ExpSO3(Vec3(p[0][0], p[0][1], p[0][2])) * s.T.R, s.T.t + Vec3(p[0][3], p[0][4], p[0][5])};
+    const Vec2 e = W * (q - Predict(*rig, *target, x, work, &cams[x.camera]));
+    r[0] = e[0];
+    r[1] = e[1];
+    return std::isfinite(r[0]) && std::isfinite(r[1]);
+  }
+};
+
 struct Eval {
   double ll = 0, sq = 0, chi2 = 0;
   long n = 0;  // samples (2 residuals each)
@@ -247,36 +277,89 @@ class Auditor {
         const Vec2 q = cam.Project(p_cam_c) + SphereProjectionBias(cam, p_cam_c, target_x.ball_radius, 32);
         const int best = ClaimNearest(blobs, q, o_.gate_px, &used);
         if (best < 0) continue;
-        obs.push_back({c, b, blobs[best].q - (cam.Project(p_cam_c) - q0), blobs[best].cov});
+        obs.push_back({c, b, blobs[best].q - (cam.Project(p_cam_c) - q0), blobs[best].cov, blobs[best].q});
       }
     }
     return obs;
   }
 
-  // The log-likelihood (up to a constant) of every ball image under the model (terms,
-  // per-camera noise scales), each frame's pose fitted to all cameras at once: the joint
-  // fit a change to one camera is judged by. Unlike the leave-one-out residuals, where a
-  // camera's fault pulls the poses its neighbours are tested against (and a neighbour made
-  // to agree with the pulled poses also lowers the faulty camera's residuals), a fault
-  // here costs what it costs once, and only its own correction removes all of it.
-  double JointLogLik(const std::vector<CameraModelTerm>& terms, const std::vector<double>& scale) const {
+  // The joint fit (a bundle adjustment of the rig's model): every frame's pose and the
+  // terms' parameters (all but the noise scales, which stay as given) fitted together to
+  // every ball image, each whitened by its blob covariance times its camera's s^2; the
+  // ball images associated under the terms as given. Returns the log-likelihood (up to a
+  // constant) and leaves the fitted parameters in *terms. It is what a change to one
+  // camera is judged by: unlike the leave-one-out residuals, where a camera's fault pulls
+  // the poses its neighbours are tested against (and a neighbour made to agree with the
+  // pulled poses also lowers the faulty camera's residuals), a fault here costs what it
+  // costs once, and only its own correction removes all of it; and unlike the units' fits
+  // on leave-one-out poses, whose optimum is not the joint one, every term is refitted
+  // beside every other.
+  // *sigma (optional) receives each term's parameter sigmas (the noise scales' empty), the
+  // poses marginalised (the covariance of the whole fit, inverted).
+  double JointFit(std::vector<CameraModelTerm>* terms_io, const std::vector<double>& scale,
+                  std::vector<std::vector<double>>* sigma = nullptr) const {
+    std::vector<CameraModelTerm>& terms = *terms_io;
     const Target target_x = ExtendTarget(target_, terms);
-    PoseRefinementOptions po;
-    po.outlier_sigma = 1e9;
-    double ll = 0;
-    for (const Frame& f : frames_) {
+    std::vector<int> free;
+    for (size_t k = 0; k < terms.size(); ++k)
+      if (terms[k].extension.effect != Effect::kPixelNoiseScale) free.push_back(static_cast<int>(k));
+    const std::vector<CameraModelTerm> frozen = terms;  // the functors' copy; free blocks overwrite
+    ceres::Problem::Options po;
+    po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+    ceres::Problem problem(po);
+    std::vector<std::array<double, 6>> pose(frames_.size(), std::array<double, 6>{});
+    double log_scales = 0;
+    for (size_t i = 0; i < frames_.size(); ++i) {
+      const Frame& f = frames_[i];
       const CameraRig rig_x = ExtendRig(rig_, terms, f.t);
-      std::vector<BallObservation> all;
+      const std::vector<Obs> obs = Associate(f, rig_x, target_x, terms);
       std::set<int> balls;
-      for (const Obs& x : Associate(f, rig_x, target_x, terms)) {
-        all.push_back({x.camera, x.ball, x.q, x.cov * scale[x.camera] * scale[x.camera]});
-        balls.insert(x.ball);
-        ll -= 2 * std::log(scale[x.camera]);
-      }
+      for (const Obs& x : obs) balls.insert(x.ball);
       if (balls.size() < 3) continue;
-      ll -= 0.5 * RefinePose(rig_x, target_x, f.T, all, po).chi2;
+      for (const Obs& x : obs) {
+        const CameraModel& cam = rig_x.cameras[x.camera];
+        const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
+        const Mat2 L = Mat2(x.cov * scale[x.camera] * scale[x.camera]).llt().matrixL();
+        auto* r = new JointResidual{&rig_, &target_, {x.camera, x.ball, f.block, f.t, f.T, f.twist, x.raw,
+                                                      SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32)},
+                                    x.raw, L.inverse(), &frozen, free, rig_.cameras, {}};
+        auto* cost = new ceres::DynamicNumericDiffCostFunction<JointResidual, ceres::CENTRAL>(r);
+        std::vector<double*> blocks{pose[i].data()};
+        cost->AddParameterBlock(6);
+        for (int k : free) {
+          cost->AddParameterBlock(static_cast<int>(terms[k].parameters.size()));
+          blocks.push_back(terms[k].parameters.data());
+        }
+        cost->SetNumResiduals(2);
+        problem.AddResidualBlock(cost, nullptr, blocks);
+        log_scales += 2 * std::log(scale[x.camera]);
+      }
     }
-    return ll;
+    if (problem.NumResidualBlocks() == 0) return 0;
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_SCHUR;
+    so.max_num_iterations = 50;
+    so.num_threads = 1;
+    so.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    if (sigma) {
+      sigma->assign(terms.size(), {});
+      ceres::Covariance::Options co;
+      co.algorithm_type = ceres::DENSE_SVD;
+      co.null_space_rank = -1;  // a term the images do not constrain: its sigma is infinite, not a failure
+      ceres::Covariance covariance(co);
+      std::vector<std::pair<const double*, const double*>> pairs;
+      for (int k : free) pairs.push_back({terms[k].parameters.data(), terms[k].parameters.data()});
+      const bool ok = covariance.Compute(pairs, &problem);
+      for (int k : free) {
+        const int n = static_cast<int>(terms[k].parameters.size());
+        Eigen::MatrixXd c = Eigen::MatrixXd::Constant(n, n, std::nan(""));
+        if (ok) covariance.GetCovarianceBlock(terms[k].parameters.data(), terms[k].parameters.data(), c.data());
+        for (int i = 0; i < n; ++i) (*sigma)[k].push_back(std::sqrt(std::max(0.0, c(i, i))));
+      }
+    }
+    return -summary.final_cost - log_scales;  // final_cost = chi2 / 2
   }
 
   // Associates every camera's blobs with the balls and re-fits the leave-one-out poses
@@ -629,9 +712,24 @@ ScaleMode UnitScaleMode(bool cam_unit, int u, const std::vector<bool>& noise_nam
   return noise_named[u] ? ScaleMode::kFree : ScaleMode::kBand;
 }
 
-// Units (cameras, balls) per round whose strongest candidate's joint likelihood ratio is also
-// computed with every named term refitted beside it (by their first joint ratio's BIC gain).
-constexpr size_t kProfiled = 4;
+// Held-out evaluation of a unit's model (the terms `free` of `terms` fitted): each fold of
+// time fitted on the others and evaluated on it, summed over the folds.
+Eval HeldOut(const Auditor& a, const CameraAuditOptions& options, bool cam_unit, int u,
+             const std::vector<CameraModelTerm>& terms, const std::vector<int>& free, const std::vector<double>& scale,
+             ScaleMode mode) {
+  const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+  Eval out;
+  for (int f = 0; f < options.folds; ++f) {
+    const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, mode, f);
+    std::vector<double> sc = scale;
+    if (cam_unit) sc[u] = fit.scale;
+    const Eval e = a.Evaluate(s, fit.terms, sc, f, true);
+    out.ll += e.ll;
+    out.sq += e.sq;
+    out.n += e.n;
+  }
+  return out;
+}
 
 // The candidates of one selection round, each fitted on all data and on the folds, with
 // its likelihood ratio and held-out gain against its unit's current model; *tested
@@ -669,11 +767,15 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
     // Two effects of the camera's own at once: a camera whose focal length and principal
     // point (or any two of these) are both off is fitted by a 6-parameter move better than
     // by either alone; the pair, with fewer parameters than the move, is its own candidate.
-    const Effect own[] = {Effect::kFocalLength, Effect::kPrincipalPoint, Effect::kRadialDistortion,
-                          Effect::kCameraTimeOffset};
-    for (size_t i = 0; i < 4; ++i)
-      for (size_t j = i + 1; j < 4; ++j) {
+    // A moved camera that is also late: a principal point and a time offset otherwise fit
+    // it better than the move alone (a move with a principal point or a focal length is
+    // not a pair: the move takes them up).
+    const Effect own[] = {Effect::kCameraMoved, Effect::kFocalLength, Effect::kPrincipalPoint,
+                          Effect::kRadialDistortion, Effect::kCameraTimeOffset};
+    for (size_t i = 0; i < 5; ++i)
+      for (size_t j = i + 1; j < 5; ++j) {
         const Effect e1 = own[i], e2 = own[j];
+        if (e1 == Effect::kCameraMoved && e2 != Effect::kCameraTimeOffset) continue;
         if (has(e1, c) || has(e2, c)) continue;
         if ((e1 == Effect::kRadialDistortion || e2 == Effect::kRadialDistortion) && !HasK1(rig.cameras[c])) continue;
         Candidate x;
@@ -706,18 +808,10 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
   // Held-out evaluation of a unit model `t_all` with its free terms `free`: sum over folds.
   auto heldout = [&](bool cam_unit, int u, const std::vector<CameraModelTerm>& t0, const std::vector<int>& free,
                      ScaleMode mode, double* ll, double* sq, long* n) {
-    const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
-    *ll = *sq = 0;
-    *n = 0;
-    for (int f = 0; f < options.folds; ++f) {
-      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, t0, free, scale, mode, f);
-      std::vector<double> sc = scale;
-      if (cam_unit) sc[u] = fit.scale;
-      const Eval e = a.Evaluate(s, fit.terms, sc, f, true);
-      *ll += e.ll;
-      *sq += e.sq;
-      *n += e.n;
-    }
+    const Eval e = HeldOut(a, options, cam_unit, u, t0, free, scale, mode);
+    *ll = e.ll;
+    *sq = e.sq;
+    *n = e.n;
   };
   struct Base {
     double ll_all = 0, ll_held = 0, sq_held = 0;
@@ -823,6 +917,26 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
   return cands;
 }
 
+// The units (cameras, balls) that carry terms.
+std::set<std::pair<bool, int>> TermUnits(const std::vector<CameraModelTerm>& terms) {
+  std::set<std::pair<bool, int>> units;
+  for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
+  return units;
+}
+
+// One unit's terms fitted on all its samples, written back with the camera's noise scale;
+// returns the indices of the unit's terms (*cov, optional: their covariance, in order).
+std::vector<int> RefitUnit(const Auditor& a, const std::vector<bool>& noise_named, bool cam_unit, int u,
+                           std::vector<CameraModelTerm>* terms, std::vector<double>* scale,
+                           Eigen::MatrixXd* cov = nullptr) {
+  const std::vector<int> free = UnitTerms(*terms, cam_unit, u);
+  const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
+  const UnitFit fit = a.Fit(s, cam_unit ? u : -1, *terms, free, *scale, UnitScaleMode(cam_unit, u, noise_named), -1, cov);
+  for (int k : free) (*terms)[k].parameters = fit.terms[k].parameters;
+  if (cam_unit) (*scale)[u] = fit.scale;
+  return free;
+}
+
 // After an effect is taken: every unit's terms fitted again on the poses re-fitted with
 // it, and the poses again, until the cameras' leave-one-out log-likelihood gains less than
 // half a nat in a sweep (at most `iterations` sweeps: two moved cameras pull each other's
@@ -834,18 +948,10 @@ void RefitUnits(Auditor& a, const std::vector<bool>& noise_named, int iterations
                 std::vector<CameraModelTerm>* terms_out, std::vector<double>* scale_out) {
   std::vector<CameraModelTerm>& terms = *terms_out;
   std::vector<double>& scale = *scale_out;
-  std::set<std::pair<bool, int>> units;
-  for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
   double last = -std::numeric_limits<double>::infinity();
   for (int it = 0; it < iterations; ++it) {
-    for (const auto& [cam_unit, u] : units) {
-      const std::vector<int> free = UnitTerms(terms, cam_unit, u);
-      const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
-      if (s.empty()) continue;
-      const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, UnitScaleMode(cam_unit, u, noise_named), -1);
-      for (int k : free) terms[k].parameters = fit.terms[k].parameters;
-      if (cam_unit) scale[u] = fit.scale;
-    }
+    for (const auto& [cam_unit, u] : TermUnits(terms))
+      if (!(cam_unit ? a.CameraSamples(u) : a.BallSamples(u)).empty()) RefitUnit(a, noise_named, cam_unit, u, &terms, &scale);
     a.Rebuild(terms, scale);
     double ll = 0;
     for (int c = 0; c < static_cast<int>(scale.size()); ++c) ll += a.Evaluate(a.CameraSamples(c), terms, scale, -1, false).ll;
@@ -912,21 +1018,16 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
   std::vector<CameraModelTerm>& terms = *terms_out;
   std::vector<double>& scale = *scale_out;
   AuditReport& rep = *rep_out;
-  std::set<std::pair<bool, int>> units;
-  for (const auto& t : terms) units.insert({t.extension.effect != Effect::kTargetGeometry, t.extension.index});
-  for (const auto& [cam_unit, u] : units) {
-    const std::vector<int> free = UnitTerms(terms, cam_unit, u);
+  for (const auto& [cam_unit, u] : TermUnits(terms)) {
     const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
     Eigen::MatrixXd cov;
-    const UnitFit fit = a.Fit(s, cam_unit ? u : -1, terms, free, scale, UnitScaleMode(cam_unit, u, noise_named), -1, &cov);
-    if (cam_unit) scale[u] = fit.scale;
+    const std::vector<int> free = RefitUnit(a, noise_named, cam_unit, u, &terms, &scale, &cov);
     int j = 0;
     for (int k : free) {
-      terms[k].parameters = fit.terms[k].parameters;
       const Extension& x = terms[k].extension;
       std::vector<double> sg;
       if (x.effect == Effect::kPixelNoiseScale) {
-        sg.push_back(fit.scale / std::sqrt(4.0 * s.size()));
+        sg.push_back(scale[u] / std::sqrt(4.0 * s.size()));
       } else {
         for (int i = 0; i < x.NumParameters(); ++i, ++j)
           sg.push_back(j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
@@ -944,36 +1045,136 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
 // Moves for the whole recording at all cameras but one (or at all) are not identifiable:
 // the target's poses are free, so camera a moved by Ma and camera b by Mb give the same
 // images as every other camera moved by Ma^-1 and b by Ma^-1 Mb (two cameras: a move of
-// either). The images cannot say which cameras moved; the moves stay in the model (the
-// poses need them) but are reported as one undecided group of every camera seen.
-void UndecideUnidentifiableMoves(const Auditor& a, const CameraRig& rig, std::vector<CameraModelTerm>* terms,
-                                 AuditReport* rep) {
+// either). Time offsets likewise: the same offset at every camera is a shift of the
+// target's (free) trajectory, so offsets (0, a, b) of three cameras give the same images as
+// (-a, 0, b - a) or (-b, a - b, 0). The images cannot say which cameras moved (or lag); the
+// terms stay in the model (the poses need them) but are reported as one undecided group of
+// every camera seen.
+void UndecideUnidentifiable(const Auditor& a, const CameraRig& rig, Effect effect, std::vector<CameraModelTerm>* terms,
+                            AuditReport* rep) {
   const int nc = static_cast<int>(rig.size());
   int seen = 0;
   for (int c = 0; c < nc; ++c) seen += a.CameraSamples(c).empty() ? 0 : 1;
-  std::vector<CameraModelTerm*> moves;
+  std::vector<CameraModelTerm*> found;
   for (auto& t : *terms)
-    if (!t.undecided && t.extension.effect == Effect::kCameraMoved &&
-        !(t.from_time_s > -std::numeric_limits<double>::infinity()))
-      moves.push_back(&t);
-  if (seen < 2 || moves.empty() || static_cast<int>(moves.size()) < seen - 1) return;
+    if (!t.undecided && t.extension.effect == effect && !(t.from_time_s > -std::numeric_limits<double>::infinity()))
+      found.push_back(&t);
+  if (seen < 2 || found.empty() || static_cast<int>(found.size()) < seen - 1) return;
   std::vector<std::string> group;
   for (int c = 0; c < nc; ++c)
-    if (!a.CameraSamples(c).empty()) group.push_back(Extension{Effect::kCameraMoved, c, 0}.Label(rig.names));
+    if (!a.CameraSamples(c).empty()) group.push_back(Extension{effect, c, 0}.Label(rig.names));
   std::string named;
-  for (CameraModelTerm* t : moves) {
+  for (CameraModelTerm* t : found) {
     t->undecided = true;
     const std::string where = t->extension.Where(rig.names);
     named += (named.empty() ? "" : ", ") + where;
     auto& ef = rep->effects;
     ef.erase(std::remove_if(ef.begin(), ef.end(),
-                            [&](const AuditEffect& e) { return e.name == Name(Effect::kCameraMoved) && e.where == where; }),
+                            [&](const AuditEffect& e) { return e.name == Name(effect) && e.where == where; }),
              ef.end());
   }
   rep->undecided.push_back(group);
-  rep->notes.push_back("camera_moved fitted at " + named + " of " + std::to_string(seen) +
-                       " cameras: moves at all cameras but one are not identifiable (the target's poses are free, so "
-                       "the same images come from the other cameras moved instead); which moved is undecided");
+  const std::string what = effect == Effect::kCameraMoved ? "moves" : "time offsets";
+  rep->notes.push_back(std::string(Name(effect)) + " fitted at " + named + " of " + std::to_string(seen) +
+                       " cameras: " + what +
+                       " at all cameras but one are not identifiable (the target's poses are free, so the same images "
+                       "come from the other cameras' instead); which cameras is undecided");
+}
+
+// A named intrinsic effect or time offset is judged against what could stand in its place
+// with as many parameters: the same effect at every other camera, and the camera's other
+// effects of its size (focal length, k1 and time offset have one parameter each), by the
+// joint fit (Auditor::JointFit: every term and every frame's pose fitted together). A fault
+// of one camera pulls the poses all cameras share, so in a small rig the same effect
+// elsewhere, with the other terms, may explain the images as well; and a focal length and a
+// k1 differ only in how the image scales with the distance from its centre, which a target
+// seen near the centre does not show. Where a stand-in explains the images as well (within
+// undecided_nats of log-likelihood), the images do not say which it is: the group is
+// reported undecided and the term kept in the model, unnamed.
+void UndecideSwappableEffects(const Auditor& a, const CameraRig& rig, const CameraAuditOptions& options,
+                              const std::vector<double>& scale, const std::vector<bool>& noise_named,
+                              std::vector<CameraModelTerm>* terms_io, AuditReport* rep) {
+  std::vector<CameraModelTerm>& terms = *terms_io;
+  const int nc = static_cast<int>(rig.size());
+  std::vector<CameraModelTerm> fitted = terms;
+  const double base = a.JointFit(&fitted, scale);
+  for (size_t k = 0; k < terms.size(); ++k) {
+    const Extension x = terms[k].extension;
+    if (terms[k].undecided ||
+        (x.effect != Effect::kFocalLength && x.effect != Effect::kPrincipalPoint &&
+         x.effect != Effect::kRadialDistortion && x.effect != Effect::kCameraTimeOffset))
+      continue;
+    std::vector<Extension> stand_ins;
+    for (int c = 0; c < nc; ++c)
+      if (c != x.index) stand_ins.push_back(Extension{x.effect, c, 0});
+    for (Effect e : {Effect::kFocalLength, Effect::kPrincipalPoint, Effect::kRadialDistortion,
+                     Effect::kCameraTimeOffset})
+      if (e != x.effect && Extension{e, x.index, 0}.NumParameters() == x.NumParameters())
+        stand_ins.push_back(Extension{e, x.index, 0});
+    std::vector<std::string> group;
+    for (const Extension& y : stand_ins) {
+      if (a.CameraSamples(y.index).empty()) continue;
+      if (y.effect == Effect::kRadialDistortion && !HasK1(rig.cameras[y.index])) continue;
+      bool taken = false;
+      for (const auto& t : terms) taken = taken || (t.extension.effect == y.effect && t.extension.index == y.index);
+      if (taken) continue;
+      std::vector<CameraModelTerm> t = terms;
+      t[k].extension = y;
+      t[k].parameters = y.InitialParameters();
+      // A stand-in at the same camera is judged on the same samples as the term was
+      // selected on: it must also predict the held-out folds as well (the selection's tie
+      // rule), not only fit the joint likelihood as well.
+      if (y.index == x.index) {
+        const ScaleMode mode = UnitScaleMode(true, x.index, noise_named);
+        const double named_ll = HeldOut(a, options, true, x.index, terms, UnitTerms(terms, true, x.index), scale, mode).ll;
+        const double stand_ll = HeldOut(a, options, true, x.index, t, UnitTerms(t, true, x.index), scale, mode).ll;
+        if (stand_ll < named_ll - options.undecided_nats) continue;
+      }
+      const double ll = a.JointFit(&t, scale);
+      if (ll >= base - options.undecided_nats) group.push_back(t[k].extension.Label(rig.names));
+    }
+    if (group.empty()) continue;
+    const std::string label = x.Label(rig.names), where = x.Where(rig.names);
+    group.insert(group.begin(), label);
+    terms[k].undecided = true;
+    auto& ef = rep->effects;
+    ef.erase(std::remove_if(ef.begin(), ef.end(),
+                            [&](const AuditEffect& e) { return e.name == Name(x.effect) && e.where == where; }),
+             ef.end());
+    rep->undecided.push_back(group);
+    std::string others;
+    for (size_t i = 1; i < group.size(); ++i) others += (i > 1 ? ", " : "") + group[i];
+    char band[32];
+    std::snprintf(band, sizeof band, "%.3g", options.undecided_nats);
+    rep->notes.push_back(label + " was selected, but " + others + " in its place, with every other term and the poses " +
+                         "refitted, explains the images as well (joint log-likelihood within " + band +
+                         " nats): which is undecided");
+  }
+}
+
+// The named terms' values and sigmas from the joint fit (every term and every frame's pose
+// together: the maximum likelihood, its covariance with the poses marginalised), not from
+// each unit's fit on leave-one-out poses, which a neighbour's fault still pulls and whose
+// sigma leaves out the poses' own error. The noise scales stay the units' fits.
+void JointEstimates(const Auditor& a, const CameraRig& rig, const std::vector<double>& scale,
+                    std::vector<CameraModelTerm>* terms_io, AuditReport* rep) {
+  std::vector<CameraModelTerm>& terms = *terms_io;
+  if (terms.empty()) return;
+  std::vector<CameraModelTerm> joint = terms;
+  std::vector<std::vector<double>> sigma;
+  a.JointFit(&joint, scale, &sigma);
+  for (size_t k = 0; k < terms.size(); ++k) {
+    const Extension& x = terms[k].extension;
+    if (x.effect == Effect::kPixelNoiseScale) continue;
+    terms[k].parameters = joint[k].parameters;
+    if (terms[k].undecided) continue;
+    for (auto& e : rep->effects)
+      if (e.name == Name(x.effect) && e.where == x.Where(rig.names))
+        for (size_t i = 0; i < sigma[k].size() && i < e.sigma.size(); ++i) {
+          e.parameters[i].second = terms[k].parameters[i];
+          e.sigma[i].second = sigma[k][i];
+        }
+  }
 }
 
 }  // namespace
@@ -1031,40 +1232,27 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     // do to the whole rig: a camera's fault pulls the leave-one-out poses its neighbours
     // are tested against, so a neighbour's candidate (or a move mimicking an intrinsic
     // error plus that pull) also fits its own unit. The likelihood ratio of each passing
-    // candidate becomes that of the joint fit (every frame's pose fitted to all cameras;
-    // Auditor::JointLogLik), where only the faulty camera's correction removes the whole
-    // cost of its fault; the test, BIC and held-out rules then decide as before.
+    // candidate becomes that of the joint fit (Auditor::JointFit: every frame's pose and
+    // every term fitted to all cameras at once), where only the faulty camera's correction
+    // removes the whole cost of its fault; the test, BIC and held-out rules then decide as
+    // before.
     if (dec.outcome == StepOutcome::kNamed || dec.outcome == StepOutcome::kUndecided) {
       std::vector<size_t> pool;
       for (size_t i = 0; i < cands.size(); ++i)
         if (sel[i].passes) pool.push_back(i);
       if (pool.size() > 1) {
-        const double base = a.JointLogLik(terms, scale);
+        // Every term, the candidate's and the named ones, fitted jointly with every frame's
+        // pose: a term named while this candidate's fault was unmodelled carries part of
+        // it, and only refitted beside it does it give that part back. The noise scales are
+        // each model's own (the candidate's camera's fitted with it, within the band).
+        std::vector<CameraModelTerm> t0 = terms;
+        const double base = a.JointFit(&t0, scale);
         for (size_t i : pool) {
           std::vector<double> sc = scale;
           if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
-          cands[i].lr = sel[i].lr = 2 * (a.JointLogLik(cands[i].fitted, sc) - base);
+          std::vector<CameraModelTerm> t = cands[i].fitted;
+          cands[i].lr = sel[i].lr = 2 * (a.JointFit(&t, sc) - base);
         }
-        // The strongest few again with every named term refitted beside them: a term named
-        // while this candidate's fault was unmodelled carries part of it, and only refitted
-        // does it give that part back.
-        std::sort(pool.begin(), pool.end(), [&](size_t x, size_t y) {
-          return sel[x].lr - sel[x].k * ln_n > sel[y].lr - sel[y].k * ln_n;
-        });
-        std::set<std::pair<bool, int>> profiled;
-        if (!terms.empty())
-          for (size_t i : pool) {
-            if (profiled.size() >= kProfiled || !profiled.insert({cands[i].camera_unit, cands[i].unit}).second) continue;
-            std::vector<double> sc = scale;
-            if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
-            std::vector<CameraModelTerm> t = cands[i].fitted;
-            std::vector<bool> nn = noise_named;
-            if (cands[i].camera_unit && cands[i].term.extension.effect == Effect::kPixelNoiseScale) nn[cands[i].unit] = true;
-            a.Rebuild(t, sc);
-            RefitUnits(a, nn, 10, &t, &sc);
-            cands[i].lr = sel[i].lr = std::max(sel[i].lr, 2 * (a.JointLogLik(t, sc) - base));
-          }
-        a.Rebuild(terms, scale);
         dec = DecideStep(sel, tested, rule);
       }
     }
@@ -1134,7 +1322,17 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
   }
   PruneNamedEffects(a, rig, nb, options, ln_n, &terms, &scale, &noise_named, &rep);
   RefitNamedUnits(a, rig, noise_named, &terms, &scale, &rep);
-  UndecideUnidentifiableMoves(a, rig, &terms, &rep);
+  UndecideUnidentifiable(a, rig, Effect::kCameraMoved, &terms, &rep);
+  UndecideUnidentifiable(a, rig, Effect::kCameraTimeOffset, &terms, &rep);
+  UndecideSwappableEffects(a, rig, options, scale, noise_named, &terms, &rep);
+  JointEstimates(a, rig, scale, &terms, &rep);
+  // What a named move cannot be told from.
+  for (const auto& t : terms)
+    if (!t.undecided && t.extension.effect == Effect::kCameraMoved)
+      rep.notes.push_back(t.extension.Label(rig.names) +
+                          " also accounts for a change of that camera's principal point (a tilt shifts its image "
+                          "the same way) and, with the target at nearly one distance, of its focal length (a shift "
+                          "along its axis scales its image): the images do not tell these apart from the move");
   // The named terms with their sigmas.
   for (const auto& t : terms) {
     if (t.undecided) continue;
