@@ -189,7 +189,7 @@ struct JointResidual {
   mutable std::vector<CameraModel> cams;
   mutable std::vector<CameraModelTerm> work;
   bool operator()(double const* const* p, double* r) const {
-    work = *terms;
+    if (work.empty()) work = *terms;  // the fixed blocks once; the free ones every call
     for (size_t k = 0; k < free.size(); ++k) {
       auto& v = work[free[k]].parameters;
       std::copy(p[k + 1], p[k + 1] + v.size(), v.begin());
@@ -308,6 +308,7 @@ class Auditor {
     po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
     ceres::Problem problem(po);
     std::vector<std::array<double, 6>> pose(frames_.size(), std::array<double, 6>{});
+    std::vector<bool> used(frames_.size(), false);
     double log_scales = 0;
     for (size_t i = 0; i < frames_.size(); ++i) {
       const Frame& f = frames_[i];
@@ -316,6 +317,7 @@ class Auditor {
       std::set<int> balls;
       for (const Obs& x : obs) balls.insert(x.ball);
       if (balls.size() < 3) continue;
+      used[i] = true;
       for (const Obs& x : obs) {
         const CameraModel& cam = rig_x.cameras[x.camera];
         const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
@@ -344,20 +346,53 @@ class Auditor {
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
     if (sigma) {
+      // The terms' covariance with the poses marginalised: the inverse of the Schur
+      // complement of the information matrix, the poses eliminated frame by frame (each
+      // ball image touches one pose; a dense inverse of the whole would cost the cube of
+      // six times the frames).
       sigma->assign(terms.size(), {});
-      ceres::Covariance::Options co;
-      co.algorithm_type = ceres::DENSE_SVD;
-      co.null_space_rank = -1;  // a term the images do not constrain: its sigma is infinite, not a failure
-      ceres::Covariance covariance(co);
-      std::vector<std::pair<const double*, const double*>> pairs;
-      for (int k : free) pairs.push_back({terms[k].parameters.data(), terms[k].parameters.data()});
-      const bool ok = covariance.Compute(pairs, &problem);
+      std::vector<double*> order;
+      for (size_t i = 0; i < frames_.size(); ++i)
+        if (used[i]) order.push_back(pose[i].data());
+      const int np = 6 * static_cast<int>(order.size());
+      int nf = 0;
       for (int k : free) {
-        const int n = static_cast<int>(terms[k].parameters.size());
-        Eigen::MatrixXd c = Eigen::MatrixXd::Constant(n, n, std::nan(""));
-        if (ok) covariance.GetCovarianceBlock(terms[k].parameters.data(), terms[k].parameters.data(), c.data());
-        for (int i = 0; i < n; ++i) (*sigma)[k].push_back(std::sqrt(std::max(0.0, c(i, i))));
+        order.push_back(terms[k].parameters.data());
+        nf += static_cast<int>(terms[k].parameters.size());
       }
+      ceres::Problem::EvaluateOptions eo;
+      eo.parameter_blocks = order;
+      ceres::CRSMatrix J;
+      problem.Evaluate(eo, nullptr, nullptr, nullptr, &J);
+      Eigen::MatrixXd Hff = Eigen::MatrixXd::Zero(nf, nf);
+      std::vector<Mat6> Hee(np / 6, Mat6::Zero());
+      std::vector<Eigen::MatrixXd> Hfe(np / 6, Eigen::MatrixXd::Zero(nf, 6));
+      Eigen::VectorXd jf(nf);
+      for (int r = 0; r < J.num_rows; ++r) {
+        Vec6 je = Vec6::Zero();
+        jf.setZero();
+        int pose_of = -1;
+        for (int i = J.rows[r]; i < J.rows[r + 1]; ++i) {
+          const int c = J.cols[i];
+          if (c < np) {
+            pose_of = c / 6;
+            je[c % 6] = J.values[i];
+          } else {
+            jf[c - np] = J.values[i];
+          }
+        }
+        Hff += jf * jf.transpose();
+        if (pose_of >= 0) {
+          Hee[pose_of] += je * je.transpose();
+          Hfe[pose_of] += jf * je.transpose();
+        }
+      }
+      for (size_t i = 0; i < Hee.size(); ++i) Hff -= Hfe[i] * Hee[i].ldlt().solve(Hfe[i].transpose());
+      const Eigen::MatrixXd C = Hff.ldlt().solve(Eigen::MatrixXd::Identity(nf, nf));
+      int j = 0;
+      for (int k : free)
+        for (size_t i = 0; i < terms[k].parameters.size(); ++i, ++j)
+          (*sigma)[k].push_back(std::sqrt(std::max(0.0, C(j, j))));
     }
     return -summary.final_cost - log_scales;  // final_cost = chi2 / 2
   }
