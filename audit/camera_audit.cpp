@@ -147,6 +147,18 @@ Vec2 Predict(const CameraRig& rig, const Target& target, const Sample& s, const 
   return cam->Project(p_cam) + s.bias;
 }
 
+// A least-squares solve on one thread, without Ceres' log.
+ceres::Solver::Summary SolveSilently(ceres::LinearSolverType solver, int max_iterations, ceres::Problem* problem) {
+  ceres::Solver::Options so;
+  so.linear_solver_type = solver;
+  so.max_num_iterations = max_iterations;
+  so.num_threads = 1;
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, problem, &summary);
+  return summary;
+}
+
 // One sample's whitened residual as a function of the free terms' parameter blocks.
 struct GroupResidual {
   const CameraRig* rig;
@@ -338,13 +350,7 @@ class Auditor {
       }
     }
     if (problem.NumResidualBlocks() == 0) return 0;
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_SCHUR;
-    so.max_num_iterations = 50;
-    so.num_threads = 1;
-    so.logging_type = ceres::SILENT;
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
+    const ceres::Solver::Summary summary = SolveSilently(ceres::DENSE_SCHUR, 50, &problem);
     if (sigma) {
       // The terms' covariance with the poses marginalised: the inverse of the Schur
       // complement of the information matrix, the poses eliminated frame by frame (each
@@ -559,13 +565,7 @@ class Auditor {
         problem.AddResidualBlock(cost, nullptr, blocks);
       }
       if (problem.NumResidualBlocks() > 0) {
-        ceres::Solver::Options so;
-        so.linear_solver_type = ceres::DENSE_QR;
-        so.max_num_iterations = 30;
-        so.num_threads = 1;
-        so.logging_type = ceres::SILENT;
-        ceres::Solver::Summary summary;
-        ceres::Solve(so, &problem, &summary);
+        SolveSilently(ceres::DENSE_QR, 30, &problem);
         if (cov) {
           ceres::Problem::EvaluateOptions eo;
           eo.parameter_blocks = blocks;
@@ -1077,6 +1077,13 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
   }
 }
 
+// The report's named effect `name` at `where` taken out (it joins an undecided group).
+void Unname(const std::string& name, const std::string& where, AuditReport* rep) {
+  auto& ef = rep->effects;
+  ef.erase(std::remove_if(ef.begin(), ef.end(), [&](const AuditEffect& e) { return e.name == name && e.where == where; }),
+           ef.end());
+}
+
 // Moves for the whole recording at all cameras but one (or at all) are not identifiable:
 // the target's poses are free, so camera a moved by Ma and camera b by Mb give the same
 // images as every other camera moved by Ma^-1 and b by Ma^-1 Mb (two cameras: a move of
@@ -1103,10 +1110,7 @@ void UndecideUnidentifiable(const Auditor& a, const CameraRig& rig, Effect effec
     t->undecided = true;
     const std::string where = t->extension.Where(rig.names);
     named += (named.empty() ? "" : ", ") + where;
-    auto& ef = rep->effects;
-    ef.erase(std::remove_if(ef.begin(), ef.end(),
-                            [&](const AuditEffect& e) { return e.name == Name(effect) && e.where == where; }),
-             ef.end());
+    Unname(Name(effect), where, rep);
   }
   rep->undecided.push_back(group);
   const std::string what = effect == Effect::kCameraMoved ? "moves" : "time offsets";
@@ -1172,10 +1176,7 @@ void UndecideSwappableEffects(const Auditor& a, const CameraRig& rig, const Came
     const std::string label = x.Label(rig.names), where = x.Where(rig.names);
     group.insert(group.begin(), label);
     terms[k].undecided = true;
-    auto& ef = rep->effects;
-    ef.erase(std::remove_if(ef.begin(), ef.end(),
-                            [&](const AuditEffect& e) { return e.name == Name(x.effect) && e.where == where; }),
-             ef.end());
+    Unname(Name(x.effect), where, rep);
     rep->undecided.push_back(group);
     std::string others;
     for (size_t i = 1; i < group.size(); ++i) others += (i > 1 ? ", " : "") + group[i];
