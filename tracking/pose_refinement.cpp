@@ -4,7 +4,9 @@
 
 #include <ceres/ceres.h>
 
+#include <algorithm>
 #include <cmath>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -34,6 +36,14 @@ class BallReprojectionCost : public ceres::SizedCostFunction<2, 6> {
   BallReprojectionCost(const CameraModel* cam, const Pose& T0, const Vec3& ball_target, const Vec2& q_minus_bias,
                        const Mat2& W)
       : cam_(cam), R0b_(T0.R * ball_target), p0_(T0.t), q_(q_minus_bias), W_(W) {}
+
+  // The same residual about another linearization pose and sphere bias (RefinePose's
+  // outer iterations change these in place instead of building a new problem).
+  void Relinearize(const Pose& T0, const Vec3& ball_target, const Vec2& q_minus_bias) {
+    R0b_ = T0.R * ball_target;
+    p0_ = T0.t;
+    q_ = q_minus_bias;
+  }
 
   bool Evaluate(double const* const* params, double* residuals, double** jacobians) const override {
     const Eigen::Map<const Vec6> d(params[0]);
@@ -95,19 +105,30 @@ PoseRefinement RefinePose(const CameraRig& rig, const Target& target, const Pose
   const double radius = options.correct_sphere_bias ? target.ball_radius : 0.0;
 
   auto solve = [&](const std::vector<BallObservation>& use) {
+    // One problem for all outer iterations (each re-linearizes the residuals in place) and
+    // one loss for every residual: building them anew cost as much as solving.
+    std::optional<ceres::HuberLoss> huber;
+    if (options.huber_sigma > 0) huber.emplace(options.huber_sigma);
+    ceres::Problem::Options po;
+    po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
+    po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    ceres::Problem problem(po);
+    std::vector<BallReprojectionCost*> costs;
+    costs.reserve(use.size());
+    double delta[6];
     for (int outer = 0; outer < options.max_outer_iterations; ++outer) {
-      ceres::Problem::Options po;
-      po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
-      po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
-      ceres::Problem problem(po);
-      double delta[6] = {0, 0, 0, 0, 0, 0};
-      for (const auto& o : use) {
+      std::fill(delta, delta + 6, 0.0);
+      for (size_t k = 0; k < use.size(); ++k) {
+        const BallObservation& o = use[k];
         const CameraModel& cam = rig.cameras[o.camera];
         const Vec3& b = target.balls_target[o.ball];
         const Vec2 bias = radius > 0 ? Bias(cam, out.T_rig_target, b, radius, options.bias_outline_points) : Vec2::Zero();
-        ceres::LossFunction* loss = options.huber_sigma > 0 ? new ceres::HuberLoss(options.huber_sigma) : nullptr;
-        problem.AddResidualBlock(
-            new BallReprojectionCost(&cam, out.T_rig_target, b, o.q - bias, WhiteningOf(o.cov)), loss, delta);
+        if (outer > 0) {
+          costs[k]->Relinearize(out.T_rig_target, b, o.q - bias);
+          continue;
+        }
+        costs.push_back(new BallReprojectionCost(&cam, out.T_rig_target, b, o.q - bias, WhiteningOf(o.cov)));
+        problem.AddResidualBlock(costs.back(), huber ? &*huber : nullptr, delta);
       }
       ceres::Solver::Options so;
       so.linear_solver_type = ceres::DENSE_QR;

@@ -99,15 +99,20 @@ Vec2 CameraModel::Project(const Vec3& p_cam, Eigen::Matrix<double, 2, 3>* dq_dp,
 }
 
 std::vector<Vec2> CameraModel::Project(const std::vector<Vec3>& p_cam) const {
+  std::vector<Vec2> out;
+  Project(p_cam, &out);
+  return out;
+}
+
+void CameraModel::Project(const std::vector<Vec3>& p_cam, std::vector<Vec2>* q) const {
   // Eigen's fixed-size vectors of doubles are laid out as mrcal's points (no padding):
   // mrcal reads and writes them in place.
   static_assert(sizeof(Vec3) == sizeof(mrcal_point3_t) && sizeof(Vec2) == sizeof(mrcal_point2_t));
-  std::vector<Vec2> out(p_cam.size());
+  q->resize(p_cam.size());
   if (!p_cam.empty())
-    mrcal_project(reinterpret_cast<mrcal_point2_t*>(out.data()), nullptr, nullptr,
+    mrcal_project(reinterpret_cast<mrcal_point2_t*>(q->data()), nullptr, nullptr,
                   reinterpret_cast<const mrcal_point3_t*>(p_cam.data()), static_cast<int>(p_cam.size()),
                   &Lens(lensmodel_), intrinsics_.data());
-  return out;
 }
 
 std::optional<Vec3> CameraModel::Unproject(const Vec2& q) const { return Unproject(std::vector<Vec2>{q})[0]; }

@@ -42,6 +42,8 @@ class CameraModel {
                std::vector<double>* dq_dintrinsics = nullptr) const;
   // Many points at once (one mrcal call).
   std::vector<Vec2> Project(const std::vector<Vec3>& p_cam) const;
+  // The same into *q (resized to p_cam's size; its storage is reused from call to call).
+  void Project(const std::vector<Vec3>& p_cam, std::vector<Vec2>* q) const;
   // Unit ray direction in camera coordinates for pixel q. std::nullopt when mrcal's
   // iterative unprojection does not converge (far outside the valid domain).
   std::optional<Vec3> Unproject(const Vec2& q) const;

@@ -24,10 +24,13 @@ const std::vector<Vec2>& UnitCircle(int n) {
 }
 }  // namespace
 
-std::vector<Vec3> SphereSilhouetteRays(const Vec3& c, double r, int n) {
+namespace {
+// The silhouette rays into *rays (cleared first; empty when the sphere holds the centre).
+void SilhouetteRaysInto(const Vec3& c, double r, int n, std::vector<Vec3>* out) {
+  std::vector<Vec3>& rays = *out;
+  rays.clear();
   const double d = c.norm();
-  std::vector<Vec3> rays;
-  if (!(d > r) || n < 3) return rays;
+  if (!(d > r) || n < 3) return;
   const Vec3 axis = c / d;
   // Any two unit vectors orthogonal to the axis.
   const Vec3 helper = std::abs(axis.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
@@ -36,6 +39,12 @@ std::vector<Vec3> SphereSilhouetteRays(const Vec3& c, double r, int n) {
   const double sin_a = r / d, cos_a = std::sqrt(1.0 - sin_a * sin_a);
   rays.reserve(n);
   for (const Vec2& cs : UnitCircle(n)) rays.push_back(cos_a * axis + sin_a * (cs.x() * e1 + cs.y() * e2));
+}
+}  // namespace
+
+std::vector<Vec3> SphereSilhouetteRays(const Vec3& c, double r, int n) {
+  std::vector<Vec3> rays;
+  SilhouetteRaysInto(c, r, n, &rays);
   return rays;
 }
 
@@ -49,7 +58,7 @@ void PolygonMoments(const std::vector<Vec2>& p, double* area, Vec2* first, Mat2*
   double A = 0, cx = 0, cy = 0, xx = 0, yy = 0, xy = 0;
   for (size_t i = 0; i < p.size(); ++i) {
     const Vec2& a = p[i];
-    const Vec2& b = p[(i + 1) % p.size()];
+    const Vec2& b = p[i + 1 < p.size() ? i + 1 : 0];  // (an integer division per vertex cost more than the rest)
     const double cr = a.x() * b.y() - b.x() * a.y();
     A += cr;
     cx += (a.x() + b.x()) * cr;
@@ -71,7 +80,12 @@ void PolygonMoments(const std::vector<Vec2>& p, double* area, Vec2* first, Mat2*
 }  // namespace
 
 Vec2 SphereImageCentroid(const CameraModel& cam, const Vec3& c, double r, int n) {
-  const auto outline = SphereOutline(cam, c, r, n);
+  // The tracker evaluates this ~100 times per frame set: the rays and the outline reuse
+  // this thread's buffers instead of two allocations per call.
+  thread_local std::vector<Vec3> rays;
+  thread_local std::vector<Vec2> outline;
+  SilhouetteRaysInto(c, r, n, &rays);
+  cam.Project(rays, &outline);
   if (outline.size() < 3) return cam.Project(c);
   double A;
   Vec2 m;

@@ -60,10 +60,11 @@ std::optional<Vec3> RayInRig(const CameraModel& cam, const Vec2& q, Vec3* origin
 }
 
 // Least-squares point nearest to all rays; nullopt when the rays are nearly parallel.
-std::optional<Vec3> NearestPointToRays(const std::vector<Vec3>& origins, const std::vector<Vec3>& dirs) {
+// n rays (origins[i], dirs[i]); pointers so that matching's pairs need no allocation.
+std::optional<Vec3> NearestPointToRays(const Vec3* origins, const Vec3* dirs, size_t n) {
   Mat3 A = Mat3::Zero();
   Vec3 b = Vec3::Zero();
-  for (size_t i = 0; i < dirs.size(); ++i) {
+  for (size_t i = 0; i < n; ++i) {
     const Mat3 P = Mat3::Identity() - dirs[i] * dirs[i].transpose();
     A += P;
     b += P * origins[i];
@@ -71,7 +72,7 @@ std::optional<Vec3> NearestPointToRays(const std::vector<Vec3>& origins, const s
   // Two unit rays at an angle t give A the eigenvalues 1 - |cos t|, 1 + |cos t| and 2: far
   // from the threshold below (1 - |cos t| > 1e-6) the eigen-decomposition cannot decide
   // otherwise and is skipped (matching calls this for every pair of image points).
-  const bool clearly_apart = dirs.size() == 2 && std::abs(dirs[0].squaredNorm() - 1) < 1e-9 &&
+  const bool clearly_apart = n == 2 && std::abs(dirs[0].squaredNorm() - 1) < 1e-9 &&
                              std::abs(dirs[1].squaredNorm() - 1) < 1e-9 &&
                              1 - std::abs(dirs[0].dot(dirs[1])) > 1e-6;
   if (!clearly_apart) {
@@ -114,7 +115,7 @@ std::optional<TriangulatedPoint> TriangulateFromRays(const CameraRig& rig,
                                                      const std::vector<PointObservation>& obs,
                                                      const TriangulationOptions& options,
                                                      const std::vector<Vec3>& origins, const std::vector<Vec3>& dirs) {
-  auto p0 = NearestPointToRays(origins, dirs);
+  auto p0 = NearestPointToRays(origins.data(), dirs.data(), dirs.size());
   if (!p0) return std::nullopt;
   Vec3 p = *p0;
   std::vector<Mat2> W(obs.size());
@@ -220,7 +221,8 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
         if (!dirs[a][i]) continue;
         for (size_t j = 0; j < points[b].size(); ++j) {
           if (!dirs[b][j]) continue;
-          const auto p = NearestPointToRays({centres[a], centres[b]}, {*dirs[a][i], *dirs[b][j]});
+          const Vec3 pair_origins[2] = {centres[a], centres[b]}, pair_dirs[2] = {*dirs[a][i], *dirs[b][j]};
+          const auto p = NearestPointToRays(pair_origins, pair_dirs, 2);
           if (!p || !InFront(rig.cameras[a], *p, options.min_depth_m) ||
               !InFront(rig.cameras[b], *p, options.min_depth_m))
             continue;
@@ -235,6 +237,7 @@ std::vector<TriangulatedPoint> MatchAndTriangulate(const CameraRig& rig,
               break;
             }
             cand.cost += e.squaredNorm();
+            if (cand.obs.empty()) cand.obs.reserve(ncam);  // one allocation per candidate
             cand.obs.push_back({c, static_cast<int>(k)});
           }
           if (!ok) continue;
