@@ -11,6 +11,7 @@
 #include <ceres/ceres.h>
 
 #include "core/error.h"
+#include "core/statistics.h"
 #include "audit/model_selection.h"
 #include "tracking/pose_refinement.h"
 #include "vision/blob_detector.h"
@@ -91,6 +92,7 @@ struct Frame {
   Pose T;      // the tracker's pose
   Vec6 twist;  // [omega; v] in the rig frame with v = pdot - omega x p (TimeShiftedPoseT)
   int block;
+  std::vector<double> lag;  // per camera: its exposure time - t (FrameResult::camera_time_s), or 0
 };
 
 struct Sample {
@@ -99,6 +101,7 @@ struct Sample {
   Pose T;  // leave-one-out pose
   Vec6 twist;
   Vec2 q, bias;
+  double lag;  // the camera's exposure time - t (known), before any camera_time_offset
 };
 
 // The samples of one unit in one frame, whitened together: they share the error of the
@@ -125,7 +128,7 @@ Vec2 Predict(const CameraRig& rig, const Target& target, const Sample& s, const 
   std::vector<double>& in = cam->MutableIntrinsics();
   in = nom.Intrinsics();
   Pose T_rig_cam = nom.T_cam_rig().Inverse();
-  Pose T = s.T;
+  double dt = s.lag;  // when this camera saw the target, relative to the pose's time
   Vec3 ball = target.balls_target[s.ball];
   for (const auto& term : terms) {
     const Extension& e = term.extension;
@@ -139,10 +142,11 @@ Vec2 Predict(const CameraRig& rig, const Target& target, const Sample& s, const 
       case Effect::kCameraMoved:
         if (s.t >= term.from_time_s) T_rig_cam = ToPose(MovedCameraT<double>(T_rig_cam, p));
         break;
-      case Effect::kCameraTimeOffset: T = ToPose(TimeShiftedPoseT<double>(T, s.twist, p)); break;
+      case Effect::kCameraTimeOffset: dt += p[0]; break;
       default: ExtendIntrinsicsT<double>(e, p, in.data(), static_cast<int>(in.size()));
     }
   }
+  const Pose T = dt == 0 ? s.T : ToPose(TimeShiftedPoseT<double>(s.T, s.twist, &dt));
   const Vec3 p_cam = T_rig_cam.Inverse() * (T * ball);
   return cam->Project(p_cam) + s.bias;
 }
@@ -234,7 +238,13 @@ class Auditor {
           const CameraAuditOptions& o)
       : rig_(rig), target_(target), results_(results), o_(o) {
     for (size_t i = 0; i < results.size(); ++i)
-      if (results[i].T_rig_target) frames_.push_back({i, results[i].time_s, *results[i].T_rig_target, Vec6::Zero(), 0});
+      if (results[i].T_rig_target) {
+        std::vector<double> lag(rig.size(), 0.0);
+        const std::vector<double>& tc = results[i].camera_time_s;
+        for (size_t c = 0; c < lag.size() && c < tc.size(); ++c)
+          if (std::isfinite(tc[c])) lag[c] = tc[c] - results[i].time_s;
+        frames_.push_back({i, results[i].time_s, *results[i].T_rig_target, Vec6::Zero(), 0, std::move(lag)});
+      }
     std::sort(frames_.begin(), frames_.end(), [](const Frame& a, const Frame& b) { return a.t < b.t; });
     std::vector<double> dts;
     for (size_t i = 1; i < frames_.size(); ++i) dts.push_back(frames_[i].t - frames_[i - 1].t);
@@ -260,6 +270,15 @@ class Auditor {
   const UnitData& CameraSamples(int c) const { return cam_samples_[c]; }
   const UnitData& BallSamples(int b) const { return ball_samples_[b]; }
 
+  // The pose at which camera c saw frame f's target: shifted along the frame's twist by
+  // the camera's known exposure lag and its fitted time offset (camera_time_offset).
+  static Pose ViewPose(const Frame& f, int c, const std::vector<CameraModelTerm>& terms) {
+    double dt = f.lag[c];
+    for (const auto& t : terms)
+      if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == c) dt += t.parameters[0];
+    return dt == 0 ? f.T : ToPose(TimeShiftedPoseT<double>(f.T, f.twist, &dt));
+  }
+
   // Every camera's blobs of one frame associated with the balls under the model (rig_x,
   // target_x: extended by `terms` at the frame's time).
   std::vector<Obs> Associate(const Frame& f, const CameraRig& rig_x, const Target& target_x,
@@ -269,12 +288,10 @@ class Auditor {
     std::vector<Obs> obs;
     for (int c = 0; c < nc && c < static_cast<int>(r.image_points.size()); ++c) {
       const CameraModel& cam = rig_x.cameras[c];
-      // A late camera's images: predicted at the shifted pose; its blobs are moved back
-      // by the difference so that the other cameras' poses are not pulled.
-      Pose T_c = f.T;
-      for (const auto& t : terms)
-        if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == c)
-          T_c = ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data()));
+      // A late camera's images (its known exposure lag, its fitted time offset): predicted
+      // at the shifted pose; its blobs are moved back by the difference so that the other
+      // cameras' poses are not pulled.
+      const Pose T_c = ViewPose(f, c, terms);
       const auto& blobs = r.image_points[c];
       std::vector<bool> used(blobs.size(), false);
       // A ball whose image another ball's crowds may be hidden in part, merged with it or
@@ -335,7 +352,7 @@ class Auditor {
         const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
         const Mat2 L = Mat2(x.cov * scale[x.camera] * scale[x.camera]).llt().matrixL();
         auto* r = new JointResidual{&rig_, &target_, {x.camera, x.ball, f.block, f.t, f.T, f.twist, x.raw,
-                                                      SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32)},
+                                                      SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), f.lag[x.camera]},
                                     x.raw, L.inverse(), &frozen, free, rig_.cameras, {}};
         auto* cost = new ceres::DynamicNumericDiffCostFunction<JointResidual, ceres::CENTRAL>(r);
         std::vector<double*> blocks{pose[i].data()};
@@ -394,11 +411,11 @@ class Auditor {
         }
       }
       for (size_t i = 0; i < Hee.size(); ++i) Hff -= Hfe[i] * Hee[i].ldlt().solve(Hfe[i].transpose());
-      const Eigen::MatrixXd C = Hff.ldlt().solve(Eigen::MatrixXd::Identity(nf, nf));
+      // A term the images do not constrain gets an infinite sigma, not a rounding residue.
+      const Eigen::VectorXd s = MarginalSigmas(Hff);
       int j = 0;
       for (int k : free)
-        for (size_t i = 0; i < terms[k].parameters.size(); ++i, ++j)
-          (*sigma)[k].push_back(std::sqrt(std::max(0.0, C(j, j))));
+        for (size_t i = 0; i < terms[k].parameters.size(); ++i, ++j) (*sigma)[k].push_back(s[j]);
     }
     return -summary.final_cost - log_scales;  // final_cost = chi2 / 2
   }
@@ -442,17 +459,9 @@ class Auditor {
           std::vector<Eigen::Matrix<double, 2, 6>> Js;
           for (const Obs& x : obs) {
             if ((pass == 0 ? x.camera : x.ball) != u) continue;
-            // Undo this camera's own time-offset correction: its prediction applies it.
+            // Undo this camera's own lag and time-offset correction: its prediction applies it.
             const CameraModel& cam = rig_x.cameras[x.camera];
-            Vec2 q = x.q;
-            for (const auto& t : terms)
-              if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == x.camera) {
-                const Vec3 a = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
-                const Vec3 b = cam.T_cam_rig() *
-                               (ToPose(TimeShiftedPoseT<double>(f.T, f.twist, t.parameters.data())) *
-                                target_x.balls_target[x.ball]);
-                q += cam.Project(b) - cam.Project(a);
-              }
+            const Vec2 q = x.raw;
             const Vec3 p_cam = cam.T_cam_rig() * (pr.T_rig_target * target_x.balls_target[x.ball]);
             Eigen::Matrix<double, 2, 3> dq;
             cam.Project(p_cam, &dq);
@@ -464,7 +473,7 @@ class Auditor {
             blob.push_back(pass == 0 ? x.cov : Mat2(x.cov * s2));
             Js.push_back(pass == 0 ? Eigen::Matrix<double, 2, 6>(J / scale[x.camera]) : J);
             ud.s.push_back({x.camera, x.ball, f.block, f.t, pr.T_rig_target, f.twist, q,
-                            SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32)});
+                            SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), f.lag[x.camera]});
           }
           grp.n = static_cast<int>(blob.size());
           Eigen::MatrixXd S = Eigen::MatrixXd::Zero(2 * grp.n, 2 * grp.n);
@@ -540,11 +549,11 @@ class Auditor {
 
   // Fits the terms `free` (indices into terms) of a unit on its samples outside block
   // `fold` (-1: all): Ceres least squares, then the camera's noise scale (camera units) by
-  // maximum likelihood, free or within the tolerance band. *cov (optional) receives the
-  // covariance of the free parameters, in order.
+  // maximum likelihood, free or within the tolerance band. *sigma (optional) receives the
+  // free parameters' sigmas, in order (MarginalSigmas: infinite where unconstrained).
   UnitFit Fit(const UnitData& s, int camera, std::vector<CameraModelTerm> terms,
               const std::vector<int>& free, std::vector<double> scale, ScaleMode mode, int fold,
-              Eigen::MatrixXd* cov = nullptr) const {
+              Eigen::VectorXd* sigma = nullptr) const {
     std::vector<int> geo;
     for (int k : free)
       if (terms[k].extension.effect != Effect::kPixelNoiseScale) geo.push_back(k);
@@ -566,7 +575,7 @@ class Auditor {
       }
       if (problem.NumResidualBlocks() > 0) {
         SolveSilently(ceres::DENSE_QR, 30, &problem);
-        if (cov) {
+        if (sigma) {
           ceres::Problem::EvaluateOptions eo;
           eo.parameter_blocks = blocks;
           ceres::CRSMatrix crs;
@@ -574,7 +583,7 @@ class Auditor {
           Eigen::MatrixXd J = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
           for (int r = 0; r < crs.num_rows; ++r)
             for (int i = crs.rows[r]; i < crs.rows[r + 1]; ++i) J(r, crs.cols[i]) = crs.values[i];
-          *cov = (J.transpose() * J).ldlt().solve(Eigen::MatrixXd::Identity(J.cols(), J.cols()));
+          *sigma = MarginalSigmas(J.transpose() * J);
         }
       }
     }
@@ -586,7 +595,7 @@ class Auditor {
       if (mode == ScaleMode::kBand) sc = std::clamp(sc, 1.0 / (1.0 + o_.noise_tolerance), 1.0 + o_.noise_tolerance);
       if (mode == ScaleMode::kFixed) sc = 1.0;
       out.scale = sc;
-      if (cov) *cov *= sc * sc;
+      if (sigma) *sigma *= sc;
       for (int k : free)
         if (terms[k].extension.effect == Effect::kPixelNoiseScale) terms[k].parameters[0] = sc;
     }
@@ -903,8 +912,8 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
       t.back().from_time_s = best_t;
       x.term.from_time_s = best_t;
     }
-    Eigen::MatrixXd cov;
-    const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1, &cov);
+    Eigen::VectorXd par_sigma;
+    const UnitFit fit = a.Fit(s, cu, t, free, scale, mode, -1, &par_sigma);
     std::vector<double> sc = scale;
     if (cu >= 0) sc[cu] = fit.scale;
     const Base& bs = base[{x.camera_unit, x.unit}];
@@ -924,11 +933,11 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
       // s from a sample variance: sd(s) = s / sqrt(2 n) for n residuals.
       x.sigma = {fit.scale / std::sqrt(4.0 * s.size())};
     } else {
-      // The candidate's blocks are the last in the fitted covariance.
+      // The candidate's blocks are the last fitted.
       const int np = x.term.extension.NumParameters() + (x.pair ? x.term2.extension.NumParameters() : 0);
       for (int i = 0; i < np; ++i) {
-        const int j = static_cast<int>(cov.rows()) - np + i;
-        x.sigma.push_back(j >= 0 ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+        const int j = static_cast<int>(par_sigma.size()) - np + i;
+        x.sigma.push_back(j >= 0 ? par_sigma[j] : std::nan(""));
       }
     }
     x.label = x.term.extension.Label(rig.names);
@@ -960,13 +969,13 @@ std::set<std::pair<bool, int>> TermUnits(const std::vector<CameraModelTerm>& ter
 }
 
 // One unit's terms fitted on all its samples, written back with the camera's noise scale;
-// returns the indices of the unit's terms (*cov, optional: their covariance, in order).
+// returns the indices of the unit's terms (*sigma, optional: their parameters' sigmas, in order).
 std::vector<int> RefitUnit(const Auditor& a, const std::vector<bool>& noise_named, bool cam_unit, int u,
                            std::vector<CameraModelTerm>* terms, std::vector<double>* scale,
-                           Eigen::MatrixXd* cov = nullptr) {
+                           Eigen::VectorXd* sigma = nullptr) {
   const std::vector<int> free = UnitTerms(*terms, cam_unit, u);
   const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
-  const UnitFit fit = a.Fit(s, cam_unit ? u : -1, *terms, free, *scale, UnitScaleMode(cam_unit, u, noise_named), -1, cov);
+  const UnitFit fit = a.Fit(s, cam_unit ? u : -1, *terms, free, *scale, UnitScaleMode(cam_unit, u, noise_named), -1, sigma);
   for (int k : free) (*terms)[k].parameters = fit.terms[k].parameters;
   if (cam_unit) (*scale)[u] = fit.scale;
   return free;
@@ -1055,8 +1064,8 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
   AuditReport& rep = *rep_out;
   for (const auto& [cam_unit, u] : TermUnits(terms)) {
     const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
-    Eigen::MatrixXd cov;
-    const std::vector<int> free = RefitUnit(a, noise_named, cam_unit, u, &terms, &scale, &cov);
+    Eigen::VectorXd par_sigma;
+    const std::vector<int> free = RefitUnit(a, noise_named, cam_unit, u, &terms, &scale, &par_sigma);
     int j = 0;
     for (int k : free) {
       const Extension& x = terms[k].extension;
@@ -1065,7 +1074,7 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
         sg.push_back(scale[u] / std::sqrt(4.0 * s.size()));
       } else {
         for (int i = 0; i < x.NumParameters(); ++i, ++j)
-          sg.push_back(j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : std::nan(""));
+          sg.push_back(j < par_sigma.size() ? par_sigma[j] : std::nan(""));
       }
       for (auto& e : rep.effects)
         if (!terms[k].undecided && e.name == Name(x.effect) && e.where == x.Where(rig.names))

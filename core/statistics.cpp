@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <boost/math/distributions/chi_squared.hpp>
 #include <boost/math/distributions/fisher_f.hpp>
 
@@ -72,6 +74,44 @@ Vec6 PoseErrorVector(const Pose& estimate, const Pose& truth) { return BoxMinus(
 double PoseNees(const Pose& estimate, const Pose& truth, const Mat6& cov) {
   const Vec6 e = PoseErrorVector(estimate, truth);
   return e.dot(cov.ldlt().solve(e));
+}
+
+Eigen::VectorXd MarginalSigmas(const Eigen::MatrixXd& information) {
+  const Eigen::MatrixXd& H = information;
+  const Eigen::Index n = H.rows();
+  if (H.cols() != n || !H.allFinite())
+    Throw("MarginalSigmas: information must be a finite square matrix, got ", H.rows(), "x", H.cols());
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd sigma = Eigen::VectorXd::Constant(n, kInf);
+  // Scaled to unit diagonal, so that the rank threshold does not depend on the units.
+  std::vector<Eigen::Index> kept;
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (H(i, i) > 0) kept.push_back(i);
+  const Eigen::Index m = static_cast<Eigen::Index>(kept.size());
+  if (m == 0) return sigma;
+  Eigen::VectorXd d(m);
+  for (Eigen::Index i = 0; i < m; ++i) d[i] = 1 / std::sqrt(H(kept[i], kept[i]));
+  Eigen::MatrixXd S(m, m);
+  for (Eigen::Index i = 0; i < m; ++i)
+    for (Eigen::Index j = 0; j < m; ++j) S(i, j) = 0.5 * (H(kept[i], kept[j]) + H(kept[j], kept[i])) * d[i] * d[j];
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+  const Eigen::VectorXd& ev = es.eigenvalues();
+  const Eigen::MatrixXd& V = es.eigenvectors();
+  const double floor = 1e-10 * ev[m - 1];
+  for (Eigen::Index i = 0; i < m; ++i) {
+    double var = 0, null_part = 0;
+    for (Eigen::Index k = 0; k < m; ++k) {
+      const double v2 = V(i, k) * V(i, k);
+      if (ev[k] > floor)
+        var += v2 / ev[k];
+      else
+        null_part += v2;
+    }
+    // A parameter outside every unconstrained direction has a component there of the
+    // eigen-solver's rounding (~1e-16 squared); one inside has a share of order one.
+    if (null_part < 1e-8) sigma[kept[i]] = std::sqrt(var) * d[i];
+  }
+  return sigma;
 }
 
 double SelectedMedian(std::vector<double>& v) {

@@ -40,6 +40,14 @@ double SelectedMedian(std::vector<double>& v);
 // reordered). Both give the same figures, to the bit. v must not be empty.
 void MedianAndMad(std::vector<double>& v, std::vector<int>* counts, double* median, double* mad);
 
+// Each parameter's standard deviation from an information matrix H (symmetric, positive
+// semi-definite, e.g. J^T W J with the nuisance parameters marginalised): the square roots
+// of the diagonal of H's inverse, and +infinity for a parameter that has a component along
+// a direction H does not constrain (an eigenvalue of H scaled to unit diagonal at or below
+// 1e-10 of the largest; a zero diagonal). A pseudo-inverse would report such a parameter
+// as known; a Cholesky solve would report noise.
+Eigen::VectorXd MarginalSigmas(const Eigen::MatrixXd& information);
+
 // The error of an estimated pose against the truth in the project's [dtheta; dp] layout
 // (docs/conventions.md): BoxMinus(estimate, truth), and its NEES e^T cov^-1 e, which is
 // chi-square(6) when cov is the estimate's honest covariance.

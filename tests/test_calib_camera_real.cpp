@@ -25,6 +25,7 @@ extern "C" {
 #include "core/error.h"
 #include "core/io.h"
 #include "core/random.h"
+#include "tests/caliscope.h"
 #include "tests/test_util.h"
 
 namespace mcms {
@@ -528,39 +529,6 @@ TEST(CalibCameraReal, AprilTagRenderedCornerAccuracy) {
 namespace mcms {
 namespace {
 
-// caliscope's camera_array.toml: per [cameras.N] the lines matrix, distortions,
-// translation, rotation (as Python/TOML literals on one line).
-struct CaliscopeCamera {
-  std::vector<double> matrix, distortions, translation, rotation;
-};
-std::map<int, CaliscopeCamera> ReadCaliscopeToml(const std::filesystem::path& p) {
-  std::map<int, CaliscopeCamera> out;
-  std::ifstream f(p);
-  std::string line;
-  int cam = -1;
-  auto numbers = [](const std::string& s) {
-    std::vector<double> v;
-    std::string t;
-    for (char ch : s) t += (std::isdigit(static_cast<unsigned char>(ch)) || ch == '.' || ch == '-' || ch == 'e') ? ch : ' ';
-    std::istringstream is(t);
-    double x;
-    while (is >> x) v.push_back(x);
-    return v;
-  };
-  while (std::getline(f, line)) {
-    if (line.rfind("[cameras.", 0) == 0) cam = std::stoi(line.substr(9));
-    const auto eq = line.find('=');
-    if (cam < 0 || eq == std::string::npos) continue;
-    const std::string key = line.substr(0, line.find(' '));
-    const std::string val = line.substr(eq + 1);
-    if (key == "matrix") out[cam].matrix = numbers(val);
-    if (key == "distortions") out[cam].distortions = numbers(val);
-    if (key == "translation") out[cam].translation = numbers(val);
-    if (key == "rotation") out[cam].rotation = numbers(val);
-  }
-  return out;
-}
-
 // xy.csv holds caliscope's extrinsic-calibration detections: few points per view
 // (a 4x5 ChArUco board, partly seen), while caliscope's intrinsics came from separate
 // per-camera intrinsic sessions. So (1) with caliscope's intrinsics held fixed, the
@@ -571,43 +539,13 @@ TEST(CalibCameraReal, Caliscope4CamMatchesCaliscope) {
   constexpr double kPosTolM = 0.03;       // relative camera positions (1-1.6 m apart)
   constexpr double kAngTolDeg = 1.0;
   constexpr double kSigmas = 4.0;         // joint solve: focal lengths within 4 sigma
-  const CsvTable t = ReadCsv(dir / "xy.csv");
-  const int c_sync = t.Column("sync_index"), c_cam = t.Column("cam_id"), c_x = t.Column("img_loc_x"),
-            c_y = t.Column("img_loc_y"), c_ox = t.Column("obj_loc_x"), c_oy = t.Column("obj_loc_y");
-  std::map<std::pair<int, int>, BoardObservation> by;
-  for (size_t r = 0; r < t.rows.size(); ++r) {
-    const int sync = static_cast<int>(t.Number(r, c_sync)), cam = static_cast<int>(t.Number(r, c_cam));
-    auto& o = by[{sync, cam}];
-    o.camera = cam;
-    o.frame = sync;
-    o.pixels.emplace_back(t.Number(r, c_x), t.Number(r, c_y));
-    o.points_board.emplace_back(t.Number(r, c_ox), t.Number(r, c_oy), 0.0);
-  }
-  CameraCalibrationInput in;
-  for (int c = 0; c < 4; ++c) {
-    in.camera_names.push_back("cam" + std::to_string(c));
-    in.widths.push_back(1280);
-    in.heights.push_back(720);
-  }
-  for (auto& [k, o] : by) in.observations.push_back(o);
-  const auto ref = ReadCaliscopeToml(dir / "camera_array.toml");
+  CameraCalibrationInput in = test::ReadCaliscopeViews(dir);
+  const auto ref = test::ReadCaliscopeToml(dir / "camera_array.toml");
   ASSERT_EQ(ref.size(), 4u);
   CameraCalibrationOptions opt;
   opt.lensmodel = "LENSMODEL_OPENCV5";  // caliscope's k1 k2 p1 p2 k3
-  for (int c = 0; c < 4; ++c) {
-    const auto& m = ref.at(c).matrix;
-    std::vector<double> intr = {m[0], m[4], m[2], m[5]};
-    for (double d : ref.at(c).distortions) intr.push_back(d);
-    opt.initial_intrinsics.push_back(intr);
-  }
-  // caliscope stores R, t of world -> camera (OpenCV's rvec/tvec sense): T_cam_world.
-  auto T_ref = [&](int c) {
-    Pose T;
-    const auto& R = ref.at(c).rotation;
-    for (int i = 0; i < 9; ++i) T.R(i / 3, i % 3) = R[i];
-    T.t = Vec3(ref.at(c).translation[0], ref.at(c).translation[1], ref.at(c).translation[2]);
-    return T;
-  };
+  for (int c = 0; c < 4; ++c) opt.initial_intrinsics.push_back(ref.at(c).Opencv5Intrinsics());
+  auto T_ref = [&](int c) { return ref.at(c).T_cam_world(); };
   const char* kCaliscopeRms[] = {"0.19", "0.469", "0.656", "0.276"};
   for (const bool fixed : {true, false}) {
     opt.fix_intrinsics = fixed;

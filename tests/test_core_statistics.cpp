@@ -1,10 +1,12 @@
-// The chi-square distribution against tabulated values.
+// The chi-square distribution against tabulated values; the median selections; marginal sigmas.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
+
+#include <Eigen/Dense>
 
 #include "core/error.h"
 #include "core/statistics.h"
@@ -82,6 +84,41 @@ TEST(MedianAndMad, CountingAndSelectionGiveTheSortedFigures) {
   std::vector<int> counts;
   double m, mad;
   EXPECT_THROW(MedianAndMad(none, &counts, &m, &mad), InputError);
+}
+
+// Marginal sigmas from an information matrix: the inverse's diagonal where the matrix is
+// invertible, whatever the parameters' units (scales 1e-6 .. 1e6); infinity for the
+// parameters in a direction it does not constrain (two columns of J that only their sum
+// reaches, a column of zeros), and the constrained one unaffected by them.
+TEST(MarginalSigmas, InverseDiagonalAndInfinityWhereUnconstrained) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> n01;
+  Eigen::MatrixXd J(40, 4);
+  for (int r = 0; r < J.rows(); ++r)
+    for (int c = 0; c < J.cols(); ++c) J(r, c) = n01(rng);
+  const Eigen::Vector4d units(1e-6, 1.0, 1e3, 1e6);
+  const Eigen::MatrixXd Ju = J * units.asDiagonal();
+  const Eigen::MatrixXd H = Ju.transpose() * Ju;
+  const Eigen::VectorXd exact = H.inverse().diagonal().cwiseSqrt();
+  const Eigen::VectorXd s = MarginalSigmas(H);
+  for (int i = 0; i < 4; ++i) EXPECT_NEAR(s[i] / exact[i], 1.0, 1e-9) << i;
+
+  // Columns 0 and 1 equal: only their sum is seen; column 3 never.
+  Eigen::MatrixXd K = J;
+  K.col(1) = K.col(0);
+  K.col(3).setZero();
+  const Eigen::VectorXd t = MarginalSigmas(K.transpose() * K);
+  EXPECT_TRUE(std::isinf(t[0]) && std::isinf(t[1]) && std::isinf(t[3])) << t.transpose();
+  // Column 2's sigma with the sum as the other parameter.
+  Eigen::MatrixXd R(40, 2);
+  R.col(0) = K.col(0);
+  R.col(1) = K.col(2);
+  EXPECT_NEAR(t[2], std::sqrt((R.transpose() * R).inverse()(1, 1)), 1e-12);
+
+  EXPECT_THROW(MarginalSigmas(Eigen::MatrixXd::Zero(2, 3)), InputError);
+  Eigen::MatrixXd bad = Eigen::MatrixXd::Identity(2, 2);
+  bad(0, 1) = NAN;
+  EXPECT_THROW(MarginalSigmas(bad), InputError);
 }
 
 }  // namespace

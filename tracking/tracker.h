@@ -53,6 +53,10 @@ struct TrackerOptions {
 struct FrameResult {
   size_t frame = 0;
   double time_s = 0;
+  // Per camera, when its image was exposed (s, the clock of time_s), for cameras that are
+  // not triggered together; empty, or NaN for a camera, when it is time_s. The tracker
+  // leaves it empty; the camera audit predicts each camera's images at its own time.
+  std::vector<double> camera_time_s;
   FrameStatus status = FrameStatus::kLost;
   std::string reason;                // empty when ok
   std::optional<Pose> T_rig_target;  // absent when lost

@@ -82,6 +82,7 @@ void PolygonMoments(const std::vector<Vec2>& p, double* area, Vec2* first, Mat2*
 Vec2 SphereImageCentroid(const CameraModel& cam, const Vec3& c, double r, int n) {
   // The tracker evaluates this ~100 times per frame set: the rays and the outline reuse
   // this thread's buffers instead of two allocations per call.
+  if (r == 0) return cam.Project(c);  // a point (a board corner standing in for a ball)
   thread_local std::vector<Vec3> rays;
   thread_local std::vector<Vec2> outline;
   SilhouetteRaysInto(c, r, n, &rays);

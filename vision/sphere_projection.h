@@ -21,7 +21,8 @@ std::vector<Vec3> SphereSilhouetteRays(const Vec3& centre_cam, double radius, in
 std::vector<Vec2> SphereOutline(const CameraModel& cam, const Vec3& centre_cam, double radius, int n = 256);
 
 // Area centroid of the sphere's image (what a centroiding detector measures on a
-// uniformly bright disc), from the outline polygon by Green's theorem.
+// uniformly bright disc), from the outline polygon by Green's theorem. Radius 0: a
+// point, its projection (a board corner standing in for a ball; zero bias).
 Vec2 SphereImageCentroid(const CameraModel& cam, const Vec3& centre_cam, double radius, int n = 256);
 
 // Bias = SphereImageCentroid - Project(centre). Subtract it from a measured centroid
