@@ -6,7 +6,7 @@
 //    "effects": [{"name", "where", "parameters": {..}, "sigma": {..}, "heldout_rms_before",
 //                 "heldout_rms_after", "heldout_loglik_gain", "bic_gain"}],
 //    "undecided": [[name, name], ..], "undecided_effects": [[{effect}, ..], ..],
-//    "tests": [..], "tests_after": [..] (robot: still failing with the final model),
+//    "tests": [..], "tests_after": [..] (robot, cameras: still failing with the final model),
 //    "notes": [..], "validation": [..] (calib/robot_validation.h; when scored)}
 //   (an effect may also carry "held": {name: reason})
 // Units: parameters and sigmas in SI (rad, m, s, dimensionless factors); held-out RMS in

@@ -115,7 +115,10 @@ void Print(const CameraAuditResult& a) {
     std::printf("\n");
   }
   for (const auto& t : a.report.tests)
-    std::printf("  test: %s: p %.3g%s\n", t.name.c_str(), t.p_value, t.failed ? "  FAILED" : "");
+    if (t.failed) std::printf("  test: %s: p %.3g  FAILED\n", t.name.c_str(), t.p_value);
+  for (const auto& t : a.report.tests_after)
+    std::printf("  still failing with the final model: %s: p %.3g\n", t.name.c_str(), t.p_value);
+  std::printf("  %zu of %d tests still fail with the final model\n", a.report.tests_after.size(), a.report.tests_after_run);
 }
 
 bool AnyTestFailed(const CameraAuditResult& a) {
@@ -137,7 +140,8 @@ const AuditEffect* Named(const CameraAuditResult& a, const std::string& name, co
 // calibrated from these very views (a constant time offset of 12-15 ms, part-way moves of
 // cam0 or cam1, a principal point of cam3 or one corner of the board), not the same ones
 // for the two timings: the model misses something the catalog does not hold, and the
-// named causes here are the catalog's nearest, not findings (docs/audits.md). The
+// named causes here are the catalog's nearest, not findings (docs/audits.md), and the
+// report says so: 9-10 of its 52 tests still fail with the final model. The
 // exposure times do not help at this sampling (the board moved by hand, sampled at 6 Hz:
 // the frame's twist from its neighbours 167 ms away does not carry a pose 46 ms along),
 // where on smooth motion they make unsynchronised cameras clean
@@ -158,6 +162,9 @@ TEST(AuditCamerasReal, CaliscopeFourWebcams) {
   Print(timed);
   EXPECT_TRUE(AnyTestFailed(base)) << "the measured views passed every residual test";
   EXPECT_TRUE(AnyTestFailed(timed)) << "the measured views passed every residual test";
+  // And the report says that what it names does not explain them.
+  EXPECT_FALSE(base.report.tests_after.empty());
+  EXPECT_FALSE(timed.report.tests_after.empty());
   EXPECT_EQ(Named(base, "focal_length", "cam3"), nullptr);
 
   constexpr double kFocal = 0.005;
