@@ -76,11 +76,31 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   // Times, read before the listing so that the parsed table is gone before the names
   // are allocated (a lower peak for long recordings).
   // (frame, time) sorted by frame; of repeated frames the last row counts. A vector, not a
-  // map: 16 bytes per frame.
+  // map: 16 bytes per frame. Cameras not triggered together: each camera's exposure times
+  // from the columns time_s_<camera> (NaN where a cell is empty or the column absent),
+  // ncam per row in the rows' order, and each sorted row's original index.
   std::vector<std::pair<size_t, double>> times;
+  std::vector<double> camera_times;
+  std::vector<size_t> row_of;
+  const size_t ncam = rig.size();
   if (!in.frames_csv.empty() && fs::exists(in.frames_csv)) {
     const CsvTable t = ReadCsv(in.frames_csv);
     const int cf = t.Column("frame"), ct = t.Column("time_s");
+    std::vector<int> camera_column(ncam, -1);
+    bool any_camera_time = false;
+    for (size_t k = 0; k < t.header.size(); ++k) {
+      const std::string& h = t.header[k];
+      if (h.rfind("time_s_", 0) != 0) continue;
+      const auto c = std::find(rig.names.begin(), rig.names.end(), h.substr(7));
+      if (c == rig.names.end()) {
+        std::string names;
+        for (const auto& n : rig.names) names += (names.empty() ? "" : ", ") + n;
+        Throw(in.frames_csv.string(), ": column '", h, "' names no camera of the rig; expected time_s_<camera> with one of: ",
+              names);
+      }
+      camera_column[c - rig.names.begin()] = static_cast<int>(k);
+      any_camera_time = true;
+    }
     if (t.rows.empty())
       Throw(in.frames_csv.string(), ": a header and no rows; expected one row (frame, time_s) per frame, or no "
             "frames.csv and the frame rate given");
@@ -91,6 +111,16 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
         Throw(in.frames_csv.string(), " line ", t.line_of_row[r], ": time_s must increase from row to row");
       last = time;
       times.emplace_back(static_cast<size_t>(f), time);
+      if (any_camera_time)
+        for (size_t c = 0; c < ncam; ++c) {
+          const int k = camera_column[c];
+          camera_times.push_back(k < 0 || t.rows[r][k].empty() ? std::nan("") : t.Number(r, k));
+        }
+    }
+    if (any_camera_time) {
+      row_of.resize(times.size());
+      for (size_t r = 0; r < row_of.size(); ++r) row_of[r] = r;
+      std::stable_sort(row_of.begin(), row_of.end(), [&](size_t a, size_t b) { return times[a].first < times[b].first; });
     }
     std::stable_sort(times.begin(), times.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   } else if (!(in.frame_rate_hz > 0)) {
@@ -99,7 +129,6 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   // Two passes over the camera folders: the frame numbers first (8 bytes per image), then
   // each image's name into its place. No path object per image, and no second copy of the
   // names: a long recording's listing stays small.
-  const size_t ncam = rig.size();
   ImageSequence seq;
   for (size_t c = 0; c < ncam; ++c) seq.camera_dirs.push_back(in.images_dir / rig.names[c]);
   for (size_t c = 0; c < ncam; ++c)
@@ -161,6 +190,11 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
               " has no time for frame ", f, "; remove the stray image or add the frame to ", in.frames_csv.filename().string());
       }
       seq.times_s.push_back((it - 1)->second);
+      if (!camera_times.empty()) {
+        const size_t row = row_of[static_cast<size_t>(it - 1 - times.begin())];
+        seq.camera_times_s.insert(seq.camera_times_s.end(), camera_times.begin() + static_cast<std::ptrdiff_t>(row * ncam),
+                                  camera_times.begin() + static_cast<std::ptrdiff_t>((row + 1) * ncam));
+      }
     } else {
       seq.times_s.push_back(static_cast<double>(f) / in.frame_rate_hz);
     }
@@ -246,6 +280,11 @@ FrameSource FilesOf(const ImageSequence& seq) {
   s.count = seq.frames.size();
   s.frame = [&seq](size_t i) { return seq.frames[i]; };
   s.time_s = [&seq](size_t i) { return seq.times_s[i]; };
+  if (!seq.camera_times_s.empty())
+    s.camera_time_s = [&seq](size_t i) {
+      const auto at = seq.camera_times_s.begin() + static_cast<std::ptrdiff_t>(i * seq.cameras());
+      return std::vector<double>(at, at + static_cast<std::ptrdiff_t>(seq.cameras()));
+    };
   s.images = [&seq](size_t i, std::vector<std::string>* problems) { return LoadFrameImages(seq, i, problems); };
   s.image_rows = [&seq](size_t i, std::vector<std::string>* problems) { return LoadFrameRows(seq, i, problems); };
   return s;
@@ -296,10 +335,14 @@ size_t TrackFramesStreaming(const FrameSource& source, Tracker& tracker,
         else
           d.rows[c].PrepareAll();
       };
-      on_frame(tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems, prepare));
+      FrameResult r = tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems, prepare);
+      if (source.camera_time_s) r.camera_time_s = source.camera_time_s(i);
+      on_frame(std::move(r));
     } else {
-      on_frame(in_order ? tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems)
-                        : tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems));
+      FrameResult r = in_order ? tracker.ProcessFrame(source.frame(i), source.time_s(i), d.images, d.problems)
+                               : tracker.ProcessPoints(source.frame(i), source.time_s(i), d.points, d.problems);
+      if (source.camera_time_s) r.camera_time_s = source.camera_time_s(i);
+      on_frame(std::move(r));
     }
     if (progress) progress(i + 1, n);
   };

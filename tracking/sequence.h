@@ -5,7 +5,11 @@
 //                                      file; file stems are frame numbers (any digits);
 //                                      also .pgm, .tif/.tiff (`mcms render --format`),
 //                                      .jpg, .bmp: read by vision/image_file.h
-//   frames.csv (optional)              frame,time_s  -- otherwise time = frame / rate
+//   frames.csv (optional)              frame,time_s  -- otherwise time = frame / rate;
+//                                      cameras not triggered together may add a column
+//                                      time_s_<camera name> per camera: its exposure
+//                                      times (an empty cell: the frame's time_s), which
+//                                      the camera audit predicts its images at
 #pragma once
 
 #include <array>
@@ -31,6 +35,9 @@ struct SequenceInput {
 struct ImageSequence {
   std::vector<size_t> frames;   // sorted frame numbers
   std::vector<double> times_s;  // one per frame
+  // [frame * cameras() + camera]: the camera's exposure time (frames.csv's time_s_<camera>;
+  // NaN: the frame's time); empty when frames.csv gives none.
+  std::vector<double> camera_times_s;
   // Where frame i's image of camera c is: ImagePath(i, c), an empty path when it is
   // missing. Stored compactly (one folder per camera, one name per image): a listing of
   // 100,000 frame sets of 4 cameras takes about 13 MB, where a std::filesystem::path per
@@ -84,6 +91,8 @@ struct FrameSource {
   size_t count = 0;
   std::function<size_t(size_t)> frame;
   std::function<double(size_t)> time_s;
+  // Optional: each camera's exposure time in frame i (FrameResult::camera_time_s).
+  std::function<std::vector<double>(size_t)> camera_time_s;
   std::function<std::vector<cv::Mat>(size_t, std::vector<std::string>*)> images;
   // Optional: the images read in part (LoadFrameRows), one per rig camera, thread-safe as
   // `images`. With a tracker whose options have predicted_windows, TrackFramesStreaming
