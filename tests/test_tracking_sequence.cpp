@@ -81,15 +81,10 @@ TEST(SequenceCameraTimes, ReadPerFrameAndCarriedIntoEveryResult) {
 TEST(SequenceCameraTimes, AColumnOfNoRigCameraIsRefused) {
   const CameraRig rig = SmallRig();
   const auto dir = Recording("seq_camera_times_bad", "frame,time_s,time_s_middle\n1,0.1,0.1\n2,0.2,0.2\n3,0.3,0.3\n");
-  try {
-    ScanImageSequence({dir / "images", dir / "frames.csv", 10.0}, rig);
-    FAIL() << "accepted a column for a camera the rig does not have";
-  } catch (const InputError& e) {
-    const std::string m = e.what();
-    EXPECT_NE(m.find("frames.csv"), std::string::npos) << m;
-    EXPECT_NE(m.find("time_s_middle"), std::string::npos) << m;
-    EXPECT_NE(m.find("left, right"), std::string::npos) << m;
-  }
+  const std::string m = test::ErrorOf([&] { ScanImageSequence({dir / "images", dir / "frames.csv", 10.0}, rig); });
+  EXPECT_NE(m.find("frames.csv"), std::string::npos) << m;
+  EXPECT_NE(m.find("time_s_middle"), std::string::npos) << m;
+  EXPECT_NE(m.find("left, right"), std::string::npos) << m;
   std::ofstream(dir / "frames.csv") << "frame,time_s,time_s_left\n1,0.1,0.1\n2,0.2,soon\n3,0.3,0.3\n";
   EXPECT_THROW(ScanImageSequence({dir / "images", dir / "frames.csv", 10.0}, rig), InputError);
 }
