@@ -91,6 +91,7 @@ struct Frame {
   double t;
   Pose T;      // the tracker's pose
   Vec6 twist;  // [omega; v] in the rig frame with v = pdot - omega x p (TimeShiftedPoseT)
+  Vec6 accel;  // the move's second-order term (TimeShiftedPoseT)
   int block;
   std::vector<double> lag;  // per camera: its exposure time - t (FrameResult::camera_time_s), or 0
 };
@@ -99,7 +100,7 @@ struct Sample {
   int camera, ball, block;
   double t;
   Pose T;  // leave-one-out pose
-  Vec6 twist;
+  Vec6 twist, accel;
   Vec2 q, bias;
   double lag;  // the camera's exposure time - t (known), before any camera_time_offset
 };
@@ -146,7 +147,7 @@ Vec2 Predict(const CameraRig& rig, const Target& target, const Sample& s, const 
       default: ExtendIntrinsicsT<double>(e, p, in.data(), static_cast<int>(in.size()));
     }
   }
-  const Pose T = dt == 0 ? s.T : ToPose(TimeShiftedPoseT<double>(s.T, s.twist, &dt));
+  const Pose T = dt == 0 ? s.T : ToPose(TimeShiftedPoseT<double>(s.T, s.twist, s.accel, &dt));
   const Vec3 p_cam = T_rig_cam.Inverse() * (T * ball);
   return cam->Project(p_cam) + s.bias;
 }
@@ -243,7 +244,8 @@ class Auditor {
         const std::vector<double>& tc = results[i].camera_time_s;
         for (size_t c = 0; c < lag.size() && c < tc.size(); ++c)
           if (std::isfinite(tc[c])) lag[c] = tc[c] - results[i].time_s;
-        frames_.push_back({i, results[i].time_s, *results[i].T_rig_target, Vec6::Zero(), 0, std::move(lag)});
+        frames_.push_back(
+            {i, results[i].time_s, *results[i].T_rig_target, Vec6::Zero(), Vec6::Zero(), 0, std::move(lag)});
       }
     std::sort(frames_.begin(), frames_.end(), [](const Frame& a, const Frame& b) { return a.t < b.t; });
     std::vector<double> dts;
@@ -259,10 +261,26 @@ class Auditor {
       if (i > 0 && frames_[i].t - frames_[i - 1].t <= 3 * med) a = i - 1;
       if (i + 1 < frames_.size() && frames_[i + 1].t - frames_[i].t <= 3 * med) b = i + 1;
       if (a == b || !(frames_[b].t > frames_[a].t)) continue;
-      const double dt = frames_[b].t - frames_[a].t;
-      const Vec3 w = LogSO3(frames_[b].T.R * frames_[a].T.R.transpose()) / dt;
-      const Vec3 pdot = (frames_[b].T.t - frames_[a].T.t) / dt;
-      frames_[i].twist << w, pdot - w.cross(frames_[i].T.t);
+      // The moves x = [phi; u] (MovedCameraT) that take this frame's pose to its
+      // neighbours', and the quadratic x(dt) = twist dt + accel dt^2 through them and 0
+      // (a line where there is one neighbour).
+      const Frame& f = frames_[i];
+      auto move_to = [&f](const Frame& g) {
+        const Mat3 dR = g.T.R * f.T.R.transpose();
+        Vec6 x;
+        x << LogSO3(dR), g.T.t - dR * f.T.t;
+        return x;
+      };
+      if (a < i && b > i) {
+        const double ha = f.t - frames_[a].t, hb = frames_[b].t - f.t;
+        const Vec6 xa = move_to(frames_[a]), xb = move_to(frames_[b]);
+        const double d = ha * hb * (ha + hb);
+        frames_[i].twist = (ha * ha * xb - hb * hb * xa) / d;
+        frames_[i].accel = (ha * xb + hb * xa) / d;
+      } else {
+        const Frame& g = frames_[a < i ? a : b];
+        frames_[i].twist = move_to(g) / (g.t - f.t);
+      }
     }
   }
 
@@ -276,7 +294,7 @@ class Auditor {
     double dt = f.lag[c];
     for (const auto& t : terms)
       if (t.extension.effect == Effect::kCameraTimeOffset && t.extension.index == c) dt += t.parameters[0];
-    return dt == 0 ? f.T : ToPose(TimeShiftedPoseT<double>(f.T, f.twist, &dt));
+    return dt == 0 ? f.T : ToPose(TimeShiftedPoseT<double>(f.T, f.twist, f.accel, &dt));
   }
 
   // Every camera's blobs of one frame associated with the balls under the model (rig_x,
@@ -351,7 +369,7 @@ class Auditor {
         const CameraModel& cam = rig_x.cameras[x.camera];
         const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
         const Mat2 L = Mat2(x.cov * scale[x.camera] * scale[x.camera]).llt().matrixL();
-        auto* r = new JointResidual{&rig_, &target_, {x.camera, x.ball, f.block, f.t, f.T, f.twist, x.raw,
+        auto* r = new JointResidual{&rig_, &target_, {x.camera, x.ball, f.block, f.t, f.T, f.twist, f.accel, x.raw,
                                                       SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), f.lag[x.camera]},
                                     x.raw, L.inverse(), &frozen, free, rig_.cameras, {}};
         auto* cost = new ceres::DynamicNumericDiffCostFunction<JointResidual, ceres::CENTRAL>(r);
@@ -472,7 +490,7 @@ class Auditor {
             const double s2 = scale[x.camera] * scale[x.camera];
             blob.push_back(pass == 0 ? x.cov : Mat2(x.cov * s2));
             Js.push_back(pass == 0 ? Eigen::Matrix<double, 2, 6>(J / scale[x.camera]) : J);
-            ud.s.push_back({x.camera, x.ball, f.block, f.t, pr.T_rig_target, f.twist, q,
+            ud.s.push_back({x.camera, x.ball, f.block, f.t, pr.T_rig_target, f.twist, f.accel, q,
                             SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), f.lag[x.camera]});
           }
           grp.n = static_cast<int>(blob.size());

@@ -270,12 +270,15 @@ void ExtendIntrinsicsT(const Extension& e, const T* p, T* intrinsics, int num_in
 }
 
 // camera_time_offset: the camera's image shows the target at t + p0, so its pose is the
-// nominal T_rig_target moved along its velocity (twist [omega; v], rig frame, rad/s, m/s):
-// T' = Exp(p0 twist) T to first order in the motion.
+// nominal T_rig_target moved along its motion: T' = M T with M the move of MovedCameraT
+// (rotation vector, translation; rig frame) x(p0) = twist p0 + accel p0^2, twist
+// [omega; v] (rad/s, m/s; v = pdot - omega x p) and accel its half-derivative (a
+// quadratic through the neighbouring frames' moves: second order in the motion; zero:
+// first order).
 template <typename T>
-PoseT<T> TimeShiftedPoseT(const Pose& T_rig_target, const Vec6& twist, const T* p) {
+PoseT<T> TimeShiftedPoseT(const Pose& T_rig_target, const Vec6& twist, const Vec6& accel, const T* p) {
   T r[6];
-  for (int k = 0; k < 6; ++k) r[k] = p[0] * twist[k];
+  for (int k = 0; k < 6; ++k) r[k] = p[0] * twist[k] + p[0] * p[0] * accel[k];
   return MovedCameraT<T>(T_rig_target, r);
 }
 

@@ -141,7 +141,7 @@ const AuditEffect* Named(const CameraAuditResult& a, const std::string& name, co
 // cam0 or cam1, a principal point of cam3 or one corner of the board), not the same ones
 // for the two timings: the model misses something the catalog does not hold, and the
 // named causes here are the catalog's nearest, not findings (docs/audits.md), and the
-// report says so: 9-10 of its 52 tests still fail with the final model. The
+// report says so: 10-11 of its 52 tests still fail with the final model. The
 // exposure times do not help at this sampling (the board moved by hand, sampled at 6 Hz:
 // the frame's twist from its neighbours 167 ms away does not carry a pose 46 ms along),
 // where on smooth motion they make unsynchronised cameras clean

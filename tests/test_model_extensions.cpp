@@ -231,7 +231,7 @@ struct Shifted {
   Vec6 twist;
   template <typename T>
   bool operator()(T const* const* x, T* r) const {
-    const PoseT<T> C = TimeShiftedPoseT<T>(pose, twist, x[0]);
+    const PoseT<T> C = TimeShiftedPoseT<T>(pose, twist, Vec6(0.3 * twist), x[0]);
     for (int k = 0; k < 3; ++k) r[k] = C.t[k] + C.R(k, 0);
     return true;
   }
