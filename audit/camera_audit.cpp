@@ -90,8 +90,9 @@ struct Frame {
   size_t result;
   double t;
   Pose T;      // the tracker's pose
-  Vec6 twist;  // [omega; v] in the rig frame with v = pdot - omega x p (TimeShiftedPoseT)
-  Vec6 accel;  // the move's second-order term (TimeShiftedPoseT)
+  // The move to the pose dt later (TimeShiftedPoseT): twist dt + accel dt^2; twist is
+  // [omega; v] in the rig frame with v = pdot - omega x p.
+  Vec6 twist, accel;
   int block;
   std::vector<double> lag;  // per camera: its exposure time - t (FrameResult::camera_time_s), or 0
 };
@@ -288,8 +289,8 @@ class Auditor {
   const UnitData& CameraSamples(int c) const { return cam_samples_[c]; }
   const UnitData& BallSamples(int b) const { return ball_samples_[b]; }
 
-  // The pose at which camera c saw frame f's target: shifted along the frame's twist by
-  // the camera's known exposure lag and its fitted time offset (camera_time_offset).
+  // The pose at which camera c saw frame f's target: moved along the frame's motion by the
+  // camera's known exposure lag and its fitted time offset (camera_time_offset).
   static Pose ViewPose(const Frame& f, int c, const std::vector<CameraModelTerm>& terms) {
     double dt = f.lag[c];
     for (const auto& t : terms)
@@ -369,9 +370,9 @@ class Auditor {
         const CameraModel& cam = rig_x.cameras[x.camera];
         const Vec3 p_cam = cam.T_cam_rig() * (f.T * target_x.balls_target[x.ball]);
         const Mat2 L = Mat2(x.cov * scale[x.camera] * scale[x.camera]).llt().matrixL();
-        auto* r = new JointResidual{&rig_, &target_, {x.camera, x.ball, f.block, f.t, f.T, f.twist, f.accel, x.raw,
-                                                      SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), f.lag[x.camera]},
-                                    x.raw, L.inverse(), &frozen, free, rig_.cameras, {}};
+        const Sample at{x.camera, x.ball, f.block, f.t, f.T, f.twist, f.accel, x.raw,
+                        SphereProjectionBias(cam, p_cam, target_x.ball_radius, 32), f.lag[x.camera]};
+        auto* r = new JointResidual{&rig_, &target_, at, x.raw, L.inverse(), &frozen, free, rig_.cameras, {}};
         auto* cost = new ceres::DynamicNumericDiffCostFunction<JointResidual, ceres::CENTRAL>(r);
         std::vector<double*> blocks{pose[i].data()};
         cost->AddParameterBlock(6);
