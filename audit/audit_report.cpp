@@ -111,7 +111,7 @@ std::string AuditReport::Text() const {
   for (const auto& t : tests)
     o << "  test " << t.name << ": statistic " << Fmt("%.4g", t.statistic) << ", p " << Fmt("%.3g", t.p_value)
       << (t.failed ? "  FAILED" : "") << "\n";
-  if (effects.empty()) {
+  if (effects.empty() && undecided.empty()) {
     o << (clean ? "no effect found: the nominal model explains the data within its noise\n"
                 : "no effect from the catalog explains what the tests found\n");
   }
@@ -142,7 +142,8 @@ std::string AuditReport::Text() const {
           << ")\n";
       }
   }
-  if (tests_after_run > 0 && !effects.empty()) {
+  // Whenever the final model holds a term (named, or an undecided group's in the camera audit).
+  if (tests_after_run > 0) {
     if (tests_after.empty())
       o << "with the final model, every one of the " << tests_after_run << " residual tests passes\n";
     else

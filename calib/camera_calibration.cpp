@@ -109,15 +109,24 @@ std::vector<double> InitIntrinsics(const std::vector<const BoardObservation*>& o
   return intr;
 }
 
-std::optional<Pose> SolveBoardPose(const BoardObservation& o, const CameraModel& cam) {
+// A view's board pose from its points alone: from `seed` (T_cam_board) when given,
+// refined; else from OpenCV's planar solution (IPPE, iterative as a fallback).
+std::optional<Pose> SolveBoardPose(const BoardObservation& o, const CameraModel& cam,
+                                   const std::optional<Pose>& seed = std::nullopt) {
   const auto& in = cam.Intrinsics();
   cv::Mat K = (cv::Mat_<double>(3, 3) << in[0], 0, in[2], 0, in[1], in[3], 0, 0, 1);
   cv::Mat D(1, static_cast<int>(in.size()) - 4, CV_64F);
   for (int i = 4; i < static_cast<int>(in.size()); ++i) D.at<double>(0, i - 4) = in[i];
   cv::Mat rvec, tvec;
-  if (!cv::solvePnP(CvObject(o), CvImage(o), K, D.cols ? D : cv::Mat(), rvec, tvec, false, cv::SOLVEPNP_IPPE) &&
-      !cv::solvePnP(CvObject(o), CvImage(o), K, D.cols ? D : cv::Mat(), rvec, tvec, false, cv::SOLVEPNP_ITERATIVE))
+  if (seed) {
+    const Rt rt = ToRt(*seed);
+    rvec = (cv::Mat_<double>(3, 1) << rt[0], rt[1], rt[2]);
+    tvec = (cv::Mat_<double>(3, 1) << rt[3], rt[4], rt[5]);
+  } else if (!cv::solvePnP(CvObject(o), CvImage(o), K, D.cols ? D : cv::Mat(), rvec, tvec, false, cv::SOLVEPNP_IPPE) &&
+             !cv::solvePnP(CvObject(o), CvImage(o), K, D.cols ? D : cv::Mat(), rvec, tvec, false,
+                           cv::SOLVEPNP_ITERATIVE)) {
     return std::nullopt;
+  }
   cv::solvePnPRefineLM(CvObject(o), CvImage(o), K, D.cols ? D : cv::Mat(), rvec, tvec);
   const double rt[6] = {rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2),
                         tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)};
@@ -822,13 +831,26 @@ double ViewsAloneVariance(const CameraCalibrationResult& res) {
       }
     if (in.pixels.size() < 4) continue;
     const CameraModel& cam = res.rig.cameras[o.camera];
-    const auto T = SolveBoardPose(in, cam);
-    if (!T) continue;
-    for (size_t k = 0; k < in.pixels.size(); ++k) {
-      const Vec3 p = *T * in.points_board[k];
-      const Vec2 q = cam.Project(p);
-      if (p.z() > 0.0 && q.allFinite()) ss += (in.Weight(k) * (q - in.pixels[k])).squaredNorm();
-    }
+    // The view's own minimum: refined from the joint solution's pose and from the planar
+    // solution, the better kept (the planar one alone can end in a far worse minimum on a
+    // view of few corners, which raised the floor 20-fold on caliscope's webcams).
+    const auto SumSq = [&](const std::optional<Pose>& T) {
+      if (!T) return std::numeric_limits<double>::infinity();
+      double sum = 0.0;
+      for (size_t k = 0; k < in.pixels.size(); ++k) {
+        const Vec3 p = *T * in.points_board[k];
+        const Vec2 q = cam.Project(p);
+        if (!(p.z() > 0.0 && q.allFinite())) return std::numeric_limits<double>::infinity();
+        sum += (in.Weight(k) * (q - in.pixels[k])).squaredNorm();
+      }
+      return sum;
+    };
+    std::optional<Pose> joint;
+    if (o.frame >= 0 && o.frame < static_cast<int>(res.T_rig_board.size()) && res.T_rig_board[o.frame])
+      joint = SolveBoardPose(in, cam, cam.T_cam_rig() * *res.T_rig_board[o.frame]);
+    const double view = std::min(SumSq(SolveBoardPose(in, cam)), SumSq(joint));
+    if (!std::isfinite(view)) continue;
+    ss += view;
     dof += 2 * static_cast<int>(in.pixels.size()) - 6;
   }
   return dof > 0 ? ss / dof : std::numeric_limits<double>::quiet_NaN();

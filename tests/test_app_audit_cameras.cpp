@@ -462,6 +462,11 @@ struct PairVerdict {
 PairVerdict JudgeNoWrongCause(const Pair& p) {
   const PairOutcome o = AuditPair(p);
   PairVerdict v;
+  // What the final model leaves unexplained is in the text whenever it holds a term, also
+  // when that is only an undecided group's.
+  if (!o.r.report.effects.empty() || !o.r.report.undecided.empty()) {
+    EXPECT_NE(o.r.report.Text().find("with the final model"), std::string::npos) << o.what;
+  }
   if (Unidentifiable(p)) {
     const auto& u = o.r.report.undecided;
     v.both = o.named.empty() && u.size() == 1 && std::find(u[0].begin(), u[0].end(), o.la) != u[0].end() &&
