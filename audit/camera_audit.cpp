@@ -252,10 +252,7 @@ class Auditor {
     std::vector<double> dts;
     for (size_t i = 1; i < frames_.size(); ++i) dts.push_back(frames_[i].t - frames_[i - 1].t);
     double med = 0;
-    if (!dts.empty()) {
-      std::nth_element(dts.begin(), dts.begin() + dts.size() / 2, dts.end());
-      med = dts[dts.size() / 2];
-    }
+    if (!dts.empty()) med = SelectedMedian(dts);
     for (size_t i = 0; i < frames_.size(); ++i) {
       frames_[i].block = TimeBlockFold(static_cast<long>(i), static_cast<long>(frames_.size()), o.folds);
       size_t a = i, b = i;

@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/statistics.h"
 #include "core/svg_plot.h"
 #include "audit/model_selection.h"
 
@@ -104,10 +105,7 @@ class Auditor {
     std::vector<double> dt;
     for (size_t i = 1; i < ref.size(); ++i) dt.push_back(ref[i].time_s - ref[i - 1].time_s);
     double max_gap = 0;
-    if (!dt.empty()) {
-      std::nth_element(dt.begin(), dt.begin() + dt.size() / 2, dt.end());
-      max_gap = 3.0 * dt[dt.size() / 2];
-    }
+    if (!dt.empty()) max_gap = 3.0 * SelectedMedian(dt);
     size_t next = 0;  // first reading not yet before the pair
     for (size_t k = 0; k + 1 < ref.size();) {
       const double ta = ref[k].time_s, tb = ref[k + 1].time_s;

@@ -18,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/statistics.h"
 #include "core/svg_plot.h"
 
 namespace mcms {
@@ -138,9 +139,9 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
     std::vector<double> all;
     for (const MeasuredPoint& p : m.points)
       for (int k = 0; k < 3; ++k) all.push_back(std::sqrt(p.variance[k]) * 1e3);
-    std::nth_element(all.begin(), all.begin() + all.size() / 2, all.end());
-    if (!all.empty() && all[all.size() / 2] < kMinMedianSigmaMm)
-      Throw(path.string(), ": its standard deviations have a median of ", all[all.size() / 2], " mm, below ",
+    const double median_sigma_mm = SelectedMedian(all);  // NaN (no check) when empty
+    if (median_sigma_mm < kMinMedianSigmaMm)
+      Throw(path.string(), ": its standard deviations have a median of ", median_sigma_mm, " mm, below ",
             kMinMedianSigmaMm, " mm, finer than any camera rig repeats a position: values in metres under the _mm "
             "headers? expected mm");
   } else {
@@ -204,8 +205,7 @@ MeasuredPoints ReadMeasuredPoints(const fs::path& path, int table_repeats) {
       double between = 0;
       for (const auto& p : m.points) between += (*p.mean_rig - centre).squaredNorm();
       between = std::sqrt(between / static_cast<double>(m.points.size()));
-      std::nth_element(within.begin(), within.begin() + static_cast<long>(within.size() / 2), within.end());
-      const double median_within = within[within.size() / 2];
+      const double median_within = SelectedMedian(within);
       if (median_within > between)
         Throw(path.string(), ": columns '", t.header[ci], "' and '", t.header[cr],
               "' do not hold what their headers say (swapped?): the repeats of a point spread ", 1e3 * median_within,
@@ -344,12 +344,6 @@ double NoiseModelFit::PointLogLik(const Vec3& nominal, const Vec3& measured, int
 
 namespace {
 
-double Median(std::vector<double> v) {
-  if (v.empty()) return kNaN;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
 int NumParams(const std::vector<std::string>& effects) {
   int k = 0;
   for (const auto& e : effects) k += e == "misidentification" ? 2 : 1;
@@ -461,11 +455,11 @@ std::vector<double> InitialTheta(const VarianceData& d, const std::vector<std::s
   }
   std::vector<double> th;
   for (const auto& e : effects) {
-    if (e == "pixel_noise_scale") th.push_back(0.5 * std::log(Median(ratio)));
-    else if (e == "noise_floor") th.push_back(0.5 * std::log(Median(vmin)));
-    else if (e == "anisotropy_x") th.push_back(0.5 * std::log(Median(va[0])));
-    else if (e == "anisotropy_y") th.push_back(0.5 * std::log(Median(va[1])));
-    else if (e == "anisotropy_z") th.push_back(0.5 * std::log(Median(va[2])));
+    if (e == "pixel_noise_scale") th.push_back(0.5 * std::log(SelectedMedian(ratio)));
+    else if (e == "noise_floor") th.push_back(0.5 * std::log(SelectedMedian(vmin)));
+    else if (e == "anisotropy_x") th.push_back(0.5 * std::log(SelectedMedian(va[0])));
+    else if (e == "anisotropy_y") th.push_back(0.5 * std::log(SelectedMedian(va[1])));
+    else if (e == "anisotropy_z") th.push_back(0.5 * std::log(SelectedMedian(va[2])));
     else if (e == "misidentification") {
       th.push_back(std::log(0.1 / 0.9));
       th.push_back(0.5 * std::log(*std::max_element(vmax.begin(), vmax.end())));

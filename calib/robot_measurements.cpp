@@ -17,6 +17,7 @@
 #include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/statistics.h"
 #include "core/yaml.h"
 
 namespace mcms {
@@ -405,14 +406,12 @@ void CheckOutlyingRow(const RobotLog& log) {
   for (int k = 0; k < 3; ++k) {
     std::vector<double> c(N);
     for (int i = 0; i < N; ++i) c[i] = log.rows[i].p_meas[k];
-    std::nth_element(c.begin(), c.begin() + N / 2, c.end());
-    med[k] = c[N / 2];
+    med[k] = SelectedMedian(c);
   }
   std::vector<double> d(N);
   for (int i = 0; i < N; ++i) d[i] = (log.rows[i].p_meas - med).norm();
   std::vector<double> sorted = d;
-  std::nth_element(sorted.begin(), sorted.begin() + N / 2, sorted.end());
-  const double typical = sorted[N / 2];
+  const double typical = SelectedMedian(sorted);
   for (int i = 0; i < N; ++i)
     if (d[i] > std::max(100.0 * typical, 10.0))
       Throw(log.Where(i), ": the measured position (", Num4(log.rows[i].p_meas.x()), ", ", Num4(log.rows[i].p_meas.y()),
@@ -513,15 +512,13 @@ void CheckRigid(const RobotLog& log) {
       std::vector<double> d(N);
       for (int i = 0; i < N; ++i) d[i] = (log.rows[i].Point(a) - log.rows[i].Point(b)).norm();
       std::vector<double> s = d;
-      std::nth_element(s.begin(), s.begin() + N / 2, s.end());
-      const double med = s[N / 2];
+      const double med = SelectedMedian(s);
       for (int i = 0; i < N; ++i) {
         dev_row[i] = std::max(dev_row[i], std::abs(d[i] - med));
         all_dev.push_back(std::abs(d[i] - med));
       }
     }
-  std::nth_element(all_dev.begin(), all_dev.begin() + all_dev.size() / 2, all_dev.end());
-  const double mad = all_dev[all_dev.size() / 2];
+  const double mad = SelectedMedian(all_dev);
   const double limit = std::max(1e-3, 10.0 * 1.4826 * mad);
   for (int i = 0; i < N; ++i)
     if (dev_row[i] > limit) {

@@ -284,8 +284,7 @@ std::string TableHtml(const Table& t, size_t max_rows) {
         double sum = 0;
         for (double x : v) sum += x;
         std::vector<double> s = v;
-        std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
-        const double med = s[s.size() / 2];
+        const double med = SelectedMedian(s);
         o << "<td>" << Num(*std::min_element(v.begin(), v.end())) << "</td><td>" << Num(med) << "</td><td>"
           << Num(*std::max_element(v.begin(), v.end())) << "</td><td>" << Num(sum / static_cast<double>(v.size()))
           << "</td>";
@@ -1040,10 +1039,7 @@ Answer FuseAnswer(const std::map<std::string, Table>& tables) {
       }
       flagged_all += flagged;
       std::string med;
-      if (!sigma.empty()) {
-        std::nth_element(sigma.begin(), sigma.begin() + sigma.size() / 2, sigma.end());
-        med = Fixed(sigma[sigma.size() / 2], 4);
-      }
+      if (!sigma.empty()) med = Fixed(SelectedMedian(sigma), 4);
       rows.push_back({m, std::to_string(rows_of[m].size()), std::to_string(flagged), std::to_string(excluded), med});
     }
     a.lead = name + ": " + std::to_string(t.rows.size()) + " fused poses by " + std::to_string(order.size()) +

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace mcms {
 
@@ -35,12 +36,6 @@ struct Px {
   double dx, dy, v;
 };
 
-double Median(std::vector<double> v) {
-  const size_t m = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + m, v.end());
-  return v[m];
-}
-
 struct SurfaceFit {
   double level = 0;     // the surface at (0, 0)
   double mean = 0;      // mean value of the inliers
@@ -56,10 +51,11 @@ bool FitSurface(const std::vector<Px>& px, bool quadratic, double clip_sigma, Su
   if (n_all < np + 1) return false;
   std::vector<double> v(n_all);
   for (int i = 0; i < n_all; ++i) v[i] = px[i].v;
-  const double med = Median(v);
-  for (int i = 0; i < n_all; ++i) v[i] = std::abs(px[i].v - med);
+  std::vector<int> counts;
+  double med = 0, mad_raw = 0;
+  MedianAndMad(v, &counts, &med, &mad_raw);
   // Floor: the quantization of an integer image, so that a noise-free image still fits.
-  const double mad = std::max(1.4826 * Median(v), 0.5);
+  const double mad = std::max(1.4826 * mad_raw, 0.5);
   auto basis = [&](const Px& p) {
     Eigen::Matrix<double, 6, 1> a;
     a << 1, p.dx, p.dy, p.dx * p.dx, p.dx * p.dy, p.dy * p.dy;
@@ -267,7 +263,7 @@ PixelNoiseEstimate EstimatePixelNoise(const std::vector<PixelNoiseSample>& sampl
   // A scatter larger than the errors predict (a non-uniform ball, clutter) widens the error.
   e.inv_gain_sigma = std::sqrt(std::max(1.0, e.scatter_chi2_per_dof) / sum_w);
   e.gain_e_per_dn = b > 0 ? 1 / b : 0.0;
-  e.background_noise_dn = Median(bg_sigma);
+  e.background_noise_dn = SelectedMedian(bg_sigma);
   e.mean_signal_dn = signal / used;
   return e;
 }
