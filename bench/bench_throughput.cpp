@@ -66,6 +66,7 @@
 #endif
 
 #include "bench/opencv_baseline.h"
+#include "core/parallel.h"
 #include "synthetic/renderer.h"
 #include "synthetic/recording.h"
 #include "synthetic/scenario.h"
@@ -337,7 +338,7 @@ int Main(int argc, char** argv) {
   };
   std::atomic<size_t> posed_baseline{0};
   auto baseline = [&](bool from_files, int threads) {
-    ParallelFor(0, n, threads, [&](size_t i) {
+    ParallelFor(n, threads, [&](size_t i) {
       const bench::Baseline base(rig, target);  // per frame set: nothing shared between threads
       std::vector<cv::Mat> images(ncam);
       for (size_t c = 0; c < ncam; ++c)

@@ -6,10 +6,10 @@
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
-#include <thread>
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/parallel.h"
 #include "core/random.h"
 #include "core/svg_plot.h"
 #include "core/output_folder.h"
@@ -48,12 +48,7 @@ std::vector<FrameResult> RenderAndTrack(const Scenario& sc, int threads, bool qu
   for (size_t f0 = 0; f0 < sc.NumFrames(); f0 += chunk) {
     const size_t f1 = std::min(sc.NumFrames(), f0 + chunk);
     std::vector<RenderedFrame> frames(f1 - f0);
-    std::vector<std::thread> pool;
-    for (int t = 0; t < threads; ++t)
-      pool.emplace_back([&, t] {
-        for (size_t f = f0 + t; f < f1; f += threads) frames[f - f0] = renderer.Render(f);
-      });
-    for (auto& th : pool) th.join();
+    ParallelFor(f1 - f0, threads, [&](size_t i) { frames[i] = renderer.Render(f0 + i); });
     for (size_t f = f0; f < f1; ++f) {
       tracked.push_back(tracker.ProcessFrame(f, sc.times[f], frames[f - f0].images));
       progress.Update(f + 1);

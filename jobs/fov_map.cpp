@@ -3,18 +3,14 @@
 
 #include <numbers>
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <exception>
 #include <limits>
-#include <mutex>
 #include <sstream>
-#include <thread>
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/parallel.h"
 #include "core/svg_plot.h"
 #include "core/statistics.h"
 #include "synthetic/scenario.h"
@@ -26,47 +22,6 @@ namespace fs = std::filesystem;
 
 namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-// Runs work(i) for i in [0, n) on `threads` threads; progress(done, n) from the caller's
-// thread a few times a second. The first exception is rethrown after all threads stop.
-void ParallelFor(size_t n, int threads, const std::function<void(size_t)>& work,
-                 const std::function<void(size_t, size_t)>& progress) {
-  if (threads <= 1) {
-    // On the calling thread (its CPU time is then the work's).
-    for (size_t i = 0; i < n; ++i) {
-      work(i);
-      if (progress && (i % 64 == 0 || i + 1 == n)) progress(i + 1, n);
-    }
-    if (progress && n == 0) progress(0, 0);
-    return;
-  }
-  std::atomic<size_t> next{0}, done{0};
-  std::atomic<bool> failed{false};
-  std::exception_ptr error;
-  std::mutex m;
-  auto run = [&] {
-    for (size_t i; !failed && (i = next++) < n;) {
-      try {
-        work(i);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(m);
-        if (!error) error = std::current_exception();
-        failed = true;
-      }
-      ++done;
-    }
-  };
-  threads = std::max(1, threads);
-  std::vector<std::thread> pool;
-  for (int t = 0; t < threads; ++t) pool.emplace_back(run);
-  while (done < n && !failed) {
-    if (progress) progress(done, n);
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  for (auto& th : pool) th.join();
-  if (error) std::rethrow_exception(error);
-  if (progress) progress(n, n);
-}
 
 Vec3 CameraCentre(const CameraModel& cam) { return cam.T_cam_rig().Inverse().t; }
 }  // namespace

@@ -1,21 +1,19 @@
 #include "synthetic/recording.h"
 
 #include <numbers>
-#include <atomic>
 #include <cstdio>
-#include <exception>
 #include <fstream>
 #include <limits>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
-#include <thread>
 
 #include <opencv2/imgproc.hpp>
 
 #include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/parallel.h"
 #include "core/output_folder.h"
 
 namespace mcms {
@@ -136,24 +134,7 @@ ScenarioRenderer::ScenarioRenderer(const Scenario& scenario, int threads)
   if (!scenario_->IsValid(&why)) Throw("scenario: ", why);
   const double pad = RenderPadPx(scenario_->render) + 2.0;
   std::vector<std::optional<RayTable>> tables(scenario_->rig.size());
-  std::atomic<size_t> next{0};
-  std::exception_ptr error;
-  std::mutex m;
-  auto work = [&] {
-    for (size_t c; (c = next++) < tables.size();) {
-      try {
-        tables[c].emplace(scenario_->rig.cameras[c], pad);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(m);
-        if (!error) error = std::current_exception();
-      }
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int i = 1; i < std::max(threads, 1); ++i) pool.emplace_back(work);
-  work();
-  for (auto& th : pool) th.join();
-  if (error) std::rethrow_exception(error);
+  ParallelFor(tables.size(), threads, [&](size_t c) { tables[c].emplace(scenario_->rig.cameras[c], pad); });
   for (auto& t : tables) tables_.push_back(std::move(*t));
 }
 
@@ -277,34 +258,18 @@ void RenderSequence(const Scenario& scenario, const fs::path& out_dir, bool quie
     const size_t n = scenario.times.size();
     std::vector<FrameTruth> truths(n);
     Progress progress("render", n, quiet);
-    std::atomic<size_t> next{0};
-    std::atomic<bool> failed{false};
-    std::exception_ptr error;
     std::mutex m;
     size_t done = 0;
-    auto work = [&] {
-      for (size_t f; !failed && (f = next++) < n;) {
-        try {
-          RenderedFrame r = renderer.Render(f);
-          char name[32];
-          std::snprintf(name, sizeof(name), "%06zu%s", f, ExtensionOf(format));
-          for (size_t c = 0; c < r.images.size(); ++c)
-            if (!r.images[c].empty()) WriteImageFile(tmp / "images" / scenario.rig.names[c] / name, r.images[c], format);
-          std::lock_guard<std::mutex> lock(m);
-          truths[f] = std::move(r.truth);
-          progress.Update(++done);
-        } catch (...) {
-          std::lock_guard<std::mutex> lock(m);
-          if (!error) error = std::current_exception();
-          failed = true;
-        }
-      }
-    };
-    std::vector<std::thread> pool;
-    for (int i = 1; i < threads; ++i) pool.emplace_back(work);
-    work();
-    for (auto& th : pool) th.join();
-    if (error) std::rethrow_exception(error);
+    ParallelFor(n, threads, [&](size_t f) {
+      RenderedFrame r = renderer.Render(f);
+      char name[32];
+      std::snprintf(name, sizeof(name), "%06zu%s", f, ExtensionOf(format));
+      for (size_t c = 0; c < r.images.size(); ++c)
+        if (!r.images[c].empty()) WriteImageFile(tmp / "images" / scenario.rig.names[c] / name, r.images[c], format);
+      std::lock_guard<std::mutex> lock(m);
+      truths[f] = std::move(r.truth);
+      progress.Update(++done);
+    });
     progress.Finish();
     WriteTruth(scenario, truths, tmp);
   });

@@ -7,6 +7,7 @@
 #include <mutex>
 
 #include "core/error.h"
+#include "core/parallel.h"
 
 namespace mcms {
 
@@ -31,7 +32,7 @@ SequenceNoiseModel EstimateSequenceNoise(const ImageSequence& seq,
   for (size_t i = 0; i < k; ++i) picks.push_back(k > 1 ? i * (n - 1) / (k - 1) : 0);
 
   std::vector<std::vector<std::vector<PixelNoiseSample>>> found(picks.size(), std::vector<std::vector<PixelNoiseSample>>(ncam));
-  ParallelFor(0, picks.size(), threads, [&](size_t j) {
+  ParallelFor(picks.size(), threads, [&](size_t j) {
     std::vector<std::string> problems;
     const std::vector<cv::Mat> images = LoadFrameImages(seq, picks[j], &problems);
     for (size_t c = 0; c < ncam && c < images.size(); ++c) {

@@ -1,7 +1,6 @@
 #include "tracking/sequence.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <condition_variable>
 #include <exception>
@@ -244,33 +243,6 @@ std::vector<ImageFileRows> LoadFrameRows(const ImageSequence& seq, size_t i, std
     images[c].Read(p, o, &(*problems)[c]);
   }
   return images;
-}
-
-void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn) {
-  threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<size_t>(end - begin, 1))));
-  if (threads == 1) {
-    for (size_t i = begin; i < end; ++i) fn(i);
-    return;
-  }
-  std::atomic<size_t> next{begin};
-  std::exception_ptr error;
-  std::mutex error_mutex;
-  auto work = [&] {
-    for (size_t i; (i = next++) < end;) {
-      try {
-        fn(i);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(error_mutex);
-        if (!error) error = std::current_exception();
-        next = end;
-      }
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int t = 1; t < threads; ++t) pool.emplace_back(work);
-  work();
-  for (auto& th : pool) th.join();
-  if (error) std::rethrow_exception(error);
 }
 
 size_t SequenceWindow(int threads) { return 4 * static_cast<size_t>(std::max(threads, 1)); }

@@ -75,10 +75,6 @@ std::vector<cv::Mat> LoadFrameImages(const ImageSequence& seq, size_t i, std::ve
 // empty image().
 std::vector<ImageFileRows> LoadFrameRows(const ImageSequence& seq, size_t i, std::vector<std::string>* problems);
 
-// Runs fn(i) for i in [begin, end) on `threads` threads (1 = in this thread, in order).
-// The first exception thrown by fn is rethrown after every thread has finished.
-void ParallelFor(size_t begin, size_t end, int threads, const std::function<void(size_t)>& fn);
-
 // The most frames TrackImageSequenceStreaming holds at once (read and detected but not
 // yet handed to on_frame) on `threads` threads: its reorder window, 4 per thread.
 size_t SequenceWindow(int threads);
