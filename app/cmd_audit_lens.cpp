@@ -9,6 +9,7 @@
 #include "audit/lens_audit.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/limits.h"
 #include "core/output_folder.h"
 
 namespace mcms::app {
@@ -18,7 +19,7 @@ struct AuditLensArgs {
   std::string model, output, json;
   std::vector<std::string> candidates;
   double false_alarm = 0.01;
-  int folds = 5, spline_nx = 30, spline_ny = 0;
+  int folds = 5, spline_nx = 30, spline_ny = 0, threads = 0;
   bool quiet = false, contiguous = false;
 };
 
@@ -33,6 +34,7 @@ int RunAuditLens(const AuditLensArgs& a) {
   job.options.candidates = a.candidates;
   job.options.spline_nx = a.spline_nx;
   job.options.spline_ny = a.spline_ny;
+  job.options.threads = a.threads;
   if (!a.quiet) job.options.progress = [](const std::string& s) { std::fprintf(stderr, "audit lens: %s\n", s.c_str()); };
   RunLensAuditJob(job, [](const std::string& s) { std::printf("%s", s.c_str()); });
   return 0;
@@ -64,6 +66,8 @@ std::pair<CLI::App*, Runner> AddAuditLens(CLI::App& audit) {
   cmd->add_flag("--contiguous-folds", args->contiguous,
                 "folds of contiguous capture order (tests extrapolation to regions of the view a block alone "
                 "covered) instead of interleaved boards");
+  cmd->add_option("--threads", args->threads, "threads solving the held-out folds side by side (0 = all cores); the result does not depend on it")
+      ->check(CLI::Range(0, kMaxThreads));
   cmd->add_flag("-q,--quiet", args->quiet, "no progress on stderr");
   return std::make_pair(cmd, Runner([args] { return RunAuditLens(*args); }));
 }

@@ -55,6 +55,9 @@ struct LensAuditOptions {
   std::vector<std::string> candidates;
   int spline_nx = 30;
   int spline_ny = 0;  // 0: square knot cells (spline_nx * height / width)
+  // Threads solving a model's held-out folds side by side (0: all cores); the result does
+  // not depend on it.
+  int threads = 0;
   std::function<void(const std::string&)> progress;
   bool IsValid(std::string* why) const;
 };

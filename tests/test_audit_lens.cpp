@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -178,6 +179,56 @@ TEST(LensAudit, BadInputNamesTheFileAndWritesNothing) {
   opt.candidates = {"LENSMODEL_NOSUCH"};
   const std::string e3 = test::ErrorOf([&] { AuditLens(ReadMrcalOptimizationInputs(path), opt); });
   EXPECT_NE(e3.find("LENSMODEL_NOSUCH"), std::string::npos) << e3;
+  opt.candidates.clear();
+  opt.threads = -1;
+  const std::string e4 = test::ErrorOf([&] { AuditLens(ReadMrcalOptimizationInputs(path), opt); });
+  EXPECT_NE(e4.find("--threads"), std::string::npos) << e4;
+}
+
+// The held-out folds are solved side by side: every figure is the same, to the bit, on
+// one thread and on several (an OpenCV and a small splined candidate, whose solves are
+// mrcal's sparse ones), and the progress still comes in fold order.
+TEST(LensAudit, FoldsSolvedSideBySideGiveTheSameScores) {
+  const auto d = test::ScratchDir("lens_audit_threads");
+  Rng rng(20261206);
+  const auto path = CalibrateAndWrite(Observe(Opencv4Truth(), 60, rng), "LENSMODEL_OPENCV4", d / "cam0.cameramodel");
+  const MrcalOptimizationInputsData data = ReadMrcalOptimizationInputs(path);
+  std::vector<LensAuditResult> runs;
+  std::vector<std::vector<std::string>> logs;
+  for (int threads : {1, 3}) {
+    LensAuditOptions opt;
+    opt.candidates = {"LENSMODEL_OPENCV8", "splined"};
+    opt.spline_nx = 8;
+    opt.threads = threads;
+    logs.emplace_back();
+    opt.progress = [&](const std::string& s) { logs.back().push_back(s); };
+    runs.push_back(AuditLens(data, opt));
+  }
+  ASSERT_EQ(runs[0].fits.size(), 3u);
+  ASSERT_EQ(runs[1].fits.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    const LensFit &a = runs[0].fits[i], &b = runs[1].fits[i];
+    EXPECT_EQ(a.lensmodel, b.lensmodel);
+    EXPECT_EQ(a.rss, b.rss) << a.lensmodel;
+    EXPECT_EQ(a.heldout_rms_px, b.heldout_rms_px) << a.lensmodel;
+    EXPECT_EQ(a.heldout_loglik, b.heldout_loglik) << a.lensmodel;
+    EXPECT_EQ(a.intrinsics, b.intrinsics) << a.lensmodel;
+    EXPECT_GT(a.heldout_rms_px, 0.0);
+  }
+  // The report's text, but for each model's wall time.
+  const auto untimed = [](const LensAuditResult& r) {
+    return std::regex_replace(r.report.Text(), std::regex(R"(, [0-9.]+ s\n)"), "\n");
+  };
+  EXPECT_EQ(untimed(runs[0]), untimed(runs[1]));
+  EXPECT_NE(untimed(runs[0]), runs[0].report.Text());
+  // Each model reports its five folds in order, whatever finished first.
+  for (const auto& log : logs) {
+    std::vector<std::string> folds;
+    for (const std::string& s : log)
+      if (s.find("  fold ") == 0) folds.push_back(s.substr(0, 11));
+    ASSERT_EQ(folds.size(), 15u);
+    for (size_t k = 0; k < folds.size(); ++k) EXPECT_EQ(folds[k], "  fold " + std::to_string(k % 5 + 1) + "/5:") << k;
+  }
 }
 
 }  // namespace
