@@ -1087,6 +1087,114 @@ void PruneNamedEffects(Auditor& a, const CameraRig& rig, int nb, const CameraAud
   }
 }
 
+// The report's named effect `name` at `where` taken out (it joins an undecided group).
+void Unname(const std::string& name, const std::string& where, AuditReport* rep) {
+  auto& ef = rep->effects;
+  ef.erase(std::remove_if(ef.begin(), ef.end(), [&](const AuditEffect& e) { return e.name == name && e.where == where; }),
+           ef.end());
+}
+
+// A move named while another camera's fault was still unmodelled may have won by what its
+// six parameters took of that fault through the shared poses (a 3-camera rig: a focal length
+// of one camera and a k1 of another; the move, a shift along the axis, took the focal
+// length's place). Once every effect is in, each named move for the whole recording is
+// judged again against its camera's simpler intrinsic explanations (focal length, principal
+// point, both), each fitted in its place with every other term and the poses (the joint
+// fit): where the move's extra parameters are no evidence against one of them (its
+// likelihood ratio over it below the chi-square quantile at the recording's false-alarm
+// rate itself, without the candidates' Bonferroni: the move keeps its place on any evidence
+// that it is one), the one of these with the best BIC is named instead, with a note.
+void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, const CameraAuditOptions& options, double ln_n,
+                        const std::vector<double>& scale, const std::vector<bool>& noise_named,
+                        std::vector<CameraModelTerm>* terms_io, AuditReport* rep) {
+  std::vector<CameraModelTerm>& terms = *terms_io;
+  for (size_t k = 0; k < terms.size(); ++k) {
+    const Extension x = terms[k].extension;
+    if (terms[k].undecided || x.effect != Effect::kCameraMoved ||
+        terms[k].from_time_s > -std::numeric_limits<double>::infinity())
+      continue;
+    auto has = [&](Effect e) {
+      for (const auto& t : terms)
+        if (t.extension.effect == e && t.extension.index == x.index) return true;
+      return false;
+    };
+    std::vector<CameraModelTerm> with = terms;
+    const double ll_move = a.JointFit(&with, scale);
+    std::vector<CameraModelTerm> without = terms;
+    without.erase(without.begin() + static_cast<long>(k));
+    std::vector<CameraModelTerm> best;
+    double best_bic = -std::numeric_limits<double>::infinity(), best_ll = 0, best_lr = 0;
+    int best_k = 0;
+    for (const std::vector<Effect>& r : std::vector<std::vector<Effect>>{
+             {Effect::kFocalLength}, {Effect::kPrincipalPoint}, {Effect::kFocalLength, Effect::kPrincipalPoint}}) {
+      bool taken = false;
+      int kr = 0;
+      std::vector<CameraModelTerm> t = without;
+      for (Effect e : r) {
+        taken = taken || has(e);
+        CameraModelTerm term;
+        term.extension = Extension{e, x.index, 0};
+        term.parameters = term.extension.InitialParameters();
+        kr += term.extension.NumParameters();
+        t.push_back(term);
+      }
+      if (taken) continue;
+      const double ll = a.JointFit(&t, scale);
+      const double lr = 2 * (ll_move - ll);
+      // Among those the move does not beat, the one of the best BIC (a principal point must
+      // earn its two parameters beside a focal length).
+      const double bic = 2 * ll - kr * ln_n;
+      if (ChiSquareSurvival(lr, x.NumParameters() - kr) < options.false_alarm || bic <= best_bic) continue;
+      best = t;
+      best_bic = bic;
+      best_ll = ll;
+      best_lr = lr;
+      best_k = kr;
+    }
+    if (best.empty()) continue;
+    // Named in the move's place: its held-out figures on its camera's samples against the
+    // camera without the move, the poses re-fitted without it.
+    const std::string move_label = x.Label(rig.names);
+    a.Rebuild(without, scale);
+    const ScaleMode mode = UnitScaleMode(true, x.index, noise_named);
+    const Eval h0 = HeldOut(a, options, true, x.index, without, UnitTerms(without, true, x.index), scale, mode);
+    const Eval h1 = HeldOut(a, options, true, x.index, best, UnitTerms(best, true, x.index), scale, mode);
+    std::vector<CameraModelTerm> none = without;
+    const double lr_none = 2 * (best_ll - a.JointFit(&none, scale));
+    // In the report's order, where the move was.
+    auto at = std::find_if(rep->effects.begin(), rep->effects.end(), [&](const AuditEffect& e) {
+      return e.name == Name(x.effect) && e.where == x.Where(rig.names);
+    });
+    if (at != rep->effects.end()) at = rep->effects.erase(at);
+    std::string named;
+    for (size_t j = without.size(); j < best.size(); ++j) {
+      const Extension& y = best[j].extension;
+      AuditEffect ef;
+      ef.name = Name(y.effect);
+      ef.where = y.Where(rig.names);
+      for (const std::string& p : y.ParameterNames()) {
+        ef.parameters.push_back({p, 0.0});
+        ef.sigma.push_back({p, std::nan("")});
+      }
+      ef.heldout_rms_before = h0.n > 0 ? std::sqrt(h0.sq / h0.n) : 0;
+      ef.heldout_rms_after = h1.n > 0 ? std::sqrt(h1.sq / h1.n) : 0;
+      ef.heldout_loglik_gain = h1.ll - h0.ll;
+      ef.bic_gain = BicGain(lr_none, best_k, ln_n);
+      at = rep->effects.insert(at, ef) + 1;
+      named += (named.empty() ? "" : " + ") + y.Label(rig.names);
+    }
+    char lr[32];
+    std::snprintf(lr, sizeof lr, "%.1f", best_lr);
+    rep->notes.push_back(move_label + " was selected, but once the other effects were in, " + named +
+                         " explains the images as well with " + std::to_string(x.NumParameters() - best_k) +
+                         " fewer parameters (the move's likelihood ratio over it " + lr +
+                         ", no evidence of a move at the false-alarm rate): named in the move's place");
+    terms = best;
+    a.Rebuild(terms, scale);
+    k = static_cast<size_t>(-1);  // the terms changed: judge the remaining moves afresh
+  }
+}
+
 // A last fit of every unit with named effects on the poses re-fitted with all of them
 // (the noise scale, in particular, whitens with the pose covariances of its own value).
 void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& noise_named,
@@ -1116,13 +1224,6 @@ void RefitNamedUnits(Auditor& a, const CameraRig& rig, const std::vector<bool>& 
           }
     }
   }
-}
-
-// The report's named effect `name` at `where` taken out (it joins an undecided group).
-void Unname(const std::string& name, const std::string& where, AuditReport* rep) {
-  auto& ef = rep->effects;
-  ef.erase(std::remove_if(ef.begin(), ef.end(), [&](const AuditEffect& e) { return e.name == name && e.where == where; }),
-           ef.end());
 }
 
 // Moves for the whole recording at all cameras but one (or at all) are not identifiable:
@@ -1223,9 +1324,21 @@ void UndecideSwappableEffects(const Auditor& a, const CameraRig& rig, const Came
     for (size_t i = 1; i < group.size(); ++i) others += (i > 1 ? ", " : "") + group[i];
     char band[32];
     std::snprintf(band, sizeof band, "%.3g", options.undecided_nats);
+    // Principal points of different cameras trade against each other through a gauge of
+    // the rig, not a want of data: say so, so that more frames are not asked for in vain.
+    bool elsewhere = false;
+    for (size_t i = 1; i < group.size(); ++i)
+      elsewhere = elsewhere || group[i].substr(group[i].rfind(" at ") + 4) != where;
+    const std::string why =
+        x.effect == Effect::kPrincipalPoint && elsewhere
+            ? "; a small turn of the whole rig is undone by the target's free poses and each camera sees it as "
+              "nearly a shift of its image, so the principal points of different cameras trade against each other "
+              "(what tells them apart is the target's distance varying: the turn also moves the other cameras, "
+              "by an image shift that falls with the distance; more frames of the same motion do not)"
+            : "";
     rep->notes.push_back(label + " was selected, but " + others + " in its place, with every other term and the poses " +
                          "refitted, explains the images as well (joint log-likelihood within " + band +
-                         " nats): which is undecided");
+                         " nats): which is undecided" + why);
   }
 }
 
@@ -1398,6 +1511,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     RefitUnits(a, noise_named, 10, &terms, &scale);
   }
   PruneNamedEffects(a, rig, nb, options, ln_n, &terms, &scale, &noise_named, &rep);
+  SimplifyNamedMoves(a, rig, options, ln_n, scale, noise_named, &terms, &rep);
   RefitNamedUnits(a, rig, noise_named, &terms, &scale, &rep);
   UndecideUnidentifiable(a, rig, Effect::kCameraMoved, &terms, &rep);
   UndecideUnidentifiable(a, rig, Effect::kCameraTimeOffset, &terms, &rep);
