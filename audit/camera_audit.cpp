@@ -1324,17 +1324,17 @@ void UndecideSwappableEffects(const Auditor& a, const CameraRig& rig, const Came
     for (size_t i = 1; i < group.size(); ++i) others += (i > 1 ? ", " : "") + group[i];
     char band[32];
     std::snprintf(band, sizeof band, "%.3g", options.undecided_nats);
-    // Principal points of different cameras trade against each other through a gauge of
-    // the rig, not a want of data: say so, so that more frames are not asked for in vain.
+    // Principal points of different cameras trade against each other through the target's
+    // free poses: say so, so that the group is not read as a want of frames.
     bool elsewhere = false;
     for (size_t i = 1; i < group.size(); ++i)
       elsewhere = elsewhere || group[i].substr(group[i].rfind(" at ") + 4) != where;
     const std::string why =
         x.effect == Effect::kPrincipalPoint && elsewhere
-            ? "; a small turn of the whole rig is undone by the target's free poses and each camera sees it as "
-              "nearly a shift of its image, so the principal points of different cameras trade against each other "
-              "(what tells them apart is the target's distance varying: the turn also moves the other cameras, "
-              "by an image shift that falls with the distance; more frames of the same motion do not)"
+            ? "; principal points of different cameras trade against each other through the target's free poses "
+              "(moving the target along one camera's line of sight leaves that camera's image nearly unchanged and "
+              "shifts the other cameras' images nearly uniformly), so a small one is not placed at its camera by "
+              "these images"
             : "";
     rep->notes.push_back(label + " was selected, but " + others + " in its place, with every other term and the poses " +
                          "refitted, explains the images as well (joint log-likelihood within " + band +

@@ -469,11 +469,12 @@ PairVerdict JudgeNoWrongCause(const Pair& p) {
   if (!o.r.report.effects.empty() || !o.r.report.undecided.empty()) {
     EXPECT_NE(o.r.report.Text().find("with the final model"), std::string::npos) << o.what;
   }
-  // A principal point undecided between cameras: the note says why (a turn of the rig).
+  // A principal point undecided between cameras: the note says why (the target's free poses).
   for (const auto& g : o.r.report.undecided)
     if (g.size() > 1 && g[0].rfind("principal_point at ", 0) == 0 && g[1].rfind("principal_point at ", 0) == 0) {
       bool said = false;
-      for (const auto& n : o.r.report.notes) said = said || n.find("a small turn of the whole rig") != std::string::npos;
+      for (const auto& n : o.r.report.notes)
+        said = said || n.find("trade against each other through the target's free poses") != std::string::npos;
       EXPECT_TRUE(said) << o.what << ": why principal points of different cameras are undecided";
     }
   if (Unidentifiable(p)) {
