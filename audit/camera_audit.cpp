@@ -1103,11 +1103,13 @@ void Unname(const std::string& name, const std::string& where, AuditReport* rep)
 // fit): where the move's extra parameters are no evidence against one of them (its
 // likelihood ratio over it below the chi-square quantile at the recording's false-alarm
 // rate itself, without the candidates' Bonferroni: the move keeps its place on any evidence
-// that it is one), the one of these with the best BIC is named instead, with a note.
-void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, const CameraAuditOptions& options, double ln_n,
+// that it is one), the one of these with the best BIC that earns its own place (the test,
+// BIC and a held-out gain, as the move did) is named instead, with a note.
+void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, int nb, const CameraAuditOptions& options, double ln_n,
                         const std::vector<double>& scale, const std::vector<bool>& noise_named,
                         std::vector<CameraModelTerm>* terms_io, AuditReport* rep) {
   std::vector<CameraModelTerm>& terms = *terms_io;
+  const double m = static_cast<double>(static_cast<int>(rig.size()) * 7 + nb);  // as the pruning's
   for (size_t k = 0; k < terms.size(); ++k) {
     const Extension x = terms[k].extension;
     if (terms[k].undecided || x.effect != Effect::kCameraMoved ||
@@ -1122,6 +1124,8 @@ void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, const CameraAuditOptio
     const double ll_move = a.JointFit(&with, scale);
     std::vector<CameraModelTerm> without = terms;
     without.erase(without.begin() + static_cast<long>(k));
+    std::vector<CameraModelTerm> none = without;
+    const double ll_none = a.JointFit(&none, scale);
     std::vector<CameraModelTerm> best;
     double best_bic = -std::numeric_limits<double>::infinity(), best_ll = 0, best_lr = 0;
     int best_k = 0;
@@ -1141,10 +1145,13 @@ void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, const CameraAuditOptio
       if (taken) continue;
       const double ll = a.JointFit(&t, scale);
       const double lr = 2 * (ll_move - ll);
-      // Among those the move does not beat, the one of the best BIC (a principal point must
-      // earn its two parameters beside a focal length).
+      // Among those the move does not beat and that earn their own place as the move did
+      // (the candidates' test and BIC), the one of the best BIC (a principal point must earn
+      // its two parameters beside a focal length).
       const double bic = 2 * ll - kr * ln_n;
-      if (ChiSquareSurvival(lr, x.NumParameters() - kr) < options.false_alarm || bic <= best_bic) continue;
+      if (ChiSquareSurvival(lr, x.NumParameters() - kr) < options.false_alarm ||
+          !EarnsPlace(2 * (ll - ll_none), kr, options.false_alarm / (2 * m), ln_n) || bic <= best_bic)
+        continue;
       best = t;
       best_bic = bic;
       best_ll = ll;
@@ -1159,8 +1166,10 @@ void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, const CameraAuditOptio
     const ScaleMode mode = UnitScaleMode(true, x.index, noise_named);
     const Eval h0 = HeldOut(a, options, true, x.index, without, UnitTerms(without, true, x.index), scale, mode);
     const Eval h1 = HeldOut(a, options, true, x.index, best, UnitTerms(best, true, x.index), scale, mode);
-    std::vector<CameraModelTerm> none = without;
-    const double lr_none = 2 * (best_ll - a.JointFit(&none, scale));
+    if (!(h1.ll > h0.ll)) {  // no held-out gain of its own: the move stays
+      a.Rebuild(terms, scale);
+      continue;
+    }
     // In the report's order, where the move was.
     auto at = std::find_if(rep->effects.begin(), rep->effects.end(), [&](const AuditEffect& e) {
       return e.name == Name(x.effect) && e.where == x.Where(rig.names);
@@ -1179,7 +1188,7 @@ void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, const CameraAuditOptio
       ef.heldout_rms_before = h0.n > 0 ? std::sqrt(h0.sq / h0.n) : 0;
       ef.heldout_rms_after = h1.n > 0 ? std::sqrt(h1.sq / h1.n) : 0;
       ef.heldout_loglik_gain = h1.ll - h0.ll;
-      ef.bic_gain = BicGain(lr_none, best_k, ln_n);
+      ef.bic_gain = BicGain(2 * (best_ll - ll_none), best_k, ln_n);
       at = rep->effects.insert(at, ef) + 1;
       named += (named.empty() ? "" : " + ") + y.Label(rig.names);
     }
@@ -1511,7 +1520,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     RefitUnits(a, noise_named, 10, &terms, &scale);
   }
   PruneNamedEffects(a, rig, nb, options, ln_n, &terms, &scale, &noise_named, &rep);
-  SimplifyNamedMoves(a, rig, options, ln_n, scale, noise_named, &terms, &rep);
+  SimplifyNamedMoves(a, rig, nb, options, ln_n, scale, noise_named, &terms, &rep);
   RefitNamedUnits(a, rig, noise_named, &terms, &scale, &rep);
   UndecideUnidentifiable(a, rig, Effect::kCameraMoved, &terms, &rep);
   UndecideUnidentifiable(a, rig, Effect::kCameraTimeOffset, &terms, &rep);
