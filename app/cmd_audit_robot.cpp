@@ -7,6 +7,7 @@
 #include <memory>
 
 #include "app/audit_modes.h"
+#include "app/commands.h"
 #include "audit/robot_audit.h"
 #include "core/error.h"
 
@@ -37,15 +38,7 @@ int RunAuditRobot(const AuditRobotArgs& a) {
   job.options.false_alarm = a.false_alarm;
   job.options.folds = a.folds;
   job.options.max_effects = a.max_effects;
-  if (!a.base_guess.empty()) {
-    if (a.base_guess.size() != 7)
-      Throw("audit robot: --base-guess takes 7 numbers x y z qw qx qy qz (m, unit quaternion), got ", a.base_guess.size());
-    for (double v : a.base_guess)
-      if (!std::isfinite(v)) Throw("audit robot: --base-guess has a value that is not finite (", v, ")");
-    const Eigen::Quaterniond q(a.base_guess[3], a.base_guess[4], a.base_guess[5], a.base_guess[6]);
-    if (std::abs(q.norm() - 1.0) > 1e-3) Throw("audit robot: --base-guess quaternion has norm ", q.norm(), ", expected 1");
-    job.options.base_guess = Pose::FromQuaternion(q.normalized(), Vec3(a.base_guess[0], a.base_guess[1], a.base_guess[2]));
-  }
+  if (!a.base_guess.empty()) job.options.base_guess = PoseFromArgs(a.base_guess, "audit robot", "--base-guess");
   std::string why;
   if (!job.options.IsValid(&why)) Throw("audit robot: ", why);
   if (!a.quiet) job.options.progress = [](const std::string& s) { std::fprintf(stderr, "audit robot: %s\n", s.c_str()); };
@@ -91,9 +84,10 @@ std::pair<CLI::App*, Runner> AddAuditRobot(CLI::App& audit) {
                   "all, whose pose is then audited)")
       ->delimiter(',');
   cmd->add_option("--validate", args->validate,
-                  "another session measured in the same frame: scored with the fitted models (registration, "
-                  "geometry, final) frozen, per point and posture group (repeatable)")
-      ->allow_extra_args(false);
+                  "other sessions (one or more files): scored with the fitted models (registration, geometry, "
+                  "final) frozen, the instrument placed anew per station or where it moved; mean, median, RMS, "
+                  "95 % and max per point and posture group")
+      ->expected(1, -1);
   cmd->add_option("-o,--output", args->output,
                   "output folder: report.txt, report.json, robot.yaml, residuals.csv, plots/, next_poses.csv (when a "
                   "pair is undecided)");

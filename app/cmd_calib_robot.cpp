@@ -54,19 +54,6 @@ struct CalibRobotArgs {
   bool registration_only = false, quiet = false, allow_poor_fit = false;
 };
 
-Pose PoseFromArgs(const std::vector<double>& v, const char* option) {
-  if (v.size() != 7) Throw("calib-robot: ", option, " takes 7 numbers x y z qw qx qy qz (m, unit quaternion), got ", v.size());
-  static const char* const kNames[7] = {"x", "y", "z", "qw", "qx", "qy", "qz"};
-  for (size_t i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i]))
-      Throw("calib-robot: ", option, " ", kNames[i], " is ", v[i], "; expected 7 finite numbers x y z qw qx qy qz");
-  for (int i = 0; i < 3; ++i)
-    CheckMagnitude(v[i], kMaxRobotLengthM, std::string("calib-robot: ") + option + " " + kNames[i], "m");
-  const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
-  if (std::abs(q.norm() - 1.0) > 1e-3) Throw("calib-robot: ", option, " quaternion has norm ", q.norm(), ", expected 1");
-  return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
-}
-
 int RunCalibRobot(const CalibRobotArgs& a) {
   RobotCalibrationJob job;
   job.measurements = a.measurements;
@@ -79,8 +66,8 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   job.points = a.points;
   job.estimate_only = a.estimate;
   for (const auto& v : a.validate) job.validate.push_back(v);
-  if (!a.base_guess.empty()) job.base_guess = PoseFromArgs(a.base_guess, "--base-guess");
-  if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "--tool-guess");
+  if (!a.base_guess.empty()) job.base_guess = PoseFromArgs(a.base_guess, "calib-robot", "--base-guess");
+  if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "calib-robot", "--tool-guess");
   job.fixed = a.fixed;
   job.error_motion_harmonics = a.error_motion;
   // From a nanometre-class interferometer to a tape measure; beyond, the weights overflow.
@@ -143,10 +130,10 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
                   "registration is always fitted")
       ->delimiter(',');
   sub->add_option("--validate", args->validate,
-                  "Another session measured in the same frame: scored with the fitted models frozen, per point and "
-                  "posture group (repeatable)")
+                  "Other sessions (one or more files): scored with the robot frozen, the instrument placed anew per "
+                  "station or where it moved; mean, median, RMS, 95 % and max per point and posture group")
       ->check(CLI::ExistingFile)
-      ->allow_extra_args(false);
+      ->expected(1, -1);
   sub->add_option("--report", args->report, "Also write the report to this file")->type_name("FILE");
   sub->add_option("--plot", args->plot, "SVG plot of the error per measurement (and FILE-joints.svg: against each joint angle)")->type_name("FILE.svg");
   sub->add_option("--base-guess", args->base_guess, "Starting T_meas_base: x y z qw qx qy qz")->expected(7);

@@ -7,6 +7,11 @@
 #include <memory>
 #include <string>
 
+#include <Eigen/Geometry>
+
+#include "core/error.h"
+#include "core/limits.h"
+
 namespace mcms::app {
 
 namespace {
@@ -54,6 +59,18 @@ CLI::Validator NumberAtLeast(bool strictly_positive) {
 }  // namespace
 
 CLI::Validator PositiveNumber() { return NumberAtLeast(true); }
+
+Pose PoseFromArgs(const std::vector<double>& v, const std::string& who, const std::string& option) {
+  if (v.size() != 7) Throw(who, ": ", option, " takes 7 numbers x y z qw qx qy qz (m, unit quaternion), got ", v.size());
+  static const char* const kNames[7] = {"x", "y", "z", "qw", "qx", "qy", "qz"};
+  for (size_t i = 0; i < v.size(); ++i)
+    if (!std::isfinite(v[i]))
+      Throw(who, ": ", option, " ", kNames[i], " is ", v[i], "; expected 7 finite numbers x y z qw qx qy qz");
+  for (int i = 0; i < 3; ++i) CheckMagnitude(v[i], kMaxRobotLengthM, who + ": " + option + " " + kNames[i], "m");
+  const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
+  if (std::abs(q.norm() - 1.0) > 1e-3) Throw(who, ": ", option, " quaternion has norm ", q.norm(), ", expected 1");
+  return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
+}
 CLI::Validator NonNegativeNumber() { return NumberAtLeast(false); }
 
 int RunSelected(CLI::App& app) {

@@ -7,7 +7,10 @@
 #include <CLI/CLI.hpp>
 
 #include <functional>
+#include <string>
 #include <vector>
+
+#include "core/pose_math.h"
 
 namespace mcms::app {
 
@@ -29,5 +32,10 @@ CLI::Validator SeedValidator();
 CLI::Validator PositiveNumber();
 CLI::Validator NonNegativeNumber();
 int RunSelected(CLI::App& app);
+
+// A pose given as 7 numbers x y z qw qx qy qz (--base-guess, --tool-guess): InputError
+// naming `who` and `option` unless finite, the position within core/limits.h's robot size,
+// and the quaternion of unit norm.
+Pose PoseFromArgs(const std::vector<double>& v, const std::string& who, const std::string& option);
 
 }  // namespace mcms::app

@@ -1,6 +1,8 @@
 #include "audit/audit_report.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <sstream>
 
@@ -46,7 +48,23 @@ std::string Fmt(const char* fmt, double v) {
 
 }  // namespace
 
+bool NestedFits::Record(double lr, double contained_loglik) {
+  const double rel = lr / std::max(1.0, std::abs(contained_loglik));
+  ++count;
+  if (!(rel >= worst_relative_lr)) worst_relative_lr = std::isfinite(rel) ? rel : -std::numeric_limits<double>::infinity();
+  const bool ok = rel >= -kTolerance;
+  if (!ok) ++failed;
+  return ok;
+}
+
+void NestedFits::Merge(const NestedFits& o) {
+  count += o.count;
+  failed += o.failed;
+  worst_relative_lr = std::min(worst_relative_lr, o.worst_relative_lr);
+}
+
 void AuditReport::Merge(const AuditReport& o) {
+  nested.Merge(o.nested);
   const long n = nominal_n + o.nominal_n;
   if (n > 0) nominal_chi2_per_dof = (nominal_chi2_per_dof * nominal_n + o.nominal_chi2_per_dof * o.nominal_n) / n;
   nominal_n = n;
@@ -100,6 +118,9 @@ std::string AuditReport::ToJson() const {
     }
   }
   j["notes"] = notes;
+  j["nested_fits"] = {{"count", nested.count},
+                      {"worst_relative_lr", Number(nested.worst_relative_lr)},
+                      {"failed", nested.failed}};
   if (!validation.empty()) j["validation"] = ValidationJson(validation);
   return j.dump(2) + "\n";
 }
@@ -118,18 +139,42 @@ std::string AuditReport::Text() const {
   const auto Sizes = [&](const AuditEffect& e) {
     for (const auto& [key, value] : e.labels) o << " " << key << " = " << value;
     for (size_t k = 0; k < e.parameters.size(); ++k) {
+      const std::string unit = k < e.units.size() ? e.units[k] : std::string();
+      if ((unit == "rad" || unit == "m") && k < e.sigma.size() && std::isfinite(e.sigma[k].second)) {
+        // mrad or mm, to the digits two significant ones of the sigma take.
+        const double v = e.parameters[k].second * 1e3, sg = e.sigma[k].second * 1e3;
+        const int digits = sg > 0 ? std::clamp(1 - static_cast<int>(std::floor(std::log10(sg))), 0, 9) : 4;
+        std::string name = e.parameters[k].first;
+        for (const std::string suffix : {"_rad", "_m"})
+          if (name.size() > suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0)
+            name.resize(name.size() - suffix.size());
+        char b[160];
+        std::snprintf(b, sizeof b, " %s = %.*f +- %.*f %s", name.c_str(), digits, v, digits, sg,
+                      unit == "rad" ? "mrad" : "mm");
+        o << b;
+        continue;
+      }
       o << " " << e.parameters[k].first << " = " << Fmt("%.6g", e.parameters[k].second);
       if (k < e.sigma.size()) o << " +- " << Fmt("%.2g", e.sigma[k].second);
+      if (!unit.empty()) o << " " << unit;
     }
+  };
+  // Held-out RMS of positions in mm (the robot's), else in the mode's unit.
+  const auto Rms = [&](const AuditEffect& e) {
+    const std::string unit = e.rms_unit.empty() ? rms_unit : e.rms_unit;
+    if (unit == "m")
+      return Fmt("%.4g", e.heldout_rms_before * 1e3) + " -> " + Fmt("%.4g", e.heldout_rms_after * 1e3) + " mm";
+    return Fmt("%.4g", e.heldout_rms_before) + " -> " + Fmt("%.4g", e.heldout_rms_after) + " " + unit;
   };
   for (const auto& e : effects) {
     o << "effect " << e.name << (e.where.empty() ? "" : " at " + e.where) << ":";
     Sizes(e);
-    o << "\n    held-out RMS " << Fmt("%.4g", e.heldout_rms_before) << " -> " << Fmt("%.4g", e.heldout_rms_after) << " "
-      << (e.rms_unit.empty() ? rms_unit : e.rms_unit) << ", held-out log-likelihood gain " << Fmt("%.1f", e.heldout_loglik_gain) << ", BIC gain "
-      << Fmt("%.1f", e.bic_gain) << "\n";
+    o << "\n    held-out RMS " << Rms(e) << ", held-out log-likelihood gain " << Fmt("%.1f", e.heldout_loglik_gain)
+      << ", BIC gain " << Fmt("%.1f", e.bic_gain) << "\n";
     for (const auto& [key, why] : e.held) o << "    held " << key << ": " << why << "\n";
   }
+  // Other sessions, frozen, beside the named causes (what a metrologist reads first).
+  o << ValidationText(validation);
   for (size_t g = 0; g < undecided.size(); ++g) {
     o << "undecided: these explain the same residual equally well:";
     for (const auto& s : undecided[g]) o << " [" << s << "]";
@@ -154,7 +199,6 @@ std::string AuditReport::Text() const {
         << Fmt("%.3g", t.p_value) << "\n";
   }
   for (const auto& n : notes) o << "note: " << n << "\n";
-  o << ValidationText(validation);
   return o.str();
 }
 

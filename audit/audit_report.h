@@ -35,6 +35,10 @@ struct AuditEffect {
   std::string name;   // catalog name, e.g. "joint_offset"
   std::string where;  // "joint 2", "a2", "cam1", "ball 3", a sensor's name; empty when global
   std::vector<std::pair<std::string, double>> parameters, sigma;  // SI, in the unit's order
+  // Each parameter's SI unit where the mode gives it ("rad", "m", "s", ""; index-aligned
+  // with parameters, or empty): the text shows rad in mrad and m in mm, to the digits its
+  // sigma carries (JSON stays SI).
+  std::vector<std::string> units;
   // Parameters that are names, not numbers (the lens audit: the chosen lens model);
   // written into "parameters" beside the numbers.
   std::vector<std::pair<std::string, std::string>> labels;
@@ -45,6 +49,20 @@ struct AuditEffect {
   double heldout_loglik_gain = 0.0;  // summed over held-out measurements (nats)
   double bic_gain = 0.0;             // BIC(before) - BIC(after) on all data (> 0 = earns its place)
   std::string rms_unit;              // unit of the held-out RMS when not the report's (fusion: rad)
+};
+
+// Every likelihood ratio of a fitted model against a model it contains (issue 51): a model
+// with more free parameters never fits worse, so a ratio below -kTolerance times the
+// contained model's |log-likelihood| (at least 1) is a failed solve, never evidence.
+// JSON "nested_fits": {"count", "worst_relative_lr", "failed"}.
+struct NestedFits {
+  static constexpr double kTolerance = 1e-6;
+  long count = 0;
+  double worst_relative_lr = 0.0;  // the lowest lr / max(1, |loglik of the contained model|)
+  long failed = 0;
+  // Records one comparison; false when it is a failed solve.
+  bool Record(double lr, double contained_loglik);
+  void Merge(const NestedFits& o);
 };
 
 struct AuditReport {
@@ -68,6 +86,7 @@ struct AuditReport {
   // Other sessions scored with the fitted models frozen (the robot audit's --validate):
   // JSON "validation" (calib/robot_validation.h).
   std::vector<SessionScore> validation;
+  NestedFits nested;
 
   // Appends another audit of the same data set (fusion: the inclinometer beside the
   // tracker and robot): its tests, effects (with its rms_unit), undecided groups and notes;

@@ -636,6 +636,7 @@ struct Candidate {
   bool pair = false;   // two intrinsic effects of one camera at once: term and term2
   CameraModelTerm term2;
   double lr = 0, bic_gain = 0, heldout_gain = 0, rms_before = 0, rms_after = 0, p_value = 1;
+  double base_ll = 0;  // the log-likelihood of the model it extends (issue 51: lr >= 0)
   bool eligible = false;
   std::vector<CameraModelTerm> fitted;  // the unit's terms fitted on all data
   double scale = 1;
@@ -951,6 +952,7 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
     const Base& bs = base[{x.camera_unit, x.unit}];
     const double ll_all = a.Evaluate(s, fit.terms, sc, -1, false).ll;
     x.lr = 2 * (ll_all - bs.ll_all);
+    x.base_ll = bs.ll_all;
     double ll_h, sq_h;
     long n_h;
     heldout(x.camera_unit, x.unit, t, free, mode, &ll_h, &sq_h, &n_h);
@@ -1419,6 +1421,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
     rule.undecided_bic = 2 * options.undecided_nats;
     std::vector<SelectionCandidate> sel(cands.size());
     for (size_t i = 0; i < cands.size(); ++i) {
+      rep.nested.Record(cands[i].lr, cands[i].base_ll);
       sel[i].k = cands[i].k;
       sel[i].lr = cands[i].lr;
       sel[i].group = cands[i].camera_unit ? cands[i].unit : -1 - cands[i].unit;
@@ -1451,6 +1454,7 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
           if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
           std::vector<CameraModelTerm> t = cands[i].fitted;
           cands[i].lr = sel[i].lr = 2 * (a.JointFit(&t, sc) - base);
+          rep.nested.Record(cands[i].lr, base);
         }
         dec = DecideStep(sel, tested, rule);
       }

@@ -197,7 +197,7 @@ void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const s
                           [&](const std::filesystem::path& dir) {
                             WriteFileAtomically(dir / "report.txt", [&](std::ostream& os) { os << text; });
                             if (with_incl) WriteInclinometerAuditFiles(ir, dir);
-                            if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot.NumJoints());
+                            if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot);
                             r.report.WriteJson(dir / "report.json");
                           });
     print("wrote " + a.output + "\n");

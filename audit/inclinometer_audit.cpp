@@ -595,6 +595,7 @@ InclinometerAuditResult AuditInclinometer(const Inclinometer& incl, const std::v
       say("step " + std::to_string(step + 1) + ": fitting " + t.label);
       t.m = a.Fit(t.m, -1);
       t.lr = 2.0 * (a.LogLikAll(t.m) - cur_ll);
+      rep.nested.Record(t.lr, cur_ll);
       tried.push_back(t);
     }
     std::vector<SelectionCandidate> sel(tried.size());

@@ -392,6 +392,11 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
     cands.push_back(sc);
   }
   const StepDecision d = cands.empty() ? StepDecision{} : DecideStep(cands, static_cast<int>(cands.size()), rule);
+  // A richer lens model never fits worse than the one it contains (issue 51).
+  const double nominal_ll =
+      -0.5 * static_cast<double>(nom.n) * (std::log(2 * std::numbers::pi * nom.rss / std::max(1L, nom.n)) + 1);
+  for (size_t i = 1; i < r.fits.size(); ++i)
+    if (r.fits[i].converged && r.fits[i].rss > 0) r.report.nested.Record(cands[i - 1].lr, nominal_ll);
 
   AuditReport& rep = r.report;
   rep.mode = "lens";

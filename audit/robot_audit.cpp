@@ -60,17 +60,16 @@ std::string Fixed(double v, int digits) {
 // Where `geometry` acts, as reports name it.
 std::string GeometryWhere(const RobotModel& robot) { return Extension{Effect::kGeometry, -1, 0}.Where(robot); }
 
-// Per row of another session, each measured point's error (predicted - measured) under the
-// model theta: the rigid body's points, or the one point.
-std::vector<std::vector<Vec3>> PointErrors(const Problem& pv, const RobotLog& v, const Eigen::VectorXd& theta) {
+// Per row of another session, each measured point as the model theta predicts it (the fit's
+// placement): the rigid body's points, or the one point.
+std::vector<std::vector<Vec3>> PointPredictions(const Problem& pv, const Eigen::VectorXd& theta) {
   std::vector<std::vector<Vec3>> e(pv.N);
   for (int i = 0; i < pv.N; ++i) {
     const Pose T = PredictedTool(pv, pv.rows[i], theta);
     if (pv.body_points.empty()) {
-      e[i].push_back(T.t - v.rows[i].p_meas);
+      e[i].push_back(T.t);
     } else {
-      for (int k = 0; k < static_cast<int>(pv.body_points.size()); ++k)
-        e[i].push_back(T * pv.body_points[k] - v.rows[i].Point(k));
+      for (int k = 0; k < static_cast<int>(pv.body_points.size()); ++k) e[i].push_back(T * pv.body_points[k]);
     }
   }
   return e;
@@ -243,6 +242,21 @@ double TestResiduals(const RobotLog& log, const Problem& s, const FitResult& nom
 // ---------------------------------------------------------------------------------
 // Reporting
 
+// The SI unit of parameter k of a catalog effect of the robot (for the text's mm and mrad).
+std::string UnitOf(const RobotModel& robot, const Extension& e, int k) {
+  const bool rev = e.index < 0 || e.index >= robot.NumJoints() || robot.Joints()[e.index].type == JointType::kRevolute;
+  switch (e.effect) {
+    case Effect::kJointOffset:
+    case Effect::kBacklash: return rev ? "rad" : "m";
+    case Effect::kLinkLength: return "m";
+    case Effect::kLinkTwist: return "rad";
+    case Effect::kErrorMotion: return k % 6 < 3 ? "rad" : "m";
+    case Effect::kThermalDrift: return e.variant == 0 && k == 1 ? "s" : "";
+    case Effect::kClockOffset: return "s";
+    default: return "";
+  }
+}
+
 // The effect of a finding with its sizes from `fit`.
 AuditEffect EffectOf(const Problem& pb, const Option& op, const std::vector<int>& terms, const FitResult& fit,
                      double tau_sigma, const Identifiable& ident) {
@@ -256,6 +270,7 @@ AuditEffect EffectOf(const Problem& pb, const Option& op, const std::vector<int>
       const std::string nm = GeometryName(pb, p);
       e.parameters.push_back({nm, fit.theta[p]});
       e.sigma.push_back({nm, SigmaOf(fit, p)});
+      e.units.push_back(GeometryParameterIsAngle(*pb.robot, p - pb.offset[pb.geometry]) ? "rad" : "m");
     }
     e.held = ident.held;
     return e;
@@ -278,10 +293,13 @@ AuditEffect EffectOf(const Problem& pb, const Option& op, const std::vector<int>
     }
     e.parameters.push_back({name, fit.theta[p]});
     e.sigma.push_back({name, SigmaOf(fit, p)});
+    e.units.push_back(geometric ? (GeometryParameterIsAngle(*pb.robot, p - pb.offset[k]) ? "rad" : "m")
+                                : UnitOf(*pb.robot, op.ext, p - pb.offset[k]));
   }
   if (pb.warmup >= 0 && terms.front() == pb.warmup) {
     e.parameters.push_back({names[1], fit.theta[pb.warmup + 1]});
     e.sigma.push_back({names[1], tau_sigma});
+    e.units.push_back("s");
   }
   return e;
 }
@@ -497,7 +515,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   {
     // The linearised problem holds the Jacobian (m N x P) and the normal matrices of every
     // fold (m^2 (K + 1) of P x P): bounded before the work, with what to do instead.
-    const double P = pb.P, m = pb.m, bytes = 8.0 * (m * pb.N * P + m * m * (pb.K + 1) * P * P);
+    const double P = pb.P, m = pb.m, bytes = 8.0 * (m * pb.N * P + m * m * (2 * pb.K + 1) * P * P);
     if (pb.N > kMaxAuditRows)
       Throw("audit robot: ", log.source.empty() ? std::string("the robot log") : log.source.string(), " has ", pb.N,
             " measurements, more than the ", kMaxAuditRows,
@@ -515,11 +533,15 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   const Eigen::MatrixXd noise0 = FitNominal(&pb);
   say("linearising " + std::to_string(pb.P) + " parameters over " + std::to_string(pb.N) + " measurements");
   Linearize(&pb);
-  const std::vector<int> base_free = [&] {
-    std::vector<int> b(pb.NumBase());
-    std::iota(b.begin(), b.end(), 0);
-    return b;
-  }();
+  std::vector<int> base_free = pb.BaseParams();
+  // A registration or tool parameter these poses cannot identify is held where it starts
+  // (the robot file's tool): a free one wanders along the degeneracy.
+  Identifiable ident0 = GeometryIdentifiability(pb, noise0, o.identifiability_tolerance);
+  for (const auto& [p, why] : ident0.held_base) {
+    std::erase(base_free, p);
+    pb.theta0[p] = 0.0;
+    rep.notes.push_back("held at the robot file's value, not identifiable from these measurements: " + why);
+  }
   const FitResult nominal = FitModel(pb, base_free, pb.theta0, noise0);
   const int N = pb.N;
   const double logN = std::log(static_cast<double>(N));
@@ -527,14 +549,45 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   const std::vector<Covariate> cov = Covariates(robot, log, pb);
   const double alpha_tests = o.false_alarm / 2.0;
   const double lof =
-      TestResiduals(log, pb, nominal, cov, alpha_tests, pb.NumBase(), JitterTolerance(robot, o.repeat_tolerance), &rep);
+      TestResiduals(log, pb, nominal, cov, alpha_tests, static_cast<int>(base_free.size()),
+                    JitterTolerance(robot, o.repeat_tolerance), &rep);
   rep.nominal_chi2_per_dof = std::isfinite(lof) ? lof : 1.0;
 
   // 2. Greedy selection over the catalog: the DH parameters these poses identify one by
   //    one and all at once ("geometry first": a real robot has all of them a little off),
   //    the other effects confirmed on top of the whole geometry.
   std::set<std::string> not_identifiable;
-  const Identifiable ident = GeometryIdentifiability(pb, nominal.noise, o.identifiability_tolerance);
+  Identifiable ident = GeometryIdentifiability(pb, nominal.noise, o.identifiability_tolerance);
+  // The whole geometry's fit: a parameter it drives to its bound (a placement off by more
+  // than any calibration finds, where the poses barely see it and an unmodelled cause pulls)
+  // is held at the robot file's value, and the rest fitted again. Where that fit is far from
+  // the nominal (a robot whose description is off by millimetres over metres of chain), the
+  // one Jacobian is taken again there, where every later model lies near, so that their
+  // fits converge on it.
+  if (GeometryWanted(o) && !ident.params.empty() &&
+      EnoughData(pb, static_cast<int>(base_free.size() + ident.params.size()))) {
+    FitResult g = FitModel(pb, Union(base_free, ident.params), nominal.theta, nominal.noise);
+    for (int round = 0; round < 8; ++round) {
+      std::vector<int> at;
+      for (int p : ident.params)
+        if (AtBound(g, p)) at.push_back(p);
+      if (at.empty()) break;
+      for (int p : at) {
+        std::erase(ident.params, p);
+        char b[200];
+        std::snprintf(b, sizeof b,
+                      "held at the robot file's value: its fit goes to the bound of %.2g (no placement is off by "
+                      "more), where the poses barely see it and another cause pulls",
+                      std::max(std::abs(pb.lower[p]), std::abs(pb.upper[p])));
+        ident.held.push_back({GeometryName(pb, p), b});
+      }
+      g = FitModel(pb, Union(base_free, ident.params), nominal.theta, nominal.noise);
+    }
+    if (g.nonlinear) {
+      say("the geometry's fit is far from the nominal: linearising again there");
+      Linearize(&pb, &g.theta);
+    }
+  }
   std::vector<Option> opts;
   for (const Option& op : geo_opts)
     if (std::find(ident.params.begin(), ident.params.end(), op.terms.front()) != ident.params.end()) opts.push_back(op);
@@ -547,7 +600,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   const std::vector<int> geometry_terms = GeometryWanted(o) ? ident.params : std::vector<int>{};
   const RobotAuditOptions& so = o;
   SelectionResult sel =
-      RunSelection(pb, opts, geometry_terms, nominal, so, alpha_selection, &not_identifiable, &rep.notes, say);
+      RunSelection(pb, opts, geometry_terms, nominal, so, alpha_selection, &not_identifiable, &rep.notes,
+                   &rep.nested, say);
 
   // 2b. Geometry present but not confirmed held out: the whole identifiable geometry still
   //     passes the likelihood-ratio test and BIC on top of what was named, but its
@@ -569,6 +623,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     if (EnoughData(pb, static_cast<int>(Fg.size()))) {
       const FitResult g = FitModel(pb, Fg, sel.cur.theta, sel.cur.noise);
       const double lr = 2.0 * (g.loglik - sel.cur.loglik);
+      rep.nested.Record(lr, sel.cur.loglik);
       if (EarnsPlace(lr, k, alpha_selection / std::max<size_t>(1, opts.size()), logN)) {
         say("the whole geometry passes on top of the named effects but not held out: selecting on top of it");
         model_base = Union(base_free, ident.params);
@@ -598,7 +653,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
         for (const Option& op : opts)
           if (!op.geometric) physical.push_back(op);
         opts = physical;
-        sel = RunSelection(pb, opts, {}, start, so, alpha_selection, &not_identifiable, &rep.notes, say);
+        sel = RunSelection(pb, opts, {}, start, so, alpha_selection, &not_identifiable, &rep.notes, &rep.nested,
+                           say);
       }
     }
   }
@@ -635,6 +691,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
         // Without it; the whole geometry gives way to the single terms named before it.
         const FitResult f = Refit(TermsOf([&](const Finding& x) { return &x != &fi; }));
         const double lr = 2.0 * (fin.loglik - f.loglik);
+        rep.nested.Record(lr, f.loglik);
         const double k = static_cast<double>(Union(f.free, fi.terms).size() - f.free.size());
         if (EarnsPlace(lr, std::max(1.0, k), bar, logN)) continue;
         if (lr < wlr) wlr = lr, weakest = static_cast<int>(i), wfit = f;
@@ -650,6 +707,74 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   // The final model holds what is named: an undecided group (one of its members, the data
   // cannot tell which) stays out of it until the proposed poses decide it.
   fin = Refit(TermsOf([](const Finding& f) { return !f.undecided; }));
+  // 3b. Named only what predicts (issue 51): in the final model, each named effect beyond
+  //     the geometry must stay off its physical bounds, at 3 sigma at least, and predict
+  //     postures outside the region it was fitted on (blocks of joint space held out, the
+  //     final model against the final model without it). The one that fails worst is taken
+  //     out, the model refitted, and the others judged again.
+  {
+    HeldOut fin_posture;
+    bool fin_posture_known = false;
+    while (true) {
+      int out = -1;
+      std::string why;
+      FitResult out_fit;
+      for (size_t i = 0; i < sel.findings.size() && out < 0; ++i) {
+        const Finding& fi = sel.findings[i];
+        if (fi.dropped || fi.undecided || opts[fi.option].geometric) continue;
+        const std::string& key = opts[fi.option].key;
+        // Off its bounds: a parameter held at a bound that is not the zero of a sign.
+        for (int p : fi.terms)
+          if (AtBound(fin, p)) {
+            const bool low = std::abs(fin.theta[p] - pb.lower[p]) <= std::abs(fin.theta[p] - pb.upper[p]);
+            if (low && pb.lower[p] == 0.0) continue;  // the zero of a compliance, mass or backlash
+            why = key + " is at its physical bound (" + Num4(low ? pb.lower[p] : pb.upper[p]) +
+                  "): the data ask for more than the physical effect can be; at its bound: not a finding";
+            out = static_cast<int>(i);
+            break;
+          }
+        if (out >= 0) break;
+        // At 3 sigma at least: the likelihood ratio of the final model over the final model
+        // without it, as the two-sided normal deviate of its chi-square p-value (a Wald
+        // statistic is no measure where a nuisance is profiled: a warm-up's time constant).
+        const FitResult wo = Refit(TermsOf([&](const Finding& x) { return &x != &fi && !x.undecided; }));
+        const double lr = 2.0 * (fin.loglik - wo.loglik);
+        rep.nested.Record(lr, wo.loglik);
+        const double z = SigmaOfTwoSidedP(ChiSquareSurvival(std::max(0.0, lr), ParamCount(pb, fi.terms)));
+        if (z < 3.0) {
+          char b[300];
+          std::snprintf(b, sizeof b,
+                        "%s is only %.1f sigma in the final model (likelihood ratio %.1f over the final model "
+                        "without it, %d parameters): not named",
+                        key.c_str(), z, lr, ParamCount(pb, fi.terms));
+          why = b;
+          out = static_cast<int>(i);
+          break;
+        }
+        // Predicts postures it was not fitted on.
+        if (!fin_posture_known) fin_posture = CrossValidate(pb, fin, fin.noise, true), fin_posture_known = true;
+        const HeldOut wo_posture = CrossValidate(pb, wo, fin.noise, true);
+        const double gain = fin_posture.loglik - wo_posture.loglik;
+        if (!(gain > 0)) {
+          char b[400];
+          std::snprintf(b, sizeof b,
+                        "%s does not predict postures outside those it was fitted on (held out by blocks of joint "
+                        "space, the final model with it gains %.1f nats over the final model without it; RMS %.4g -> "
+                        "%.4g mm): not named",
+                        key.c_str(), gain, wo_posture.rms * 1e3, fin_posture.rms * 1e3);
+          why = b;
+          out = static_cast<int>(i);
+          out_fit = wo;
+        }
+      }
+      if (out < 0) break;
+      say(why);
+      rep.notes.push_back(why);
+      sel.findings[out].dropped = true;
+      fin = Refit(TermsOf([](const Finding& f) { return !f.undecided; }));
+      fin_posture_known = false;
+    }
+  }
   NoteViolatedBounds(pb, opts, ident, fin, alpha_selection, o, &rep);
   // What remains unexplained: the residual tests again, on the final model's residuals.
   if (fin.free.size() > base_free.size()) {
@@ -768,6 +893,10 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
                              Refit(TermsOf([&](const Finding& x) { return &x != &f && !x.undecided; }))});
           without_ext.push_back({opts[f.option].key, opts[f.option].ext});
         }
+    PlacementOptions place;
+    place.noise = fin.noise.topLeftCorner(3, 3);
+    place.false_alarm = o.false_alarm;
+    place.fit_per_station = pb.S > 1;
     for (const RobotLog& v : validate) {
       const Problem pv = MakeProblem(robot, v, o, &pb);
       SessionScore s;
@@ -777,14 +906,22 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       for (const auto& [name, fit] : {std::pair<const char*, const FitResult*>{"registration", &nominal},
                                       {"geometry", &geo},
                                       {"final", &fin}})
-        s.models.push_back(ScoreModel(name, PointErrors(pv, v, fit->theta), s.group_of_row));
+        s.models.push_back(ScoreModel(name, v, PointPredictions(pv, fit->theta), s.group_of_row, place));
       for (const auto& [name, fit] : without)
-        s.models.push_back(ScoreModel(name, PointErrors(pv, v, fit.theta), s.group_of_row));
+        s.models.push_back(ScoreModel(name, v, PointPredictions(pv, fit.theta), s.group_of_row, place));
+      for (const auto& e : s.models[2].errors) s.scored_rows += !e.empty();
       AddValidationPlots(robot, v, pv, s, without_ext, &result.validation_plots);
-      // What remains there: the residual tests on the final model's frozen residuals.
+      // What remains there: the residual tests on the final model's residuals (as placed).
       {
         FitResult frozen = fin;
         Exact(pv, fin.theta, AllRows(pv), &frozen.R);
+        for (int i = 0; i < pv.N; ++i) {
+          const Pose& C = s.models[2].correction[i];
+          if (C.R == Mat3::Identity() && C.t == Vec3::Zero()) continue;
+          const Pose T = C * PredictedTool(pv, pv.rows[i], fin.theta);
+          frozen.R.row(i).head(3) = (T.t - pv.rows[i].p).transpose();
+          if (pv.six) frozen.R.row(i).tail(3) = LogSO3(T.R * pv.rows[i].R.transpose()).transpose();
+        }
         AuditReport t;
         int run = 0, nf = 0, shown = 0;
         TestResiduals(v, pv, frozen, Covariates(robot, v, pv), alpha_tests, 0,

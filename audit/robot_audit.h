@@ -68,9 +68,10 @@
 
 namespace mcms {
 
-// Writes next_poses as CSV: pair,q1_rad..qN_rad,x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,
-// difference_mm,separation_sigma (atomically).
-void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, int num_joints);
+// Writes next_poses as CSV: pair,q1_rad..qN_rad (q<i>_m for a prismatic joint; a robot with
+// mimic joints: its actuated joints by name, as its logs record them),x_a_m,y_a_m,z_a_m,
+// x_b_m,y_b_m,z_b_m,difference_mm,separation_sigma (atomically).
+void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, const RobotModel& robot);
 
 // `validate`: other sessions measured in the same frame, scored frozen (RobotAuditResult::
 // validation; also in the report's JSON and text).

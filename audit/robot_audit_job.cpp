@@ -13,17 +13,25 @@ namespace mcms {
 
 using robot_audit::PositionRms;
 
-void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, int num_joints) {
+void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, const RobotModel& robot) {
   WriteFileAtomically(path, [&](std::ostream& os) {
     os << "pair";
-    for (int j = 1; j <= num_joints; ++j) os << ",q" << j << "_rad";
+    const auto& act = robot.ActuatedJoints();
+    for (int j = 0; j < robot.NumActuated(); ++j) {
+      const char* unit = act[j].type == JointType::kRevolute ? "_rad" : "_m";
+      if (robot.HasMimicJoints())
+        os << "," << act[j].name << unit;
+      else
+        os << ",q" << j + 1 << unit;
+    }
     os << ",x_a_m,y_a_m,z_a_m,x_b_m,y_b_m,z_b_m,difference_mm,separation_sigma,readings_each\n";
     char b[64];
     for (const auto& np : result.next_poses)
       for (const auto& p : np.poses) {
         os << '"' << np.a << " | " << np.b << '"';
-        for (int j = 0; j < p.q.size(); ++j) {
-          std::snprintf(b, sizeof b, ",%.9g", p.q[j]);
+        const Eigen::VectorXd qa = robot.ActuatedValues(p.q);
+        for (int j = 0; j < qa.size(); ++j) {
+          std::snprintf(b, sizeof b, ",%.9g", qa[j]);
           os << b;
         }
         for (const Vec3* v : {&p.p_meas_a, &p.p_meas_b})
@@ -167,7 +175,7 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
                                     {vp.series[s].first, vp.x, vp.series[s].second, colors[s % 4], true});
                               p.WriteSvg(dir / "plots" / ("validation" + std::to_string(++k) + ".svg"));
                             }
-                            if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot.NumJoints());
+                            if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot);
                             r.report.WriteJson(dir / "report.json");
                           });
   }

@@ -28,6 +28,7 @@ namespace mcms::robot_audit {
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
 
 struct RowData {
+  int station = 0;  // the row's placement of the robot in the instrument's frame
   Eigen::VectorXd q;
   MeasurementContext c;
   Vec3 p = Vec3::Zero();      // measured position (the point, or the rigid body's origin)
@@ -56,11 +57,31 @@ struct Problem {
   Eigen::VectorXd theta0;                       // the linearisation point (the nominal fit)
   std::vector<Eigen::MatrixXd> J;               // per residual component a: N x P at theta0
   Eigen::MatrixXd u;                            // N x m: residual change per unit uniform link growth
-  int K = 0;                                    // folds: contiguous blocks of time
-  std::vector<int> fold_begin;                  // K + 1 boundaries
+  int K = 0;  // folds: contiguous blocks of time within each station
+  std::vector<std::vector<std::pair<int, int>>> fold_rows;  // per fold its rows, as ranges [begin, end)
+  // Blocks of joint space (issue 51): K clusters of each station's postures (k-means on the
+  // joint values, each joint scaled by its spread), fold k holding every station's k-th;
+  // held out, a model is judged by how it predicts postures outside the region it was
+  // fitted on (another session visits other postures).
+  std::vector<std::vector<std::pair<int, int>>> posture_rows;
+  std::vector<std::vector<Eigen::MatrixXd>> posture_G;
   std::vector<std::vector<Eigen::MatrixXd>> G;  // [fold][a * m + b] = J_a^T J_b over the fold
   std::vector<Eigen::MatrixXd> Gall;
+  // Stations (issue 51): rows that share one placement of the robot in the instrument's
+  // frame, each with its own registration: station 0's is theta[0..5], station s > 0's
+  // 6 parameters at reg_extra + 6 (s - 1), after the blocks; station0 holds each one's
+  // starting placement (station0[0] = base0).
+  int S = 1;
+  int reg_extra = -1;
+  std::vector<Pose> station0;
+  std::vector<std::string> station_names;
+  int RegOffset(int s) const { return s == 0 ? 0 : reg_extra + 6 * (s - 1); }
+  // Station 0's registration and the tool (the blocks start after them).
   int NumBase() const { return 6 + ts; }
+  // Every registration and the tool: the parameters every model fits.
+  std::vector<int> BaseParams() const;
+  // Whether parameter p belongs to a block of the catalog (not a registration or the tool).
+  bool IsBlockParam(int p) const { return p >= NumBase() && (reg_extra < 0 || p < reg_extra); }
 };
 
 // Rows as contiguous ranges [begin, end): all rows, a fold's test block, or its training rows.
@@ -68,6 +89,7 @@ struct RowSet {
   std::vector<std::pair<int, int>> ranges;
   int fold = -1;       // -1: all rows
   bool train = false;  // with fold >= 0: every row but the fold's (else the fold's)
+  bool posture = false;  // the fold is a block of joint space (else of time)
   int Count() const {
     int c = 0;
     for (const auto& [b, e] : ranges) c += e - b;
@@ -75,8 +97,8 @@ struct RowSet {
   }
 };
 RowSet AllRows(const Problem& pb);
-RowSet TestRows(const Problem& pb, int f);
-RowSet TrainRows(const Problem& pb, int f);
+RowSet TestRows(const Problem& pb, int f, bool posture = false);
+RowSet TrainRows(const Problem& pb, int f, bool posture = false);
 
 // Per joint: changes of a joint value no larger than this are the encoders' jitter, not a
 // move (a repeat of the pose; no new move direction for backlash): the options'
@@ -94,9 +116,10 @@ Problem MakeProblem(const RobotModel& robot, const RobotLog& log, const RobotAud
 // noise re-estimated between solves); sets theta0's first NumBase() values. Returns the
 // noise covariance.
 Eigen::MatrixXd FitNominal(Problem* pb);
-// The Jacobian of every row with respect to every parameter at theta0, the uniform-growth
-// direction and the Gram matrices of each fold. The blocks must be set (P, offset, theta0).
-void Linearize(Problem* pb);
+// The Jacobian of every row with respect to every parameter at theta0 (or at `at`), the
+// uniform-growth direction and the Gram matrices of each fold. The blocks must be set (P,
+// offset, theta0). Fits use it as the chord method's Jacobian from any start.
+void Linearize(Problem* pb, const Eigen::VectorXd* at = nullptr);
 
 // Predicted minus measured of one row at theta (position, m; and for 6-D the rotation
 // vector of R_pred R_meas^T), and the predicted pose of the tool (the rigid body's frame).
@@ -124,6 +147,7 @@ struct FitResult {
   Eigen::VectorXd row_ll;      // N
   double loglik = -kInf;
   Eigen::MatrixXd cov;  // covariance of `free` (0 for those at a bound)
+  bool nonlinear = false;  // solved by Gauss-Newton on the exact model (the one Jacobian did not converge)
 };
 
 // Column values of the free parameters F: the Jacobian, or the warm-up's column at the
@@ -144,9 +168,13 @@ struct Columns {
   void Apply(const RowSet& set, const Eigen::VectorXd& d, Eigen::MatrixXd* R) const;
 };
 
-// The fit of the model whose free parameters are F, on all rows, from `start`.
+// The fit of the model whose free parameters are F, on the rows of `rows` (all rows when
+// null), from `start`: the chord iterations on the one Jacobian, and where they do not
+// converge or end below the start, Levenberg-Marquardt on the exact model. Never ends below
+// `start` (issue 51: a model with more free parameters never fits worse than the one it
+// extends).
 FitResult FitModel(const Problem& pb, const std::vector<int>& F, const Eigen::VectorXd& start,
-                   const Eigen::MatrixXd& noise_start);
+                   const Eigen::MatrixXd& noise_start, const RowSet* rows = nullptr);
 // The same; with the warm-up's growth free, its time constant by the profile likelihood,
 // with its standard deviation in *tau_sigma.
 FitResult FitProfiled(const Problem& pb, const std::vector<int>& F, const Eigen::VectorXd& start,
@@ -165,7 +193,8 @@ struct HeldOut {
   double loglik = 0.0, rms = 0.0;
   Eigen::VectorXd row_ll;
 };
-HeldOut CrossValidate(const Problem& pb, const FitResult& all_fit, const Eigen::MatrixXd& metric);
+HeldOut CrossValidate(const Problem& pb, const FitResult& all_fit, const Eigen::MatrixXd& metric,
+                      bool posture = false);
 // Whether a model with `params` free parameters can be cross-validated: every training set
 // has at least twice as many residuals.
 bool EnoughData(const Problem& pb, int params);

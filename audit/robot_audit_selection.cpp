@@ -17,10 +17,27 @@ namespace mcms::robot_audit {
 namespace {
 
 constexpr double kMaxJointScale = 5e-3;
+// Physical bounds of the flexible and thermal terms (issue 51: a 0.56 % "warm-up" and a
+// 1.66 rad error motion were fitted where the catalog lacked the cause): no robot's links
+// grow by more than 0.1 % (aluminium warmed by 43 K) or by more than 1e-4 per kelvin, and no
+// rotary axis wobbles by more than 10 mrad or 5 mm (ISO 230-7 error motions of robot joints
+// are tenths of a millirad and of a millimetre).
+constexpr double kMaxThermalGrowth = 1e-3, kMaxGrowthPerKelvin = 1e-4;
+constexpr double kMaxErrorMotionRad = 0.01, kMaxErrorMotionM = 0.005;
 
 // A single geometric kind is offered when asked for by name, or with the whole geometry.
 bool GeometricKindWanted(const RobotAuditOptions& o, Effect e) {
   return Wanted(o, e) || Wanted(o, Effect::kGeometry);
+}
+
+// A fit that ended below the model it extends: a failed solve, not evidence (issue 51).
+std::string FailedSolveNote(const std::string& key, double lr) {
+  char b[300];
+  std::snprintf(b, sizeof b,
+                "%s: its fit ended below the model it extends (likelihood ratio %.3g): a failed solve, not "
+                "evidence; not named",
+                key.c_str(), lr);
+  return b;
 }
 
 }  // namespace
@@ -76,12 +93,15 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
   for (const auto& r : log.rows) moving |= r.qdot.size() > 0 && r.qdot.norm() > 0;
   if (Wanted(o, Effect::kClockOffset) && moving) B.push_back({Effect::kClockOffset, -1, 0});
 
-  // Parameters.
+  // Parameters: station 0's registration and the tool, the blocks, the other stations'
+  // registrations.
   pb->P = pb->NumBase();
   for (const Extension& e : B) {
     pb->offset.push_back(pb->P);
     pb->P += e.NumParameters();
   }
+  pb->reg_extra = pb->P;
+  pb->P += 6 * (pb->S - 1);
   pb->theta0 = Eigen::VectorXd::Zero(pb->P);
   pb->lower.assign(pb->P, -kInf);
   pb->upper.assign(pb->P, kInf);
@@ -113,6 +133,26 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
         if (lever > 0) pb->upper[pb->offset[k] + c] = most / lever;
       }
     }
+    // A placement off by more than kMaxGeometryErrorRad or kMaxGeometryErrorM is a robot file
+    // of another robot, not a calibration (and a fit that goes there has wandered along a
+    // direction the poses barely see).
+    if (B[k].effect == Effect::kGeometry)
+      for (int j = 0; j < B[k].NumParameters(); ++j) {
+        const double most = GeometryParameterIsAngle(robot, j) ? kMaxGeometryErrorRad : kMaxGeometryErrorM;
+        pb->lower[pb->offset[k] + j] = -most;
+        pb->upper[pb->offset[k] + j] = most;
+      }
+    if (B[k].effect == Effect::kThermalDrift) {
+      const double most = B[k].variant == 0 ? kMaxThermalGrowth : kMaxGrowthPerKelvin;
+      pb->lower[pb->offset[k]] = -most;
+      pb->upper[pb->offset[k]] = most;
+    }
+    if (B[k].effect == Effect::kErrorMotion)
+      for (int j = 0; j < B[k].NumParameters(); ++j) {
+        const double most = j % 6 < 3 ? kMaxErrorMotionRad : kMaxErrorMotionM;
+        pb->lower[pb->offset[k] + j] = -most;
+        pb->upper[pb->offset[k] + j] = most;
+      }
     if (B[k].effect == Effect::kThermalDrift && B[k].variant == 0) pb->warmup = pb->offset[k];
   }
 
@@ -163,13 +203,19 @@ std::string GeometryName(const Problem& pb, int p) {
 }
 
 Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& noise, double tol) {
-  const int nb = pb.NumBase(), g0 = pb.offset[pb.geometry], ng = pb.robot->NumGeometryParameters();
+  const int g0 = pb.offset[pb.geometry], ng = pb.robot->NumGeometryParameters();
   std::vector<int> cols;
   std::vector<std::string> names;
-  static const char* kBase[6] = {"base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z"};
+  static const char* kBase[6] = {".rx", ".ry", ".rz", ".x", ".y", ".z"};
   static const char* kTool[6] = {"tool.x", "tool.y", "tool.z", "tool.rx", "tool.ry", "tool.rz"};
-  for (int k = 0; k < 6; ++k) cols.push_back(k), names.push_back(kBase[k]);
+  // The placements first (they may be anything), then the tool: a tool offset that only
+  // moves every station alike (a prism always below a vertical flange) is the one held.
+  for (int k = 0; k < 6; ++k) cols.push_back(k), names.push_back(std::string("base") + kBase[k]);
+  for (int st = 1; st < pb.S; ++st)
+    for (int k = 0; k < 6; ++k)
+      cols.push_back(pb.RegOffset(st) + k), names.push_back("base@" + pb.station_names[st] + kBase[k]);
   for (int k = 0; k < pb.ts; ++k) cols.push_back(6 + k), names.push_back(kTool[k]);
+  const int nb = static_cast<int>(cols.size());
   for (int k = 0; k < ng; ++k)
     cols.push_back(g0 + k), names.push_back(GeometryName(pb, g0 + k));
   const Eigen::MatrixXd Li = WhiteningOf(noise);
@@ -183,8 +229,16 @@ Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& n
       }
   std::vector<CalibrationParameter> params(cols.size());
   for (size_t c = 0; c < cols.size(); ++c) params[c].name = names[c];
-  AnalyzeIdentifiability(Jw, names, tol, &params);
+  // The registrations may be anything; the tool and each geometric parameter no worse
+  // determined than a robot's placement could be off (a tool offset the poses fix only to
+  // centimetres is held at the robot file's).
+  std::vector<double> largest(cols.size(), 0.0);
+  for (int k = 0; k < pb.ts; ++k) largest[nb - pb.ts + k] = k < 3 ? kWeakGeometryLengthM : kWeakGeometryAngleRad;
+  for (int k = 0; k < ng; ++k) largest[nb + k] = WeakGeometrySigma(*pb.robot, k);
+  AnalyzeIdentifiability(Jw, names, tol, &params, largest);
   Identifiable id;
+  for (int c = 0; c < nb; ++c)
+    if (params[c].fixed) id.held_base.push_back({cols[c], params[c].name + ": " + params[c].reason});
   for (int k = 0; k < ng; ++k) {
     const CalibrationParameter& p = params[nb + k];
     if (p.fixed)
@@ -288,7 +342,7 @@ Tried FitCandidate(const Problem& pb, const FitResult& cur, int option, const st
 // series follows the shape of a joint's deflection under the arm's weight or of its play
 // too, and a physical cause is preferred where the data cannot tell them apart (rule 5).
 void RetestFlexible(const Problem& pb, const std::vector<Option>& opts, const RobotAuditOptions& o, double alpha,
-                    std::set<int>* taken, SelectionResult* res, std::vector<std::string>* notes,
+                    std::set<int>* taken, SelectionResult* res, std::vector<std::string>* notes, NestedFits* nested,
                     const std::function<void(const std::string&)>& say) {
   const double logN = std::log(static_cast<double>(pb.N));
   const SelectionRule rule;
@@ -317,6 +371,10 @@ void RetestFlexible(const Problem& pb, const std::vector<Option>& opts, const Ro
       Tried t = FitCandidate(pb, base, s.option, s.terms);
       t.lr = 2.0 * (t.fit.loglik - base.loglik);
       t.bic = BicGain(t.lr, k, logN);
+      if (!nested->Record(t.lr, base.loglik)) {
+        notes->push_back(FailedSolveNote(opts[s.option].key, t.lr));
+        continue;
+      }
       if (t.lr < ChiSquareThreshold(k, alpha / M) || t.bic <= 0) continue;
       const std::vector<double> a(res->cur.row_ll.data(), res->cur.row_ll.data() + pb.N);
       const std::vector<double> b(t.fit.row_ll.data(), t.fit.row_ll.data() + pb.N);
@@ -367,7 +425,7 @@ void RetestFlexible(const Problem& pb, const std::vector<Option>& opts, const Ro
 SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts, const std::vector<int>& geometry_terms,
                              const FitResult& start, const RobotAuditOptions& o, double alpha,
                              std::set<std::string>* not_identifiable, std::vector<std::string>* notes,
-                             const std::function<void(const std::string&)>& say) {
+                             NestedFits* nested, const std::function<void(const std::string&)>& say) {
   SelectionResult res;
   res.cur = start;
   const double logN = std::log(static_cast<double>(pb.N));
@@ -415,6 +473,11 @@ SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts,
       Tried t = FitCandidate(pb, res.cur, sc[i].option, sc[i].terms);
       t.lr = 2.0 * (t.fit.loglik - res.cur.loglik);
       t.bic = BicGain(t.lr, k, logN);
+      if (!nested->Record(t.lr, res.cur.loglik)) {
+        notes->push_back(FailedSolveNote(op.key, t.lr));
+        say(notes->back());
+        continue;
+      }
       char b[240];
       std::snprintf(b, sizeof b, "step %d: %s: likelihood ratio %.1f (threshold %.1f), BIC gain %.1f", step + 1,
                     op.key.c_str(), t.lr, Threshold(k), t.bic);
@@ -423,9 +486,13 @@ SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts,
       if (!op.geometric && !geometry_free && !geometry_terms.empty() && t.lr >= Threshold(k)) {
         const std::vector<int> Fg = Union(res.cur.free, geometry_terms);
         if (EnoughData(pb, static_cast<int>(Fg.size()) + k)) {
-          if (!with_geometry) with_geometry = FitModel(pb, Fg, res.cur.theta, res.cur.noise);
+          if (!with_geometry) {
+            with_geometry = FitModel(pb, Fg, res.cur.theta, res.cur.noise);
+            nested->Record(2.0 * (with_geometry->loglik - res.cur.loglik), res.cur.loglik);
+          }
           const Tried c = FitCandidate(pb, *with_geometry, sc[i].option, sc[i].terms);
           const double lr = 2.0 * (c.fit.loglik - with_geometry->loglik);
+          nested->Record(lr, with_geometry->loglik);
           if (ChiSquareSurvival(lr, k) >= alpha) {
             std::snprintf(b, sizeof b,
                           "%s: likelihood ratio %.1f on the model, but only %.1f on top of every identifiable DH "
@@ -515,7 +582,7 @@ SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts,
     res.findings.push_back(f);
     res.cur = best.fit;
     res.cur_cv = best.cv;
-    RetestFlexible(pb, opts, o, alpha, &taken, &res, notes, say);
+    RetestFlexible(pb, opts, o, alpha, &taken, &res, notes, nested, say);
   }
   return res;
 }
@@ -545,10 +612,10 @@ RobotAuditResult::NextPoses SeparatingPoses(const Problem& pb, const RobotLog& l
     const int redraw = k % 2 ? 1 + static_cast<int>(rng.Uniform() * 2) : pb.n;
     for (int r = 0; r < redraw; ++r) {
       const int j = k % 2 ? static_cast<int>(rng.Uniform() * pb.n) % pb.n : r;
-      const Joint& jt = robot.Joints()[j];
-      const double wide = jt.type == JointType::kRevolute ? std::numbers::pi : 1.0;
-      q[j] = rng.Uniform(std::max(jt.lower, -wide), std::min(jt.upper, wide));
+      const auto [lo, hi] = SamplingRange(robot.Joints()[j]);
+      q[j] = rng.Uniform(lo, hi);
     }
+    if (robot.HasMimicJoints()) q = robot.ChainValues(robot.ActuatedValues(q));  // mimic joints follow
     RowData row;
     row.q = q;
     row.c = last.c;
@@ -702,7 +769,7 @@ void NoteViolatedBounds(const Problem& pb, const std::vector<Option>& opts, cons
   for (size_t i = 0; i < opts.size(); ++i) {
     bool b = false, all_free = true;
     for (int t : opts[i].terms) {
-      b |= std::isfinite(pb.lower[t]);
+      b |= pb.lower[t] == 0.0;  // a sign constraint (a compliance, a mass, a backlash)
       all_free &= std::find(base.free.begin(), base.free.end(), t) != base.free.end();
     }
     if (b && !all_free) bounded.push_back(static_cast<int>(i));

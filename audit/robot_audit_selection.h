@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "audit/audit_report.h"
 #include "audit/robot_audit_problem.h"
 
 namespace mcms::robot_audit {
@@ -44,6 +45,9 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
 struct Identifiable {
   std::vector<int> params;                                // geometry parameters of theta
   std::vector<std::pair<std::string, std::string>> held;  // name, reason
+  // Registration or tool parameters these poses do not identify (a tool offset along an
+  // axis that never turns, with a placement per station): held at the starting value.
+  std::vector<std::pair<int, std::string>> held_base;
 };
 Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& noise, double tol);
 // The name of geometric parameter `p` of theta (model/robot_model.h GeometryParameterNames).
@@ -81,7 +85,7 @@ struct SelectionResult {
 SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts, const std::vector<int>& geometry_terms,
                              const FitResult& start, const RobotAuditOptions& o, double alpha,
                              std::set<std::string>* not_identifiable, std::vector<std::string>* notes,
-                             const std::function<void(const std::string&)>& say);
+                             NestedFits* nested, const std::function<void(const std::string&)>& say);
 
 // A physical bound the data push against (a negative compliance or backlash wanted on top
 // of the final model and the whole geometry): said in a note, not named.

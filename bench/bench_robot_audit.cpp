@@ -30,13 +30,19 @@
 namespace mcms {
 namespace {
 
-RobotLog Make(int n) {
+// The KR 5 arc with its links' masses (the arm's weight on its compliant joints).
+const RobotModel& Massed() {
   static const RobotModel massed = [] {
     std::vector<Joint> j = RobotModel::Default().Joints();
     const double m[6] = {25.0, 18.0, 12.0, 4.0, 2.0, 0.5};
     for (int k = 0; k < 6; ++k) j[k].mass_kg = m[k];
     return RobotModel::Default().WithJoints(j);
   }();
+  return massed;
+}
+
+RobotLog Make(int n) {
+  const RobotModel& massed = Massed();
   test::RobotLogSpec spec;
   spec.poses = std::max(4, n / 5);
   spec.repeats = 5;
@@ -56,6 +62,32 @@ void BM_AuditRobot(benchmark::State& state) {
   state.counters["measurements"] = static_cast<double>(log.rows.size());
 }
 BENCHMARK(BM_AuditRobot)->Arg(400)->Arg(2000)->Arg(10000)->Unit(benchmark::kSecond)->Iterations(1);
+
+// Issue 51: a user's arm of 1,000 distinct postures (a laser tracker's calibration run: every
+// DH term off, the arm's weight, a hidden offset) audited with 20 other postures scored
+// frozen (--validate), as `mcms audit robot LOG --validate OTHER` runs it; the goal is under
+// 30 s on one core.
+void BM_AuditRobot1000PosturesWithValidate(benchmark::State& state) {
+  const RobotModel& massed = Massed();
+  test::RobotLogSpec spec;
+  spec.poses = 1020;
+  spec.repeats = 1;
+  spec.dh_length_sigma_m = 0.05e-3;
+  spec.dh_angle_sigma_rad = 5e-5;
+  spec.masses = &massed;
+  spec.compliance = {0, 1.5e-6, 2.5e-6, 0, 0, 0};
+  const RobotLog all = test::MakeRobotLog(RobotModel::Default(), 12, {{{Effect::kJointOffset, 2, 0}, {1e-4}}}, spec);
+  RobotLog fit = all, other = all;
+  fit.rows.assign(all.rows.begin(), all.rows.begin() + 1000);
+  other.rows.assign(all.rows.begin() + 1000, all.rows.end());
+  other.source = "other.csv";
+  for (auto _ : state) {
+    const RobotAuditResult r = AuditRobot(RobotModel::Default(), fit, {}, {other});
+    benchmark::DoNotOptimize(r.report.effects.size());
+  }
+  state.counters["measurements"] = static_cast<double>(fit.rows.size());
+}
+BENCHMARK(BM_AuditRobot1000PosturesWithValidate)->Unit(benchmark::kSecond)->Iterations(1);
 
 // The peer: one DH calibration of the same log (calib-robot).
 void BM_CalibrateRobotPeer(benchmark::State& state) {

@@ -205,7 +205,7 @@ bool GlobMatch(const std::string& pattern, const std::string& name) {
 }
 
 void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
-                            std::vector<CalibrationParameter>* params) {
+                            std::vector<CalibrationParameter>* params, const std::vector<double>& largest_sigma) {
   const int n = static_cast<int>(J.cols());
   Eigen::MatrixXd Q(J.rows(), 0);
   std::vector<int> kept;
@@ -241,6 +241,31 @@ void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::str
     Q.conservativeResize(Eigen::NoChange, Q.cols() + 1);
     Q.col(Q.cols() - 1) = res / dist;
     kept.push_back(j);
+  }
+  if (largest_sigma.empty()) return;
+  // Weakly identifiable: a standard deviation beyond what the parameter could physically be.
+  while (!kept.empty()) {
+    Eigen::MatrixXd A(J.rows(), kept.size());
+    for (size_t k = 0; k < kept.size(); ++k) A.col(k) = J.col(kept[k]);
+    const Eigen::VectorXd d = A.colwise().norm().transpose().cwiseMax(1e-300);
+    const Eigen::MatrixXd An = A * d.cwiseInverse().asDiagonal();
+    const Eigen::MatrixXd C = (An.transpose() * An).completeOrthogonalDecomposition().pseudoInverse();
+    int worst = -1;
+    double ratio = 1.0, sigma = 0.0;
+    for (size_t k = 0; k < kept.size(); ++k) {
+      const double limit = largest_sigma[kept[k]];
+      if (!(limit > 0)) continue;
+      const double s = std::sqrt(std::max(0.0, C(k, k))) / d[k];
+      if (s / limit > ratio) ratio = s / limit, worst = static_cast<int>(k), sigma = s;
+    }
+    if (worst < 0) break;
+    CalibrationParameter& p = (*params)[kept[worst]];
+    std::ostringstream s;
+    s << "weakly identifiable: these poses give it a standard deviation of " << sigma
+      << ", more than a robot's placement could be off (" << largest_sigma[kept[worst]] << ")";
+    p.fixed = true;
+    p.reason = s.str();
+    kept.erase(kept.begin() + worst);
   }
 }
 
@@ -369,9 +394,10 @@ std::vector<CalibrationParameter> ReferenceIdentifiability(const RobotModel& rob
     Eigen::VectorXd q(robot.NumJoints());
     for (int i = 0; i < robot.NumJoints(); ++i) {
       const Joint& j = robot.Joints()[i];
-      const double wide = j.type == JointType::kRevolute ? kPi : 1.0;
-      q[i] = rng.Uniform(std::max(j.lower, -wide), std::min(j.upper, wide));
+      const auto [lo, hi] = SamplingRange(j);
+      q[i] = rng.Uniform(lo, hi);
     }
+    if (robot.HasMimicJoints()) q = robot.ChainValues(robot.ActuatedValues(q));  // mimic joints follow
     poses.push_back(q);
   }
   const Eigen::MatrixXd J = PoseJacobian(robot, T_meas_base, poses, six_dof, options, points0);
@@ -527,9 +553,9 @@ Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasuremen
     dst.col(i) = measurements[i].p_meas;
   }
   const Vec3 cs = src.rowwise().mean(), cd = dst.rowwise().mean();
-  const Eigen::Matrix3d H = (dst.colwise() - cd) * (src.colwise() - cs).transpose();
-  Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  if (svd.singularValues()[1] < 1e-9 * std::max(1e-30, svd.singularValues()[0])) {
+  double spread = 0.0;
+  const Pose T = RigidFit(src, dst, &spread);
+  if (!(spread >= 1e-9)) {
     const double spread_meas = (dst.colwise() - cd).norm() / std::sqrt(n);
     const double spread_model = (src.colwise() - cs).norm() / std::sqrt(n);
     const char* why = spread_meas < 1e-6    ? "every measured position is the same (the same row repeated?)"
@@ -540,11 +566,6 @@ Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasuremen
     Throw("the starting registration cannot be found: ", why,
           "; give measurements spread over the workspace, or a starting base transform");
   }
-  Mat3 S = Mat3::Identity();
-  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) S(2, 2) = -1;
-  Pose T;
-  T.R = svd.matrixU() * S * svd.matrixV().transpose();
-  T.t = cd - T.R * cs;
   return T;
 }
 
@@ -589,6 +610,10 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_
       Throw("robot calibration: fixed parameter '", f, "' is not one of the ", np, " parameters of robot '",
             robot.Name(), "' (names like ", names[0], ", base.x, tool.rz)");
     Hold(static_cast<int>(it - names.begin()), "fixed by request");
+  }
+  for (const auto& [name, why] : options.held_weak) {
+    const auto it = std::find(names.begin(), names.end(), name);
+    if (it != names.end()) Hold(static_cast<int>(it - names.begin()), why);
   }
   for (const std::string& pattern : options.estimate_only) {
     bool any = false;
@@ -718,7 +743,8 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_
   so.callbacks.push_back(&callback);
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem, &summary);
-  result.iterations = static_cast<int>(summary.iterations.size());
+  // Ceres lists iteration 0 (the start) too: the count of steps is one less.
+  result.iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
   result.converged = summary.termination_type == ceres::CONVERGENCE;
   // Ceres' tolerances here are tight (1e-12): an ill-conditioned but settled problem runs
   // out of iterations while its cost no longer moves. Settled counts as converged: the
@@ -771,6 +797,29 @@ RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_
   for (int k = 1; k < K; ++k) result.points_tool.push_back(points0[k - 1] + x.segment<3>(L.points + 3 * (k - 1)));
   result.errors_before = PredictionErrors(robot_in, T_meas_base_guess, measurements, points_guess);
   result.errors_after = PredictionErrors(result.robot, result.T_meas_base, measurements, result.points_tool);
+  // Weakly identifiable (issue 51): a geometric parameter known only to worse than a
+  // placement could be off is held at nominal, never written into the calibrated robot; the
+  // worst first, then the problem is solved again without it (a solve that did not converge
+  // is refused as it is, its sigmas unknown).
+  {
+    int worst = -1;
+    double ratio = 1.0;
+    for (size_t k = 0; k < free.size(); ++k) {
+      const int p = free[k];
+      if (!L.IsGeometry(p)) continue;
+      const double r = result.parameters[p].sigma / WeakGeometrySigma(robot, p);
+      if (r > ratio) ratio = r, worst = p;
+    }
+    if (worst >= 0 && result.converged && options.held_weak.size() < static_cast<size_t>(np)) {
+      RobotCalibrationOptions again = options;
+      std::ostringstream why;
+      why << "weakly identifiable: these poses give it a standard deviation of " << result.parameters[worst].sigma
+          << (result.parameters[worst].angle ? " rad" : " m") << ", more than a robot's placement could be off ("
+          << WeakGeometrySigma(robot, worst) << "); held at nominal";
+      again.held_weak.push_back({names[worst], why.str()});
+      return CalibrateRobot(robot_in, T_meas_base_guess, measurements, again);
+    }
+  }
   return result;
 }
 

@@ -77,6 +77,10 @@ struct RobotCalibrationOptions {
   bool estimate_tool = true;
   // Parameter names (see the header comment) held at their starting value by request.
   std::vector<std::string> fixed;
+  // Parameters held as weakly identifiable (name -> reason), by the calibration itself: a
+  // geometric parameter whose sigma at the solution exceeds what a placement could be off
+  // (model/robot_model.h WeakGeometrySigma) is held at nominal and the problem solved again.
+  std::vector<std::pair<std::string, std::string>> held_weak;
   // When not empty: only the geometric and error-motion parameters whose names match one of
   // these patterns (shell globs: "arm_[2-6]_joint.offset", "*.offset") are estimated, with
   // the registration (base, tool, points); the others are held at their starting value.
@@ -221,9 +225,14 @@ CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_b
 // the base out; the robot audit does the same): a column whose relative distance from the
 // span of the columns kept before it is below `tol`, or that is zero, is marked fixed in
 // `params` (index-aligned with the columns) with the reason, naming the kept parameters it
-// is a combination of. Parameters already fixed (by request) are skipped.
+// is a combination of. Parameters already fixed (by request) are skipped. With
+// `largest_sigma` (index-aligned; 0 = no limit) and J whitened by the measurements' noise
+// (so that (J^T J)^-1 is the parameters' covariance): then, one at a time, the kept
+// parameter whose standard deviation exceeds its largest_sigma by the most is held, with
+// the reason "weakly identifiable", until none does.
 void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
-                            std::vector<CalibrationParameter>* params);
+                            std::vector<CalibrationParameter>* params,
+                            const std::vector<double>& largest_sigma = {});
 
 // Greedy pose selection: picks k of the candidate joint vectors, each step the one that
 // most improves the column-normalized information matrix of the identifiable parameters

@@ -11,6 +11,7 @@
 
 #include "calib/robot_validation.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/io.h"
 #include "core/output_folder.h"
 #include "core/svg_plot.h"
@@ -28,12 +29,12 @@ std::string ValueText(const CalibrationParameter& p, double v) {
   return buf;
 }
 
-// Rows x points errors of a model on measurements.
-std::vector<std::vector<Vec3>> ErrorRows(const std::vector<PoseError>& e) {
+// Rows x points of a model's predictions on measurements (its errors plus the measured points).
+std::vector<std::vector<Vec3>> PredictedRows(const std::vector<PoseError>& e, const std::vector<RobotMeasurement>& m) {
   std::vector<std::vector<Vec3>> rows;
-  for (const auto& pe : e) {
-    std::vector<Vec3> r{pe.dp};
-    r.insert(r.end(), pe.other_dp.begin(), pe.other_dp.end());
+  for (size_t i = 0; i < e.size(); ++i) {
+    std::vector<Vec3> r{e[i].dp + m[i].p_meas};
+    for (size_t k = 0; k < e[i].other_dp.size(); ++k) r.push_back(e[i].other_dp[k] + m[i].other_points[k]);
     rows.push_back(r);
   }
   return rows;
@@ -117,8 +118,18 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   }
   std::string out_ext = job.output.extension().string();
   for (auto& c : out_ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (out_ext != ".yaml" && out_ext != ".yml" && out_ext != ".urdf" && out_ext != ".xml")
+    Throw("calib-robot -o ", job.output.string(), ": the calibrated robot is written as FILE.yaml or FILE.urdf (or .xml), not '",
+          out_ext.empty() ? std::string("(no extension)") : out_ext, "'");
   const bool write_urdf = out_ext == ".urdf" || (robot.Urdf() && out_ext != ".yaml" && out_ext != ".yml");
   const RobotLog log = ReadRobotLog(job.measurements, robot);
+  if (static_cast<int>(log.rows.size()) > kMaxAuditRows)
+    Throw("calib-robot: ", job.measurements.string(), " has ", log.rows.size(), " measurements, more than the ",
+          kMaxAuditRows, " a calibration takes (core/limits.h): thin the log (a few hundred poses identify a robot)");
+  if (log.Stations().size() > 1)
+    Throw("calib-robot: ", job.measurements.string(), " places the robot at ", log.Stations().size(),
+          " stations (a station column); calib-robot fits one placement: fit it with `mcms audit robot`, which "
+          "places each station, or give one station's rows");
   const std::vector<RobotMeasurement> ms = KeepPoints(log, job.points, "calib-robot --points").rows;
   std::vector<RobotLog> validate;
   for (const auto& v : job.validate) {
@@ -181,17 +192,28 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
 
   // Other sessions, frozen: the registered nominal model and the calibrated one.
   std::vector<SessionScore> scores;
+  PlacementOptions place;
+  {
+    // The calibrated model's position noise, for the test of a frozen placement.
+    Mat3 S = Mat3::Zero();
+    for (const PoseError& e : r.errors_after) S += e.dp * e.dp.transpose();
+    place.noise = S / std::max<size_t>(1, r.errors_after.size()) + Mat3::Identity() * 1e-18;
+  }
   for (const RobotLog& v : validate) {
-    const std::vector<RobotMeasurement> vm = KeepPoints(v, job.points, "calib-robot --points").rows;
+    const RobotLog vk = KeepPoints(v, job.points, "calib-robot --points");
+    const std::vector<RobotMeasurement>& vm = vk.rows;
     SessionScore sc;
     sc.log = v.source.string();
     sc.rows = static_cast<int>(v.rows.size());
     sc.group_of_row = PostureGroups(log, v);
-    sc.models.push_back(ScoreModel("registration",
-                                   ErrorRows(PredictionErrors(nominal.robot, nominal.T_meas_base, vm, nominal.points_tool)),
-                                   sc.group_of_row));
-    sc.models.push_back(ScoreModel(
-        "geometry", ErrorRows(PredictionErrors(r.robot, r.T_meas_base, vm, r.points_tool)), sc.group_of_row));
+    sc.models.push_back(
+        ScoreModel("registration",
+                   vk, PredictedRows(PredictionErrors(nominal.robot, nominal.T_meas_base, vm, nominal.points_tool), vm),
+                   sc.group_of_row, place));
+    sc.models.push_back(ScoreModel("geometry", vk,
+                                   PredictedRows(PredictionErrors(r.robot, r.T_meas_base, vm, r.points_tool), vm),
+                                   sc.group_of_row, place));
+    for (const auto& e : sc.models.back().errors) sc.scored_rows += !e.empty();
     scores.push_back(sc);
   }
 

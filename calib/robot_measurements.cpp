@@ -74,7 +74,12 @@ struct JointColumns {
 
 JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::set<int>* used) {
   const std::string src = t.source.string();
-  const int n = robot.NumJoints();
+  // The joints a log records: the actuated ones (a mimic joint's driver, not the mimic).
+  const auto& act = robot.ActuatedJoints();
+  const int n = robot.NumActuated();
+  const auto JointName = [&](const RobotModel&, int i) {
+    return act[i].name.empty() ? "joint " + std::to_string(i + 1) : act[i].name;
+  };
   JointColumns jc{std::vector<int>(n, -1), std::vector<double>(n, 1.0)};
   const auto Find = [&](const std::string& name) {
     for (size_t c = 0; c < t.header.size(); ++c)
@@ -89,7 +94,7 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
     numbered = i;
   }
   const auto Take = [&](int i, const std::string& stem, const std::string& label) {
-    const bool rev = robot.Joints()[i].type == JointType::kRevolute;
+    const bool rev = act[i].type == JointType::kRevolute;
     std::vector<std::pair<std::string, double>> units;
     if (rev)
       units = {{stem + "_rad", 1.0}, {stem + "_deg", kDeg}};
@@ -115,13 +120,21 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
     if (jc.column[i] >= 0) used->insert(jc.column[i]);
   };
   if (numbered > 0) {
+    // A joint given twice, numbered and by its name: which one is meant is not for the
+    // reader to guess.
+    for (int i = 0; i < n; ++i)
+      for (const std::string& suffix : {std::string(), std::string("_rad"), std::string("_deg"), std::string("_m")})
+        if (!act[i].name.empty() && Find(act[i].name + suffix) >= 0)
+          Throw(src, ": joint ", act[i].name, " has two columns, 'q", i + 1, "...' and '", act[i].name + suffix,
+                "'; give one");
     if (numbered != n)
       Throw(src, ": ", numbered, " joint columns (q1 .. q", numbered, ") but robot '", robot.Name(), "' has ", n,
-            " joints; give the robot description the log was measured with (--robot)");
+            robot.HasMimicJoints() ? " actuated joints (its mimic joints follow them)" : " joints",
+            "; give the robot description the log was measured with (--robot)");
     for (int i = 0; i < n; ++i) {
       Take(i, "q" + std::to_string(i + 1), "");
       if (jc.column[i] < 0)
-        Throw(src, ": no column for joint ", i + 1, " (q", i + 1, robot.Joints()[i].type == JointType::kRevolute
+        Throw(src, ": no column for joint ", i + 1, " (q", i + 1, act[i].type == JointType::kRevolute
                                                                      ? "_rad or q" + std::to_string(i + 1) + "_deg"
                                                                      : "_m",
               ")");
@@ -131,7 +144,7 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
   // Columns named as the robot names its joints.
   std::vector<std::string> missing;
   for (int i = 0; i < n; ++i) {
-    const std::string& name = robot.Joints()[i].name;
+    const std::string& name = act[i].name;
     if (!name.empty()) Take(i, name, name);
     if (jc.column[i] < 0) missing.push_back(name.empty() ? "joint " + std::to_string(i + 1) : name);
   }
@@ -225,9 +238,12 @@ RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) 
   const int ctemp = Use("temperature_c"), cpay = Use("payload_kg");
   log.has_temperature = ctemp >= 0;
   log.has_payload = cpay >= 0;
+  const int cstation = Use("station"), crole = Use("role");
+  log.has_stations = cstation >= 0;
+  log.has_roles = crole >= 0;
   for (size_t c = 0; c < t.header.size(); ++c)
     if (!used.count(static_cast<int>(c))) log.ignored_columns.push_back(t.header[c]);
-  const int n = robot.NumJoints();
+  const int n = robot.NumActuated();
   for (size_t i = 0; i < t.rows.size(); ++i) {
     RobotMeasurement r;
     r.line = t.line_of_row[i];
@@ -238,8 +254,9 @@ RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) 
       r.time_s = 0.5 * (t.Number(i, cts) + t.Number(i, cte));
     else
       r.time_s = static_cast<double>(i);
-    r.q.resize(n);
-    for (int j = 0; j < n; ++j) r.q[j] = t.Number(i, jc.column[j]) * jc.scale[j];
+    Eigen::VectorXd qa(n);
+    for (int j = 0; j < n; ++j) qa[j] = t.Number(i, jc.column[j]) * jc.scale[j];
+    r.q = robot.ChainValues(qa);
     for (size_t k = 0; k < pts.size(); ++k) {
       const Vec3 p(t.Number(i, pts[k][0]), t.Number(i, pts[k][1]), t.Number(i, pts[k][2]));
       if (k == 0)
@@ -255,6 +272,24 @@ RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) 
     }
     if (ctemp >= 0) r.temperature_c = t.Number(i, ctemp);
     if (cpay >= 0) r.payload_kg = t.Number(i, cpay);
+    if (cstation >= 0) {
+      r.station = t.rows[i][cstation];
+      if (r.station.empty())
+        Throw(src, " line ", r.line, ": the station cell is empty; give every row its station (any label)");
+    }
+    if (crole >= 0) {
+      const std::string v = Lower(t.rows[i][crole]);
+      if (v.empty() || v == "evaluation")
+        r.role = RowRole::kEvaluation;
+      else if (v == "stationing")
+        r.role = RowRole::kStationing;
+      else if (v == "spare")
+        r.role = RowRole::kSpare;
+      else
+        Throw(src, " line ", r.line, ": role '", t.rows[i][crole],
+              "' is not understood; expected stationing (places its station), evaluation (scored; also an empty "
+              "cell) or spare");
+    }
     log.rows.push_back(r);
   }
   return log;
@@ -296,6 +331,22 @@ std::string UnitHint(const RobotModel& robot, const RobotLog& log, int j) {
 }
 
 }  // namespace
+
+const char* Name(RowRole r) {
+  switch (r) {
+    case RowRole::kStationing: return "stationing";
+    case RowRole::kSpare: return "spare";
+    default: return "evaluation";
+  }
+}
+
+std::vector<std::string> RobotLog::Stations() const {
+  std::vector<std::string> s;
+  for (const auto& r : rows)
+    if (std::find(s.begin(), s.end(), r.station) == s.end()) s.push_back(r.station);
+  if (s.empty()) s.push_back("");
+  return s;
+}
 
 std::string RobotLog::Where(size_t i) const {
   if (i < rows.size() && !rows[i].source.empty()) return rows[i].source;
@@ -350,13 +401,133 @@ void CheckRobotLog(const RobotLog& log, const RobotModel& robot, int min_rows) {
   }
 }
 
+namespace {
+
+// Hilti's construction-robot stationing datasets as published (see the header).
+bool IsStationingDataset(const YAML::Node& root) {
+  return root.IsMap() && root["joint_names"] && root["column_heights"];
+}
+
+RobotLog ReadStationingDataset(const std::filesystem::path& path, const YAML::Node& root, const RobotModel& robot) {
+  const std::string src = "measurement file " + path.string();
+  RobotLog log;
+  log.source = path;
+  log.has_time = log.has_stations = log.has_roles = true;
+  // The file's joints against the robot's actuated joints, by name.
+  std::vector<std::string> names;
+  for (const auto& n : root["joint_names"]) names.push_back(n.as<std::string>());
+  const auto& act = robot.ActuatedJoints();
+  std::vector<int> column(act.size(), -1);
+  for (size_t a = 0; a < act.size(); ++a)
+    for (size_t k = 0; k < names.size(); ++k)
+      if (names[k] == act[a].name) column[a] = static_cast<int>(k);
+  for (size_t a = 0; a < act.size(); ++a)
+    if (column[a] < 0) {
+      std::string list;
+      for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+      Throw(src, ": joint_names (", list, ") has no '", act[a].name, "', a joint of robot '", robot.Name(),
+            "'; give the robot the dataset was recorded with (--robot, and --tip-link for the measured point)");
+    }
+  // The square of stationing points the publisher's protocol uses (arm commands, m).
+  static const double kSquare[4][3] = {{0.1, 0.15, 0.48}, {0.1, -0.15, 0.48}, {0.4, 0.15, 0.48}, {0.4, -0.15, 0.48}};
+  const auto InSquare = [](const std::vector<double>& c) {
+    for (const auto& s : kSquare)
+      if (c.size() == 3 && std::abs(c[0] - s[0]) < 1e-6 && std::abs(c[1] - s[1]) < 1e-6 && std::abs(c[2] - s[2]) < 1e-6)
+        return true;
+    return false;
+  };
+  struct Timed {
+    double time;
+    RobotMeasurement m;
+  };
+  std::vector<Timed> rows;
+  int unplaced = 0, unplaced_stations = 0;
+  for (const auto& hk : root["column_heights"]) {
+    const std::string height = hk.first.as<std::string>();
+    const YAML::Node spaces = hk.second["solution_spaces"];
+    if (!spaces || !spaces.IsMap()) Throw(src, ": column height ", height, " has no 'solution_spaces' map");
+    for (const auto& sk : spaces) {
+      const std::string station = height + " m / " + sk.first.as<std::string>();
+      const YAML::Node st = sk.second["stationing_measurements"], ev = sk.second["evaluation_measurements"];
+      const bool placed = st && st.IsSequence() && st.size() > 0;
+      for (const auto& [list, stationing] : {std::pair{st, true}, std::pair{ev, false}}) {
+        if (!list) continue;
+        if (!list.IsSequence()) Throw(src, ": station ", station, ": expected a list of measurements");
+        for (const auto& e : list) {
+          const std::string where = src + " station " + station + " measurement " +
+                                    (e["id"] ? e["id"].as<std::string>() : std::string("?")) + " (line " +
+                                    std::to_string(e.Mark().line + 1) + ")";
+          for (const char* k : {"time", "joint_states", "prism_position"})
+            if (!e[k]) Throw(where, ": missing '", k, "'");
+          const auto q = ReadList(e["joint_states"], where + " joint_states");
+          if (q.size() != names.size())
+            Throw(where, ": ", q.size(), " joint_states but ", names.size(), " joint_names");
+          const auto p = ReadList(e["prism_position"], where + " prism_position");
+          if (p.size() != 3) Throw(where, ": prism_position must have 3 numbers, has ", p.size());
+          Timed t;
+          t.time = e["time"].as<double>();
+          if (!std::isfinite(t.time)) Throw(where, ": time is not finite");
+          Eigen::VectorXd qa(act.size());
+          for (size_t a = 0; a < act.size(); ++a) qa[a] = q[column[a]];
+          t.m.q = robot.ChainValues(qa);
+          t.m.p_meas = Vec3(p[0], p[1], p[2]);
+          t.m.station = station;
+          if (stationing) {
+            const auto cmd = e["doosan_cmd"] ? ReadList(e["doosan_cmd"], where + " doosan_cmd") : std::vector<double>{};
+            t.m.role = InSquare(cmd) ? RowRole::kStationing : RowRole::kSpare;
+          } else {
+            t.m.role = placed ? RowRole::kEvaluation : RowRole::kSpare;
+            if (!placed) ++unplaced;
+          }
+          t.m.line = e.Mark().line + 1;
+          t.m.source = where;
+          rows.push_back(t);
+        }
+      }
+      if (!placed && ev && ev.size() > 0) ++unplaced_stations;
+    }
+  }
+  if (rows.empty()) Throw(src, ": no measurements under column_heights");
+  std::stable_sort(rows.begin(), rows.end(), [](const Timed& a, const Timed& b) { return a.time < b.time; });
+  for (const Timed& t : rows) {
+    log.rows.push_back(t.m);
+    log.rows.back().time_s = t.time;
+  }
+  if (unplaced > 0)
+    log.notes.push_back(path.filename().string() + ": " + std::to_string(unplaced) + " evaluation points of " +
+                        std::to_string(unplaced_stations) +
+                        " stations without stationing points (nothing places them) are spare, as in the "
+                        "publisher's protocol");
+  return log;
+}
+
+}  // namespace
+
 RobotLog ReadRobotLog(const std::filesystem::path& path, const RobotModel& robot) {
   const std::string ext = Lower(path.extension().string());
   RobotLog log;
+  YAML::Node root;
   if (ext == ".yaml" || ext == ".yml") {
+    try {
+      root = LoadYaml(ReadTextFile(path), "measurement file " + path.string());
+    } catch (const YAML::Exception& e) {
+      Throw("measurement file ", path.string(), ": not valid YAML: ", e.what());
+    }
+  }
+  if (IsStationingDataset(root)) {
+    try {
+      log = ReadStationingDataset(path, root, robot);
+    } catch (const YAML::Exception& e) {
+      Throw("measurement file ", path.string(), ": ", e.what());
+    }
+  } else if (ext == ".yaml" || ext == ".yml") {
     log.source = path;
     std::vector<RobotMeasurement> m = ReadRobotMeasurements(path);
-    for (size_t i = 0; i < m.size(); ++i) m[i].time_s = static_cast<double>(i);
+    for (size_t i = 0; i < m.size(); ++i) {
+      m[i].time_s = static_cast<double>(i);
+      // The file's joints are the actuated ones: a mimic joint follows its driver.
+      if (robot.HasMimicJoints() && m[i].q.size() == robot.NumActuated()) m[i].q = robot.ChainValues(m[i].q);
+    }
     log.rows = std::move(m);
   } else {
     log = ReadCsvLog(path, robot);
@@ -541,10 +712,24 @@ void CheckRowsFitTheRobot(const RobotModel& robot, const RobotLog& log);  // bel
 void CheckRobotLogPlausible(const RobotLog& log, const RobotModel& robot) {
   CheckRobotLog(log, robot);
   CheckDuplicateRows(log);
-  CheckOutlyingRow(log);
-  CheckScale(robot, log);
   CheckRigid(log);
-  CheckRowsFitTheRobot(robot, log);
+  // The checks against one placement of the instrument: per station where the log has them.
+  const std::vector<std::string> stations = log.Stations();
+  for (const std::string& st : stations) {
+    RobotLog part;
+    const RobotLog* one = &log;
+    if (stations.size() > 1) {
+      part = log;
+      part.rows.clear();
+      for (const auto& r : log.rows)
+        if (r.station == st) part.rows.push_back(r);
+      if (part.rows.size() < 4) continue;  // too few to test; placing it names it
+      one = &part;
+    }
+    CheckOutlyingRow(*one);
+    CheckScale(robot, *one);
+    CheckRowsFitTheRobot(robot, *one);
+  }
 }
 
 namespace {
@@ -557,17 +742,7 @@ Eigen::Matrix3Xd PointsOfRow(const RobotLog& log, int i) {
 }
 
 // Kabsch: the pose mapping `ref` (body frame) onto `P` (meas frame), least squares.
-Pose Align(const Eigen::Matrix3Xd& ref, const Eigen::Matrix3Xd& P) {
-  const Vec3 cr = ref.rowwise().mean(), cp = P.rowwise().mean();
-  const Mat3 H = (P.colwise() - cp) * (ref.colwise() - cr).transpose();
-  Eigen::JacobiSVD<Mat3> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Mat3 S = Mat3::Identity();
-  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) S(2, 2) = -1;
-  Pose T;
-  T.R = svd.matrixU() * S * svd.matrixV().transpose();
-  T.t = cp - T.R * cr;
-  return T;
-}
+Pose Align(const Eigen::Matrix3Xd& ref, const Eigen::Matrix3Xd& P) { return RigidFit(ref, P); }
 
 // Rows of another layout among the others (x and y exchanged in some rows, a row in
 // another unit): once the scale is right, the best rigid registration and tool position
@@ -634,6 +809,13 @@ RigidBody FitRigidBody(const RobotLog& log) {
   }
   std::vector<Vec3> shape;
   for (int k = 0; k < K; ++k) shape.push_back(ref.col(k));
+  // Points on one line fix no rotation about it: not a pose.
+  Eigen::JacobiSVD<Mat3> svd(Mat3(ref * ref.transpose()));
+  if (!(svd.singularValues()[1] > 1e-6 * svd.singularValues()[0]) || !(std::sqrt(svd.singularValues()[1]) > 1e-4))
+    Throw(log.source.empty() ? std::string("robot log") : log.source.string(), ": the ", K,
+          " points of the rigid body lie on one line (spread ", std::sqrt(std::max(0.0, svd.singularValues()[1])) * 1e3,
+          " mm across it); a body's pose needs points spread in two directions (give one point, or points not in a "
+          "line)");
   return RigidBodyPoses(log, shape);
 }
 
@@ -664,6 +846,11 @@ RobotLog KeepPoints(const RobotLog& log, const std::vector<int>& keep, const std
       Throw(option, " ", k, ": ", log.source.string(), " has ", K, K == 1 ? " point" : " points",
             " per row; give numbers from 1 to ", K);
   if (keep.size() == 2) Throw(option, " gives 2 points; give one point or at least 3");
+  for (size_t a = 0; a < keep.size(); ++a)
+    for (size_t b = 0; b < a; ++b)
+      if (keep[a] == keep[b])
+        Throw(option, " names point ", keep[a], " twice; each point counts once (a repeated one would shrink the "
+              "sigmas as if measured again)");
   for (auto& m : out.rows) {
     std::vector<Vec3> all{m.p_meas};
     all.insert(all.end(), m.other_points.begin(), m.other_points.end());

@@ -25,8 +25,16 @@
 
 namespace mcms {
 
+// What a row is for where a log places the robot per station (issue 51): a row measured
+// only to place its station in the instrument's frame (`stationing`), a row scored against
+// the model (`evaluation`, the default), or one measured at the station that neither places
+// it nor is scored in another session (`spare`: the stationing points a protocol does not
+// use). In the fitted log every row is fitted alike.
+enum class RowRole { kEvaluation, kStationing, kSpare };
+const char* Name(RowRole r);
+
 struct RobotMeasurement {
-  Eigen::VectorXd q;
+  Eigen::VectorXd q;  // the chain's joint values (a mimic joint's from its driver)
   Vec3 p_meas = Vec3::Zero();        // the measured point (point 1 of a rigid body)
   std::vector<Vec3> other_points;    // points 2..K of the same rigid body (empty: one point)
   std::optional<Mat3> R_meas_tool;   // measured orientation of the tool (a pose)
@@ -36,6 +44,10 @@ struct RobotMeasurement {
   // Joint velocities at the measurement (empty = at rest): with them the audit tests a
   // clock offset between the joint log and the instrument (`audit fusion`).
   Eigen::VectorXd qdot;
+  // The station: rows that share one placement of the robot in the instrument's frame (the
+  // instrument or the robot set up anew); "" = the log's one placement.
+  std::string station;
+  RowRole role = RowRole::kEvaluation;
   int line = 0;        // 1-based line in the file (0: made in code)
   std::string source;  // where it came from, for messages ("file.yaml measurement 5 (line 23)")
   int NumPoints() const { return 1 + static_cast<int>(other_points.size()); }
@@ -48,7 +60,11 @@ struct RobotLog {
   std::filesystem::path source;
   std::vector<RobotMeasurement> rows;
   bool has_time = false, has_temperature = false, has_payload = false;
+  bool has_stations = false, has_roles = false;
   std::vector<std::string> ignored_columns;  // CSV columns the reader does not use
+  std::vector<std::string> notes;            // what the reader decided that a report should say
+  // The stations in order of first appearance ({""} without a station column).
+  std::vector<std::string> Stations() const;
   bool six_dof() const { return !rows.empty() && rows.front().R_meas_tool.has_value(); }
   int NumPoints() const { return rows.empty() ? 0 : rows.front().NumPoints(); }
   // "file line 12" (or "file row 3" for rows made in code).
@@ -66,13 +82,23 @@ struct RobotLog {
 //               x1_m ...) for K points of one rigid body;
 //      pose:    qw, qx, qy, qz with one point (the tool's orientation);
 //      temperature_c, payload_kg;
+//      station: rows that share one placement of the robot in the instrument's frame (any
+//               label); role: stationing, evaluation (also an empty cell) or spare (RowRole);
 //  - or YAML: calib-robot's `measurements:` list or ROS-Industrial industrial_calibration's
-//    kinematic measurements (ReadRobotMeasurements), rows in order (the row index is the time).
+//    kinematic measurements (ReadRobotMeasurements), rows in order (the row index is the time);
+//  - or YAML as Hilti publishes its construction-robot stationing datasets (`joint_names`,
+//    `column_heights: {h: {solution_spaces: {s: {stationing_measurements, evaluation_
+//    measurements}}}}`): one station per column height and solution space ("1.98 m / 0"),
+//    the four stationing points that form the square the publisher's protocol uses as
+//    `stationing`, its other stationing points `spare`, evaluation points `evaluation` (those
+//    of a station without stationing points `spare`: nothing places them), rows in time
+//    order, the joints by the file's names (a mimic joint's driver), the prism's position.
 // InputError naming the file, the line and the column: missing or extra joint columns (a
 // URDF joint that is not in the chain, a chain joint not in the log), a duplicated column,
 // degrees under a radian header or millimetres under a metre header (CheckRobotLog), joint
 // values outside the robot's limits, time going backwards, non-finite cells, a quaternion
-// that is not unit, 2 points (give 1 or >= 3), points that are not one rigid body.
+// that is not unit, 2 points (give 1 or >= 3), points that are not one rigid body, a role
+// not understood.
 RobotLog ReadRobotLog(const std::filesystem::path& path, const RobotModel& robot);
 
 // Checks a log made in code or read: joint counts, limits (a reading may pass one by

@@ -1,13 +1,34 @@
-// Another session, frozen: a robot model fitted on one log (its registration, the tool's
-// points, the geometry, each effect) scored unchanged on another log measured in the same
-// frame, as metrologists judge a model: by what it predicts on data it was not fitted to.
-// Used by `calib-robot --validate` and `audit robot --validate`.
+// Another session, frozen: a robot model fitted on one log (the geometry, each effect, the
+// tool's points) scored unchanged on another log, as metrologists judge a model: by what it
+// predicts on data it was not fitted to. Used by `calib-robot --validate` and
+// `audit robot --validate`.
 //
-// Scores are per point of the measured body (3-D distance between predicted and measured,
-// RMS and max, m) and per posture group (calib/robot_measurements.h PostureGroups: repeated
-// from the fitted log, new inside its joint ranges, out of range).
-// JSON: {"log", "rows", "models": [{"model", "points": [{"point", "rows", "rms_mm", "max_mm"}],
-//        "groups": {"repeated": {"rows", "points": [..]}, "new_in_range": .., "out_of_range": ..}}]}
+// Where the instrument stood (issue 51): a laser tracker, total station or motion-capture
+// system is set up anew for each session, or for each station of one. The robot stays
+// frozen; only its placement in the instrument's frame is found again:
+//  - a log with stations (calib/robot_measurements.h: a `station` column, or a dataset read
+//    as published) places each station from its stationing rows (every row of the station
+//    where the log gives no roles) by the rigid transform that best maps the model's
+//    predictions onto the measurements (RigidFit), and scores its evaluation rows;
+//  - a log without stations is scored with the fit's placement, unless that placement
+//    misses far beyond the noise: re-placed from every row (its stationing rows where it
+//    has roles) when the re-placement's likelihood ratio under the fit's noise passes
+//    chi-square(6) at the false-alarm rate and halves the RMS error; the score says so, with
+//    how far the placement moved (mm at the rows' centroid, mrad). A fit with stations of its
+//    own has no placement to keep: every other session is placed anew.
+// Too few or degenerate stationing rows (fewer than 3 points, or on one line) are an
+// InputError naming the log and the station.
+//
+// Scores are per point of the measured body over the scored rows: 3-D error mean, median,
+// RMS, 95th percentile and max, and the 95th percentiles of the horizontal (the
+// instrument's xy) and vertical (|z|) errors, which is what a gravity-aligned instrument's
+// users quote; point 1 per posture group (calib/robot_measurements.h PostureGroups) and per
+// station.
+// JSON: {"log", "rows", "scored_rows", "models": [{"model", "points": [{"point", "rows",
+//   "mean_mm", "median_mm", "rms_mm", "p95_mm", "max_mm", "p95_xy_mm", "p95_z_mm"}],
+//   "groups": {"repeated": {"rows", "points": [..]}, ..}, "stations": [{"station", ..point..}],
+//   "placements": [{"station", "stationing_rows", "scored_rows", "placed_anew", "moved_mm",
+//   "moved_mrad"}]}]}
 #pragma once
 
 #include <string>
@@ -23,30 +44,53 @@ namespace mcms {
 struct PointScore {
   int point = 1;  // 1-based
   int rows = 0;
-  double rms_m = 0.0, max_m = 0.0;
+  double mean_m = 0.0, median_m = 0.0, rms_m = 0.0, p95_m = 0.0, max_m = 0.0;
+  double p95_xy_m = 0.0, p95_z_m = 0.0;
+};
+
+// Where a session's station was placed for a model.
+struct StationPlacement {
+  std::string station;  // "" for a log without stations
+  int stationing_rows = 0, scored_rows = 0;
+  bool placed_anew = false;             // false: the fit's placement, frozen
+  double moved_mm = 0.0, moved_mrad = 0.0;  // from the fit's placement
+  double frozen_rms_mm = 0.0;          // a log without stations: the frozen placement's RMS error
 };
 
 struct ModelScore {
-  std::string model;  // "registration", "geometry", "final"
+  std::string model;  // "registration", "geometry", "final", "final without X"
   std::vector<PointScore> points;
   std::vector<std::pair<PostureGroup, std::vector<PointScore>>> groups;  // the groups with rows
-  // Per row, each point's error (predicted - measured, m): for plots.
+  std::vector<std::pair<std::string, PointScore>> stations;              // point 1, logs with stations
+  std::vector<StationPlacement> placements;
+  // Per row, each point's error (predicted - measured, m) with the placement used; empty for
+  // rows not scored (stationing, spare).
   std::vector<std::vector<Vec3>> errors;
+  // Per row, the change of placement applied to the predictions (identity where frozen).
+  std::vector<Pose> correction;
 };
 
 struct SessionScore {
   std::string log;
-  int rows = 0;
+  int rows = 0, scored_rows = 0;
   std::vector<PostureGroup> group_of_row;
   std::vector<ModelScore> models;
 };
 
-// The score of one model from its per-row point errors (rows x points).
-ModelScore ScoreModel(const std::string& model, const std::vector<std::vector<Vec3>>& errors,
-                      const std::vector<PostureGroup>& groups);
+struct PlacementOptions {
+  Mat3 noise = Mat3::Identity() * 1e-8;  // the fit's position noise covariance (m^2)
+  double false_alarm = 0.01;
+  bool fit_per_station = false;  // the fit placed the robot per station of its own
+};
 
-// Text for reports: per session, per model, point 1's RMS / max overall and per group, then
-// every point's RMS.
+// The score of one model on `log` from its predictions (per row, each point, in the
+// instrument's frame with the fit's placement), placed as the header says.
+ModelScore ScoreModel(const std::string& model, const RobotLog& log, const std::vector<std::vector<Vec3>>& predicted,
+                      const std::vector<PostureGroup>& groups, const PlacementOptions& options);
+
+// Text for reports: per session, a table of the models (point 1: mean, 95 %, max, RMS mm;
+// with stations, 95 % horizontal and |z|), where the instrument was placed, what each cause
+// moved there, and per station the final model's figures.
 std::string ValidationText(const std::vector<SessionScore>& sessions);
 // The JSON array of the header.
 nlohmann::json ValidationJson(const std::vector<SessionScore>& sessions);

@@ -45,6 +45,11 @@ constexpr size_t kMaxAuditBytes = size_t{2} << 30;
 // Measurements the robot audit takes from one log: 50,000 rows of a 6-joint arm take some
 // 2 minutes; a continuously logged trajectory of 400,000 rows is thinned first.
 constexpr int kMaxAuditRows = 50000;
+// Links in a robot's URDF tree below its base, and movable joints in its chain (issue 53):
+// the largest real robots have some hundreds of links (a humanoid with hands) and tens of
+// joints; a file beyond is refused by name before any walk of the tree or fit is built.
+constexpr int kMaxRobotLinks = 10000;
+constexpr int kMaxRobotJoints = 64;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 

@@ -1,5 +1,7 @@
 #include "core/pose_math.h"
 
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <cmath>
 
@@ -76,6 +78,22 @@ double RotationAngle(const Mat3& R_a, const Mat3& R_b) {
   // Through the quaternion: acos of the trace loses half the digits near zero.
   const Eigen::Quaterniond q(R_a.transpose() * R_b);
   return 2.0 * std::atan2(q.vec().norm(), std::abs(q.w()));
+}
+
+Pose RigidFit(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst, double* spread) {
+  const Vec3 cs = src.rowwise().mean(), cd = dst.rowwise().mean();
+  const Mat3 H = (dst.colwise() - cd) * (src.colwise() - cs).transpose();
+  Eigen::JacobiSVD<Mat3> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  if (spread) {
+    const Vec3 sv = svd.singularValues();
+    *spread = sv[0] > 0 ? sv[1] / sv[0] : 0.0;
+  }
+  Mat3 S = Mat3::Identity();
+  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) S(2, 2) = -1;
+  Pose T;
+  T.R = svd.matrixU() * S * svd.matrixV().transpose();
+  T.t = cd - T.R * cs;
+  return T;
 }
 
 Vec3 RpyOf(const Mat3& R) {

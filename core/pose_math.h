@@ -49,6 +49,12 @@ Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, cons
 // Angle of the relative rotation R_a^T R_b, radians.
 double RotationAngle(const Mat3& R_a, const Mat3& R_b);
 
+// The rigid transform T minimising sum |T src_i - dst_i|^2 (Kabsch / Umeyama, no scale;
+// columns are points). `spread`, when not null, receives the second singular value of the
+// centred cross-covariance over the first (0: the points lie on a line or at one place,
+// and T is not determined).
+Pose RigidFit(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst, double* spread = nullptr);
+
 // URDF's rpy (fixed axes: R = Rz(yaw) Ry(pitch) Rx(roll)) of a rotation, and back.
 Vec3 RpyOf(const Mat3& R);
 Mat3 RotationOfRpy(const Vec3& rpy);

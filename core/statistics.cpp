@@ -114,6 +114,17 @@ Eigen::VectorXd MarginalSigmas(const Eigen::MatrixXd& information) {
   return sigma;
 }
 
+double SigmaOfTwoSidedP(double p) {
+  if (!(p > 0)) return std::numeric_limits<double>::infinity();
+  if (p >= 1) return 0.0;
+  double lo = 0.0, hi = 40.0;
+  for (int it = 0; it < 200 && hi - lo > 1e-12; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (TwoSidedNormalP(mid) > p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 double SelectedMedian(std::vector<double>& v) {
   if (v.empty()) return std::nan("");
   const size_t h = v.size() / 2;
@@ -122,6 +133,14 @@ double SelectedMedian(std::vector<double>& v) {
   if (v.size() % 2) return upper;
   const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(h));
   return 0.5 * (lower + upper);
+}
+
+double Percentile(std::vector<double>& v, double p) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const double r = std::clamp(p, 0.0, 100.0) / 100.0 * static_cast<double>(v.size() - 1);
+  const size_t lo = static_cast<size_t>(std::floor(r)), hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (r - static_cast<double>(lo)) * (v[hi] - v[lo]);
 }
 
 namespace {

@@ -28,10 +28,15 @@ std::pair<double, double> ChiSquareBand(double dof, double p);
 double FisherSurvival(double x, double d1, double d2);
 // P(|Z| > |z|) for Z ~ N(0, 1).
 double TwoSidedNormalP(double z);
+// Its inverse: the |z| ("sigma") with TwoSidedNormalP(z) = p, for p in (0, 1]; +inf for p <= 0.
+double SigmaOfTwoSidedP(double p);
 
 // The median of v by selection (nth_element; v reordered); an even count's median is the
 // mean of its two middle values; NaN when v is empty.
 double SelectedMedian(std::vector<double>& v);
+// The p-th percentile (0..100) of v with linear interpolation between the order statistics
+// (numpy's default: rank p/100 (n - 1)); v reordered; NaN when v is empty.
+double Percentile(std::vector<double>& v, double p);
 
 // The median of v and the median of the absolute deviations from it (unscaled; 1.4826
 // times it estimates a normal sigma). An even count's median is the mean of its two middle

@@ -11,9 +11,11 @@
 // the placement's geometric error and A a rotation taking z to the axis.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -77,7 +79,31 @@ struct Joint {
   // theta_offset (revolute) and d (prismatic), which offset the joint's zero as in DH).
   Pose origin;
   Vec3 axis = Vec3::UnitZ();
+  // A mimic joint (URDF <mimic>, issue 51): not measured on its own, its value is
+  // mimic_multiplier * (the value of joint `mimics`) + mimic_offset, the driving joint being
+  // one of the robot's actuated joints (RobotModel::ActuatedJoints): a chain joint, or a
+  // joint outside the chain that a log records (a telescopic column's motor driving two
+  // segments). Empty: the joint is actuated itself.
+  std::string mimics;
+  double mimic_multiplier = 1.0, mimic_offset = 0.0;
 };
+
+// Where to draw a joint's values when its range is all one knows (identifiability at
+// random postures, poses that separate two models): its limits, an open or very wide side
+// narrowed to pi rad or 1 m from the other side or from 0; always inside the limits (a
+// telescopic column reaching from 1.48 to 3.97 m is drawn there, not around 0).
+inline std::pair<double, double> SamplingRange(const Joint& j) {
+  const double wide = j.type == JointType::kRevolute ? 3.141592653589793 : 1.0;
+  double lo = j.lower, hi = j.upper;
+  if (!std::isfinite(lo) && !std::isfinite(hi)) return {-wide, wide};
+  if (!std::isfinite(lo)) lo = hi - 2 * wide;
+  if (!std::isfinite(hi)) hi = lo + 2 * wide;
+  if (hi - lo > 2 * wide) {
+    const double mid = std::clamp(0.0, lo + wide, hi - wide);
+    lo = mid - wide, hi = mid + wide;
+  }
+  return {lo, hi};
+}
 
 // A rigid transform with scalar T, as Pose is for double.
 template <typename T>

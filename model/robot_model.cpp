@@ -191,13 +191,14 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
     if (urdf)
       in.CheckKeys(jn,
                    {"name", "type", "origin_xyz_m", "origin_rpy_rad", "axis", "limits_rad", "limits_deg", "limits_m",
-                    "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m", "error_motion", "mass_kg", "com_m"},
+                    "encoder_sigma_rad", "encoder_sigma_deg", "encoder_sigma_m", "error_motion", "mass_kg", "com_m",
+                    "mimic"},
                    where);
     else
       in.CheckKeys(jn,
                    {"name", "type", "a_m", "d_m", "alpha_rad", "alpha_deg", "theta_offset_rad", "theta_offset_deg",
                     "limits_rad", "limits_deg", "limits_m", "encoder_sigma_rad", "encoder_sigma_deg",
-                    "encoder_sigma_m", "error_motion", "mass_kg", "com_m"},
+                    "encoder_sigma_m", "error_motion", "mass_kg", "com_m", "mimic"},
                    where);
     Joint j;
     if (jn["name"]) j.name = jn["name"].as<std::string>();
@@ -280,6 +281,14 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
         j.com_m = Vec3(v[0], v[1], v[2]);
       }
     }
+    if (const YAML::Node mn = jn["mimic"]) {
+      // mimic: {joint: name, multiplier: m, offset: o}: q = m * q_joint + o (a URDF <mimic>).
+      in.CheckKeys(mn, {"joint", "multiplier", "offset"}, label + " mimic");
+      if (!mn["joint"]) in.Fail(mn, label, ": mimic needs 'joint' (the driving joint's name)");
+      j.mimics = mn["joint"].as<std::string>();
+      if (mn["multiplier"]) j.mimic_multiplier = in.Number(mn["multiplier"], label + " mimic multiplier");
+      if (mn["offset"]) j.mimic_offset = in.Number(mn["offset"], label + " mimic offset");
+    }
     joints.push_back(j);
   }
   int with_mass = 0;
@@ -299,6 +308,8 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
     : name_(std::move(name)), convention_(convention), joints_(std::move(joints)), T_flange_tool_(T_flange_tool) {
   const std::string who = "robot '" + name_ + "'";
   if (joints_.empty()) Throw(who, ": needs at least one joint");
+  if (NumJoints() > kMaxRobotJoints)
+    Throw(who, ": ", NumJoints(), " joints; a robot's chain has at most ", kMaxRobotJoints, " (core/limits.h)");
   for (int i = 0; i < NumJoints(); ++i) {
     const Joint& j = joints_[i];
     for (double v : {j.a, j.alpha, j.d, j.theta_offset})
@@ -349,6 +360,80 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
     Throw(who, ": T_flange_tool must be a finite rigid transform");
   CheckMagnitude(T_flange_tool_.t.lpNorm<Eigen::Infinity>(), kMaxRobotLengthM, who + ": the tool (largest coordinate)",
                  "m");
+  // The actuated joints: the chain's own, and the drivers of mimic joints.
+  actuated_of_.assign(NumJoints(), -1);
+  const auto Find = [&](const std::string& name) {
+    for (size_t a = 0; a < actuated_.size(); ++a)
+      if (actuated_[a].name == name) return static_cast<int>(a);
+    return -1;
+  };
+  for (int i = 0; i < NumJoints(); ++i) {
+    const Joint& j = joints_[i];
+    if (j.mimics.empty()) {
+      actuated_of_[i] = static_cast<int>(actuated_.size());
+      actuated_.push_back({j.name, j.type, j.lower, j.upper});
+      continue;
+    }
+    mimic_ = true;
+    if (!(std::isfinite(j.mimic_multiplier) && j.mimic_multiplier != 0.0) || !std::isfinite(j.mimic_offset))
+      Throw(who, ": ", JointLabel(joints_, i), " mimics '", j.mimics, "' with multiplier ", j.mimic_multiplier,
+            " and offset ", j.mimic_offset, "; expected a finite non-zero multiplier and a finite offset");
+    if (j.mimics == j.name) Throw(who, ": ", JointLabel(joints_, i), " mimics itself");
+    for (int k = 0; k < NumJoints(); ++k)
+      if (joints_[k].name == j.mimics && !joints_[k].mimics.empty())
+        Throw(who, ": ", JointLabel(joints_, i), " mimics '", j.mimics, "', which mimics '", joints_[k].mimics,
+              "' itself; a mimic joint follows an actuated joint");
+  }
+  for (int i = 0; i < NumJoints(); ++i) {
+    const Joint& j = joints_[i];
+    if (j.mimics.empty()) continue;
+    int a = Find(j.mimics);
+    // The driver's range from this mimic joint's limits.
+    double lo = (j.lower - j.mimic_offset) / j.mimic_multiplier, hi = (j.upper - j.mimic_offset) / j.mimic_multiplier;
+    if (lo > hi) std::swap(lo, hi);
+    if (a < 0) {
+      // A driver outside the chain: recorded where its first mimic joint is.
+      int at = 0;
+      for (int k = 0; k < i; ++k) at = std::max(at, actuated_of_[k] + 1);
+      actuated_.insert(actuated_.begin() + at, ActuatedJoint{j.mimics, j.type, lo, hi});
+      for (int k = 0; k < NumJoints(); ++k)
+        if (actuated_of_[k] >= at) ++actuated_of_[k];
+      a = at;
+    } else if (!(std::isnan(lo) || std::isnan(hi))) {
+      ActuatedJoint& d = actuated_[a];
+      d.lower = std::max(d.lower, lo);
+      d.upper = std::min(d.upper, hi);
+      if (!(d.lower < d.upper))
+        Throw(who, ": the limits of the joints that mimic '", j.mimics, "' leave it no range");
+    }
+    actuated_of_[i] = a;
+  }
+}
+
+Eigen::VectorXd RobotModel::ChainValues(const Eigen::VectorXd& qa) const {
+  if (qa.size() != NumActuated())
+    Throw("robot '", name_, "': ", qa.size(), " actuated joint values, expected ", NumActuated());
+  if (!mimic_) return qa;
+  Eigen::VectorXd q(NumJoints());
+  for (int i = 0; i < NumJoints(); ++i) {
+    const Joint& j = joints_[i];
+    const double v = qa[actuated_of_[i]];
+    q[i] = j.mimics.empty() ? v : j.mimic_multiplier * v + j.mimic_offset;
+  }
+  return q;
+}
+
+Eigen::VectorXd RobotModel::ActuatedValues(const Eigen::VectorXd& q) const {
+  if (q.size() != NumJoints()) Throw("robot '", name_, "': ", q.size(), " joint values, expected ", NumJoints());
+  if (!mimic_) return q;
+  Eigen::VectorXd qa = Eigen::VectorXd::Constant(NumActuated(), std::nan(""));
+  for (int i = 0; i < NumJoints(); ++i) {
+    const Joint& j = joints_[i];
+    double& v = qa[actuated_of_[i]];
+    if (!std::isnan(v)) continue;
+    v = j.mimics.empty() ? q[i] : (q[i] - j.mimic_offset) / j.mimic_multiplier;
+  }
+  return qa;
 }
 
 bool RobotModel::HasMasses() const {
@@ -457,6 +542,13 @@ std::string RobotModel::ToYaml() const {
       out << YAML::Key << "mass_kg" << YAML::Value << j.mass_kg;
       out << YAML::Key << "com_m" << YAML::Value << YAML::Flow
           << std::vector<double>{j.com_m.x(), j.com_m.y(), j.com_m.z()};
+    }
+    if (!j.mimics.empty()) {
+      out << YAML::Key << "mimic" << YAML::Value << YAML::Flow << YAML::BeginMap;
+      out << YAML::Key << "joint" << YAML::Value << j.mimics;
+      out << YAML::Key << "multiplier" << YAML::Value << j.mimic_multiplier;
+      out << YAML::Key << "offset" << YAML::Value << j.mimic_offset;
+      out << YAML::EndMap;
     }
     if (j.Harmonics() > 0) {
       out << YAML::Key << "error_motion" << YAML::Value << YAML::Flow << YAML::BeginSeq;
@@ -618,6 +710,10 @@ bool GeometryParameterIsAngle(const RobotModel& robot, int k) {
   if (robot.Convention() != ChainConvention::kUrdf) return t == 0 || t == 3;
   if (t == 0) return robot.Joints()[k / s].type == JointType::kRevolute;
   return t >= 4;
+}
+
+double WeakGeometrySigma(const RobotModel& robot, int k) {
+  return GeometryParameterIsAngle(robot, k) ? kWeakGeometryAngleRad : kWeakGeometryLengthM;
 }
 
 RobotModel WithGeometryErrors(const RobotModel& robot, const Eigen::VectorXd& delta) {

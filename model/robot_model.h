@@ -44,6 +44,7 @@ struct ChainSelection {
 // movable joint the fixed placements folded in before its own <origin>.
 struct UrdfSource {
   std::string text, source, base_link, tip_link;
+  std::string tip_note;  // how the tip was chosen when not given (leaves on one chain), else empty
   std::vector<std::string> all_joints;
   std::vector<Pose> prefix;
 };
@@ -63,6 +64,15 @@ class RobotModel {
   static constexpr double kLimitSlack = 0.02;
   // Which frame the Jacobian and the pose covariance refer to.
   enum class EndFrame { kFlange, kTool };
+  // A joint a log records (issue 51): every chain joint that mimics none, and the driver of
+  // mimic joints, in chain order (a driver outside the chain where its first mimic joint
+  // is); its range is the one its mimic joints' limits imply. Without mimic joints, the
+  // chain's joints.
+  struct ActuatedJoint {
+    std::string name;
+    JointType type = JointType::kRevolute;
+    double lower = -std::numeric_limits<double>::infinity(), upper = std::numeric_limits<double>::infinity();
+  };
 
   RobotModel() = default;
   // InputError when there are no joints, a parameter is not finite, a limit range is
@@ -88,6 +98,15 @@ class RobotModel {
   ChainConvention Convention() const { return convention_; }
   const std::vector<Joint>& Joints() const { return joints_; }
   int NumJoints() const { return static_cast<int>(joints_.size()); }
+  // The joints a log records and the chain's values from theirs (ChainValues; the identity
+  // without mimic joints), and back (each driver from its first mimic joint).
+  const std::vector<ActuatedJoint>& ActuatedJoints() const { return actuated_; }
+  int NumActuated() const { return static_cast<int>(actuated_.size()); }
+  bool HasMimicJoints() const { return mimic_; }
+  // The actuated joint that drives chain joint i, and d(q_i)/d(q_actuated).
+  int ActuatedOf(int i) const { return actuated_of_[i]; }
+  Eigen::VectorXd ChainValues(const Eigen::VectorXd& q_actuated) const;
+  Eigen::VectorXd ActuatedValues(const Eigen::VectorXd& q_chain) const;
   const Pose& T_flange_tool() const { return T_flange_tool_; }
   // The geometric error model (model/joint.h): parameters per joint and in all.
   int GeometryParamsPerJoint() const { return mcms::GeometryParamsPerJoint(convention_); }
@@ -149,6 +168,9 @@ class RobotModel {
   Pose T_flange_tool_;
   ToolMass tool_mass_;
   std::shared_ptr<const UrdfSource> urdf_;
+  std::vector<ActuatedJoint> actuated_;
+  std::vector<int> actuated_of_;  // per chain joint
+  bool mimic_ = false;
 };
 
 // Names of the geometric error parameters in the layout of model/joint.h, joint by joint:
@@ -157,6 +179,18 @@ class RobotModel {
 std::vector<std::string> GeometryParameterNames(const RobotModel& robot);
 // Whether geometric parameter k (of the layout) is an angle (rad) rather than a length (m).
 bool GeometryParameterIsAngle(const RobotModel& robot, int k);
+// The largest standard deviation with which a geometric parameter is worth estimating: a
+// robot's placements are not off by more than a few degrees or centimetres, so a parameter
+// the poses determine only to worse than this (kWeakGeometryAngleRad, kWeakGeometryLengthM)
+// is weakly identifiable: held at its nominal value, never written into a calibrated robot
+// (issue 51: a wrist offset of -17.6 +- 26.6 deg was). Angle or length by
+// GeometryParameterIsAngle.
+inline constexpr double kWeakGeometryAngleRad = 0.035;  // 2 deg
+inline constexpr double kWeakGeometryLengthM = 0.02;
+double WeakGeometrySigma(const RobotModel& robot, int k);
+// The largest geometric error a calibration may find (a bound of its fit): a placement off
+// by more is another robot's description, not this one's error.
+inline constexpr double kMaxGeometryErrorRad = 0.2, kMaxGeometryErrorM = 0.2;
 // The robot with geometric errors `delta` (NumGeometryParameters values) folded into its
 // description: added to the DH table, or into each URDF joint's origin (origin G M(offset)),
 // so that its forward kinematics equals the error model's exactly.

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <functional>
 #include <limits>
+#include <locale>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -17,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/limits.h"
 
 namespace mcms {
 
@@ -76,38 +78,76 @@ const char* TypeText(int type) {
   }
 }
 
-// The leaves under `base` with the number of movable joints on their path.
-void Leaves(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& link, int movable,
-            std::vector<std::pair<int, std::string>>* out) {
-  if (link->child_joints.empty()) {
-    out->push_back({movable, link->name});
-    return;
+// The leaves under `base` with the number of movable joints on their path and their last
+// movable joint ("" when none), walked without recursion (a chain of 60,000 fixed links
+// must not overflow the stack).
+struct Leaf {
+  int movable = 0;
+  std::string name, last_movable;
+};
+std::vector<Leaf> Leaves(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& base) {
+  std::vector<Leaf> out;
+  std::vector<std::pair<urdf::LinkConstSharedPtr, Leaf>> stack{{base, Leaf{0, base->name, ""}}};
+  while (!stack.empty()) {
+    auto [link, at] = stack.back();
+    stack.pop_back();
+    if (link->child_joints.empty()) {
+      at.name = link->name;
+      out.push_back(at);
+      continue;
+    }
+    for (const auto& cj : link->child_joints) {
+      const auto child = m.getLink(cj->child_link_name);
+      if (!child) continue;
+      Leaf next = at;
+      if (Movable(*cj)) ++next.movable, next.last_movable = cj->name;
+      stack.push_back({child, next});
+    }
   }
-  for (const auto& cj : link->child_joints) {
-    const auto child = m.getLink(cj->child_link_name);
-    if (child) Leaves(m, child, movable + (Movable(*cj) ? 1 : 0), out);
-  }
+  return out;
 }
 
 // Mass and first moment (sum m p) of `link` and every link below it, in the frame T (frame
 // -> link), the joints below at zero; the subtree below `stop` (the chain's next movable
-// joint) is not included.
-void AddSubtree(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& link, const Pose& T,
+// joint) is not included. Without recursion. A mass of 0 is a massless link (ROS's virtual
+// frames: ee_link, tool0).
+void AddSubtree(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& top, const Pose& T0,
                 const std::string& stop, const std::string& source, double* mass, Vec3* moment, bool* any) {
-  if (link->inertial) {
-    const double mk = link->inertial->mass;
-    if (!(std::isfinite(mk) && mk > 0))
-      Throw(source, ": link '", link->name, "' has an <inertial> mass of ", mk,
-            "; expected a positive mass in kg (leave out the <inertial> of a massless link)");
-    *mass += mk;
-    *moment += mk * (T * ToPose(link->inertial->origin).t);
-    *any = true;
+  std::vector<std::pair<urdf::LinkConstSharedPtr, Pose>> stack{{top, T0}};
+  while (!stack.empty()) {
+    const auto [link, T] = stack.back();
+    stack.pop_back();
+    if (link->inertial) {
+      const double mk = link->inertial->mass;
+      const Pose at = ToPose(link->inertial->origin);
+      if (!(std::isfinite(mk) && mk >= 0))
+        Throw(source, ": link '", link->name, "' has an <inertial> mass of ", mk,
+              "; expected a finite mass >= 0 in kg (0 for a massless link)");
+      if (!at.t.allFinite() || !at.R.allFinite())
+        Throw(source, ": link '", link->name, "' has a non-finite <inertial> <origin>");
+      if (mk > 0) {
+        *mass += mk;
+        *moment += mk * (T * at.t);
+      }
+      *any = true;
+    }
+    for (const auto& cj : link->child_joints) {
+      if (cj->name == stop) continue;
+      const auto child = m.getLink(cj->child_link_name);
+      if (child) stack.push_back({child, T * ToPose(cj->parent_to_joint_origin_transform)});
+    }
   }
-  for (const auto& cj : link->child_joints) {
-    if (cj->name == stop) continue;
-    const auto child = m.getLink(cj->child_link_name);
-    if (child) AddSubtree(m, child, T * ToPose(cj->parent_to_joint_origin_transform), stop, source, mass, moment, any);
-  }
+}
+
+// A tool-like link name (the frame a user measures or works at): lower is likelier.
+int ToolLikeRank(std::string name) {
+  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return std::tolower(c); });
+  static const char* kExact[] = {"tool0", "tool", "tcp", "tool_tip", "flange", "ee_link", "end_effector"};
+  for (int k = 0; k < static_cast<int>(std::size(kExact)); ++k)
+    if (name == kExact[k]) return k;
+  for (const char* part : {"tcp", "tool", "tip", "ee", "effector", "flange", "prism"})
+    if (name.find(part) != std::string::npos) return 20;
+  return 100;
 }
 
 std::string Num(double v) {
@@ -262,6 +302,46 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
       if (++depth > 100) Throw(source, ": XML elements nested more than 100 deep; a URDF nests a few levels");
     }
   }
+  if (xml.find("xmlns:xacro") != std::string::npos || xml.find("<xacro:") != std::string::npos)
+    Throw(source, ": a xacro file (a URDF written with macros, ROS's xacro); expand it to a URDF first: "
+                  "`xacro ",
+          source.rfind("robot file ", 0) == 0 ? source.substr(11) : source,
+          " > robot.urdf` (package ros-xacro, or `ros2 run xacro xacro`), then give robot.urdf");
+  {
+    size_t links = 0;
+    for (size_t i = xml.find("<link"); i != std::string::npos; i = xml.find("<link", i + 5)) ++links;
+    if (links > static_cast<size_t>(kMaxRobotLinks))
+      Throw(source, ": ", links, " <link> elements; a robot has at most ", kMaxRobotLinks,
+            " (the largest real robots have some hundreds)");
+  }
+  {
+    // urdfdom reads a mass or an inertial origin it cannot parse ("nan", "inf") as 0: check
+    // them as written.
+    TiXmlDocument doc;
+    doc.Parse(xml.c_str());
+    const TiXmlElement* root = doc.Error() ? nullptr : doc.RootElement();
+    for (const TiXmlElement* l = root ? root->FirstChildElement("link") : nullptr; l; l = l->NextSiblingElement("link"))
+      for (const TiXmlElement* in = l->FirstChildElement("inertial"); in; in = in->NextSiblingElement("inertial")) {
+        const char* name = l->Attribute("name");
+        const auto Finite = [](const char* text, int count) {
+          std::istringstream is(text ? text : "");
+          is.imbue(std::locale::classic());
+          for (int k = 0; k < count; ++k) {
+            double v;
+            if (!(is >> v) || !std::isfinite(v)) return false;
+          }
+          return true;
+        };
+        const TiXmlElement* m = in->FirstChildElement("mass");
+        if (m && !Finite(m->Attribute("value"), 1))
+          Throw(source, ": link '", name ? name : "?", "' has an <inertial> mass of '",
+                m->Attribute("value") ? m->Attribute("value") : "", "'; expected a finite mass >= 0 in kg");
+        const TiXmlElement* o = in->FirstChildElement("origin");
+        if (o && o->Attribute("xyz") && !Finite(o->Attribute("xyz"), 3))
+          Throw(source, ": link '", name ? name : "?", "' has an <inertial> <origin xyz='", o->Attribute("xyz"),
+                "'>; expected three finite numbers (m)");
+      }
+  }
   urdf::ModelInterfaceSharedPtr model;
   {
     std::lock_guard<std::mutex> lock(ParserMutex());
@@ -289,20 +369,41 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
   if (!base_link)
     Throw(source, ": --base-link '", base, "' is not a link of the URDF (links: ", NameList(LinkNames(m)), ")");
   std::string tip = chain.tip_link;
+  std::string tip_note;
   if (tip.empty()) {
-    std::vector<std::pair<int, std::string>> leaves;
-    Leaves(m, base_link, 0, &leaves);
+    const std::vector<Leaf> leaves = Leaves(m, base_link);
     int best = 0;
-    for (const auto& [c, name] : leaves) best = std::max(best, c);
-    std::vector<std::string> cands;
-    for (const auto& [c, name] : leaves)
-      if (c == best) cands.push_back(name);
-    std::sort(cands.begin(), cands.end());
+    for (const Leaf& l : leaves) best = std::max(best, l.movable);
     if (best == 0) Throw(source, ": no movable joint below base link '", base, "'; give --base-link");
-    if (cands.size() != 1)
+    std::vector<Leaf> cands;
+    for (const Leaf& l : leaves)
+      if (l.movable == best) cands.push_back(l);
+    std::sort(cands.begin(), cands.end(), [](const Leaf& a, const Leaf& b) {
+      return std::make_pair(ToolLikeRank(a.name), a.name) < std::make_pair(ToolLikeRank(b.name), b.name);
+    });
+    bool one_chain = true;
+    for (const Leaf& l : cands) one_chain &= l.last_movable == cands.front().last_movable;
+    if (!one_chain) {
+      // Name every leaf with its depth, the deepest first.
+      std::vector<Leaf> all = leaves;
+      std::sort(all.begin(), all.end(), [](const Leaf& a, const Leaf& b) {
+        return std::make_pair(-a.movable, a.name) < std::make_pair(-b.movable, b.name);
+      });
+      std::vector<std::string> named;
+      for (const Leaf& l : all) named.push_back(l.name + " (" + std::to_string(l.movable) + ")");
       Throw(source, ": the tip of the chain is ambiguous: ", cands.size(), " links lie ", best,
-            " movable joints below '", base, "' (", NameList(cands), "); give --tip-link");
-    tip = cands.front();
+            " movable joints below '", base, "' on different chains; give --tip-link (leaves with their movable "
+            "joints below the base: ", NameList(named), ")");
+    }
+    // Leaves on one chain (rigid frames after its last joint: a tool frame, a sensor): the
+    // chain is the same, the tool-like one is the tip.
+    tip = cands.front().name;
+    if (cands.size() > 1) {
+      std::vector<std::string> others;
+      for (size_t k = 1; k < cands.size(); ++k) others.push_back(cands[k].name);
+      tip_note = "tip link '" + tip + "' taken as the tool (after joint " + cands.front().last_movable +
+                 ", beside " + NameList(others) + " on the same joints); give --tip-link to name another";
+    }
   }
   auto link = m.getLink(tip);
   if (!link) Throw(source, ": --tip-link '", tip, "' is not a link of the URDF (links: ", NameList(LinkNames(m)), ")");
@@ -334,10 +435,19 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
     if (!Movable(*j))
       Throw(source, ": joint '", j->name, "' in the chain from '", base, "' to '", tip, "' is ", TypeText(j->type),
             "; a serial chain takes revolute, continuous, prismatic and fixed joints");
-    if (j->mimic)
-      Throw(source, ": joint '", j->name, "' in the chain mimics joint '", j->mimic->joint_name,
-            "'; a mimic joint inside the chain is not supported (its value is not measured on its own)");
     Joint jt;
+    if (j->mimic) {
+      // Follows its driving joint (the one a log records): q = multiplier q_driver + offset.
+      jt.mimics = j->mimic->joint_name;
+      jt.mimic_multiplier = j->mimic->multiplier;
+      jt.mimic_offset = j->mimic->offset;
+      const auto driver = m.getJoint(jt.mimics);
+      if (!driver)
+        Throw(source, ": joint '", j->name, "' mimics joint '", jt.mimics, "', which is not in the URDF");
+      if (!Movable(*driver))
+        Throw(source, ": joint '", j->name, "' mimics joint '", jt.mimics, "', which is ", TypeText(driver->type),
+              "; a mimic joint follows a revolute, continuous or prismatic joint");
+    }
     jt.name = j->name;
     jt.type = j->type == urdf::Joint::PRISMATIC ? JointType::kPrismatic : JointType::kRevolute;
     const Vec3 axis(j->axis.x, j->axis.y, j->axis.z);
@@ -361,6 +471,9 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
     child_links.push_back(j->child_link_name);
     joints.push_back(jt);
     prefix = Pose::Identity();
+    if (static_cast<int>(joints.size()) > kMaxRobotJoints)
+      Throw(source, ": more than ", kMaxRobotJoints, " movable joints from '", base, "' to '", tip,
+            "'; a robot's chain has at most ", kMaxRobotJoints);
   }
   if (joints.empty())
     Throw(source, ": the chain from '", base, "' to '", tip, "' has no movable joint (only fixed ones)");
@@ -386,6 +499,7 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
   src->base_link = base;
   src->tip_link = tip;
   src->prefix = prefixes;
+  src->tip_note = tip_note;
   for (const auto& [name, j] : m.joints_) src->all_joints.push_back(name);
   RobotModel robot(m.getName().empty() ? tip : m.getName(), ChainConvention::kUrdf, joints, T_flange_tool);
   robot.SetUrdf(src);

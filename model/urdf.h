@@ -7,8 +7,15 @@
 // frame is its child link's frame, placed in joint i-1's frame by `origin` (the fixed
 // joints between the two folded in) and moved about or along `axis`. The fixed joints
 // after the last movable one make the tool transform T_flange_tool (flange = the last
-// movable joint's child link, tool = the tip link). Mimic, floating and planar joints
-// inside the chain are refused by name.
+// movable joint's child link, tool = the tip link). A mimic joint inside the chain follows
+// its driving joint (model/joint.h: the log records the driver, RobotModel::ActuatedJoints),
+// with placement errors of its own; floating and planar joints inside the chain are refused
+// by name. Without --tip-link, the tip is the leaf farthest from the base in movable
+// joints; leaves after the same last joint (a tool frame beside a sensor frame) are one
+// chain, and the tool-like one (tool0, tool, tcp, ...) is taken, said in
+// UrdfSource::tip_note. A link mass of 0 is a massless (virtual) link. Trees are walked
+// without recursion; a file beyond kMaxRobotLinks links or a chain beyond kMaxRobotJoints
+// movable joints (core/limits.h) is refused.
 //
 // The arm's weight comes from the links' <inertial> elements: each joint's link carries
 // every link rigidly attached to it, including the branches off the chain (a head on the
@@ -31,8 +38,10 @@ bool IsUrdfFile(const std::filesystem::path& path);
 
 // InputError naming the file and the element: a URDF urdfdom rejects (its own message
 // kept), an unknown base or tip link (the links listed), no chain between them (the
-// links on the tip's path listed), an ambiguous tip (the candidates listed), a mimic,
-// floating or planar joint in the chain, a zero axis, an inertial mass <= 0.
+// links on the tip's path listed), an ambiguous tip (the leaves listed with their depths),
+// a floating or planar joint in the chain, a mimic joint whose driver is missing, a zero
+// axis, a negative or non-finite inertial mass, a xacro file (with the command that
+// expands it).
 RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& chain = {});
 RobotModel ParseUrdf(const std::string& xml, const std::string& source, const ChainSelection& chain = {});
 

@@ -16,6 +16,8 @@
 #include "calib/robot_calibration.h"
 #include "core/random.h"
 #include "model/extensions.h"
+#include "model/urdf.h"
+#include "tests/urdf_robots.h"
 
 namespace mcms::test {
 
@@ -153,6 +155,17 @@ inline RobotLog MakeRobotLog(const RobotModel& nominal, uint64_t seed, const std
   AppendRows(truth, order, 0.0, spec.hours * 3600.0 / N, rng, &log);
   if (truth_out) *truth_out = truth;
   return log;
+}
+
+// The seven-joint robot of SevenJointUrdf as the audit's tests read it, and the joint ranges
+// (and payload) of its logs.
+inline RobotModel SevenJoints() { return ParseUrdf(SevenJointUrdf(), "seven.urdf", {"world", "tool"}); }
+inline RobotLogSpec SevenSpec() {
+  RobotLogSpec s;
+  s.lo = {0.02, -1.4, -1.4, -1.4, -1.4, -1.4, -2.5};
+  s.hi = {0.38, 1.4, 1.4, 1.4, 1.4, 1.4, 2.5};
+  s.payload_kg = 1.0;
+  return s;
 }
 
 }  // namespace mcms::test

@@ -181,13 +181,24 @@ TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
   // (not replaced half-way with the old output left beside it). Run as an ordinary user
   // (root writes anyway): setpriv to nobody when the tests run as root.
   {
-    const fs::path ro = test::ScratchDir("attack_limits_readonly");
-    std::string as_user;
+    fs::path ro = test::ScratchDir("attack_limits_readonly");
+    std::string as_user, cli = MCMS_CLI, log = (d / "log.csv").string();
     if (::geteuid() == 0) {
-      ASSERT_EQ(std::system(("chown 65534:65534 '" + ro.string() + "'").c_str()), 0);
+      // nobody may not reach a checkout in a private folder (mode 700, as mktemp -d makes
+      // them, issue 53): the run happens in a folder of the system's temporary directory
+      // with the program and the log copied into it.
+      ro = fs::temp_directory_path() / ("mcms_attack_readonly-" + std::to_string(::getpid()));
+      fs::remove_all(ro);
+      fs::create_directories(ro);
+      fs::copy_file(MCMS_CLI, ro / "mcms");
+      fs::copy_file(d / "log.csv", ro / "log.csv");
+      ASSERT_EQ(std::system(("chmod 755 '" + ro.string() + "' && chown -R 65534:65534 '" + ro.string() + "'").c_str()),
+                0);
+      cli = (ro / "mcms").string();
+      log = (ro / "log.csv").string();
       as_user = "setpriv --reuid=65534 --regid=65534 --clear-groups ";
     }
-    const std::string run = as_user + "'" + MCMS_CLI + "' audit robot '" + (d / "log.csv").string() + "' -o aro -q";
+    const std::string run = as_user + "'" + cli + "' audit robot '" + log + "' -o aro -q";
     ASSERT_EQ(test::Shell(ro, run).code, 0);
     fs::permissions(ro / "aro" / "plots", fs::perms::owner_write, fs::perm_options::remove);
     const auto before = test::Snapshot(ro);
@@ -196,6 +207,7 @@ TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
     EXPECT_NE(r.err.find("folder plots is not writable"), std::string::npos) << r.err;
     EXPECT_EQ(test::Snapshot(ro), before);
     fs::permissions(ro / "aro" / "plots", fs::perms::owner_write, fs::perm_options::add);
+    if (::geteuid() == 0) fs::remove_all(ro);
   }
   // A file added to it since is the user's: refused, kept.
   test::WriteText(d / "aud" / "mine.txt", "x\n");

@@ -301,12 +301,12 @@ TEST(Urdf, BadInputIsNamed) {
                  "<link name=\"finger2\"/></robot>"),
             {});
   EXPECT_NE(e.find("the tip of the chain is ambiguous"), std::string::npos) << e;
-  EXPECT_NE(e.find("finger, finger2"), std::string::npos) << e;
-  // A mimic joint, a floating joint inside the chain.
+  EXPECT_NE(e.find("finger (8), finger2 (8), head (2)"), std::string::npos) << e;
+  // A mimic joint whose driver is missing or fixed; a floating joint inside the chain.
   e = Error(Edit(good, "<joint name=\"j4\" type=\"revolute\">",
-                 "<joint name=\"j4\" type=\"revolute\"><mimic joint=\"j3\" multiplier=\"1\"/>"),
+                 "<joint name=\"j4\" type=\"revolute\"><mimic joint=\"nowhere\" multiplier=\"1\"/>"),
             {"world", "tool"});
-  EXPECT_NE(e.find("joint 'j4' in the chain mimics joint 'j3'"), std::string::npos) << e;
+  EXPECT_NE(e.find("joint 'j4' mimics joint 'nowhere', which is not in the URDF"), std::string::npos) << e;
   e = Error(Edit(good, "<joint name=\"j5\" type=\"revolute\">", "<joint name=\"j5\" type=\"floating\">"),
             {"world", "tool"});
   EXPECT_NE(e.find("joint 'j5'"), std::string::npos) << e;
@@ -314,12 +314,17 @@ TEST(Urdf, BadInputIsNamed) {
   e = Error(Edit(good, "<joint name=\"j5\" type=\"revolute\">", "<joint name=\"j5\" type=\"planar\">"),
             {"world", "tool"});
   EXPECT_NE(e.find("planar"), std::string::npos) << e;
-  // A mass <= 0.
+  // A negative or non-finite mass (0 is a massless link, as ROS's virtual frames are).
   e = Error(Edit(good, "<mass value=\"1.5\"/>", "<mass value=\"-1.5\"/>"), {"world", "tool"});
   EXPECT_NE(e.find("link 'l3'"), std::string::npos) << e;
   EXPECT_NE(e.find("mass"), std::string::npos) << e;
-  e = Error(Edit(good, "<mass value=\"1.5\"/>", "<mass value=\"0\"/>"), {"world", "tool"});
+  e = Error(Edit(good, "<mass value=\"1.5\"/>", "<mass value=\"inf\"/>"), {"world", "tool"});
   EXPECT_NE(e.find("link 'l3'"), std::string::npos) << e;
+  EXPECT_EQ(Error(Edit(good, "<mass value=\"1.5\"/>", "<mass value=\"0\"/>"), {"world", "tool"}), "(no InputError)");
+  // A xacro file: named, with the command that expands it.
+  e = Error(Edit(good, "<robot name=", "<robot xmlns:xacro=\"http://www.ros.org/wiki/xacro\" name="), {});
+  EXPECT_NE(e.find("a xacro file"), std::string::npos) << e;
+  EXPECT_NE(e.find("xacro r.urdf > robot.urdf"), std::string::npos) << e;
   // A zero axis.
   e = Error(Edit(good, "<axis xyz=\"0 1 0\"/>\n    <limit lower=\"-2.5\"", "<axis xyz=\"0 0 0\"/>\n    <limit lower=\"-2.5\""),
             {"world", "tool"});
@@ -355,6 +360,123 @@ TEST(Urdf, RealTiagoUrdfLoads) {
   double total = 0;
   for (const Joint& j : r.Joints()) total += j.mass_kg;
   EXPECT_GT(total, 15.0);  // torso, head and arm
+}
+
+}  // namespace
+}  // namespace mcms
+
+namespace mcms {
+namespace {
+
+// A telescopic column as ROS describes one (issue 51): the motor's joint drives two segments
+// that mimic it (multiplier 0.5 each), on a branch of its own; an arm on the top segment.
+std::string ColumnUrdf() {
+  return R"(<robot name="column">
+  <link name="base"/>
+  <joint name="motor" type="prismatic"><parent link="base"/><child link="motor_link"/>
+    <axis xyz="0 0 1"/><limit lower="1.0" upper="3.0" effort="1" velocity="1"/></joint>
+  <link name="motor_link"/>
+  <joint name="mid" type="prismatic"><parent link="base"/><child link="mid_link"/><origin xyz="0.1 0 0.2"/>
+    <axis xyz="0 0 1"/><limit lower="0.0" upper="1.0" effort="1" velocity="1"/>
+    <mimic joint="motor" multiplier="0.5" offset="-0.5"/></joint>
+  <link name="mid_link"><inertial><mass value="10"/><origin xyz="0 0 -0.5"/>
+    <inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+  <joint name="top" type="prismatic"><parent link="mid_link"/><child link="top_link"/><origin xyz="0 0 0.05"/>
+    <axis xyz="0 0 1"/><limit lower="0.0" upper="1.0" effort="1" velocity="1"/>
+    <mimic joint="motor" multiplier="0.5" offset="-0.5"/></joint>
+  <link name="top_link"><inertial><mass value="0"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="top_link"/><child link="arm"/><origin xyz="0 0 0.3"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="arm"><inertial><mass value="2"/><origin xyz="0.2 0 0"/>
+    <inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+  <joint name="elbow" type="revolute"><parent link="arm"/><child link="forearm"/><origin xyz="0.4 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <link name="forearm"/>
+  <joint name="to_tool" type="fixed"><parent link="forearm"/><child link="tool0"/><origin xyz="0.3 0 0"/></joint>
+  <link name="tool0"/>
+  <joint name="to_sensor" type="fixed"><parent link="forearm"/><child link="sensor"/><origin xyz="0.1 0.05 0"/></joint>
+  <link name="sensor"/>
+</robot>)";
+}
+
+TEST(Urdf, MimicJointsFollowTheirDriver) {
+  const RobotModel r = ParseUrdf(ColumnUrdf(), "column.urdf");
+  // The tip: leaves after the same last joint (elbow) are one chain; the tool-like one.
+  EXPECT_EQ(r.Urdf()->tip_link, "tool0");
+  EXPECT_NE(r.Urdf()->tip_note.find("tip link 'tool0' taken as the tool"), std::string::npos) << r.Urdf()->tip_note;
+  ASSERT_EQ(r.NumJoints(), 4);
+  ASSERT_EQ(r.NumActuated(), 3);
+  EXPECT_TRUE(r.HasMimicJoints());
+  EXPECT_EQ(r.ActuatedJoints()[0].name, "motor");
+  EXPECT_NEAR(r.ActuatedJoints()[0].lower, 1.0, 1e-12);  // from the segments' limits
+  EXPECT_NEAR(r.ActuatedJoints()[0].upper, 3.0, 1e-12);
+  EXPECT_EQ(r.ActuatedJoints()[1].name, "shoulder");
+  const Eigen::Vector3d qa(2.2, 0.4, -0.7);
+  const Eigen::VectorXd q = r.ChainValues(qa);
+  ASSERT_EQ(q.size(), 4);
+  EXPECT_NEAR(q[0], 0.6, 1e-15);
+  EXPECT_NEAR(q[1], 0.6, 1e-15);
+  EXPECT_NEAR((r.ActuatedValues(q) - qa).norm(), 0.0, 1e-15);
+  // The forward kinematics by hand: the two segments each rise by 0.5 q - 0.5.
+  const double h = 0.2 + 0.05 + 0.3 + 2 * (0.5 * 2.2 - 0.5);
+  const Eigen::Vector3d arm = Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()) *
+                              (Eigen::Vector3d(0.4, 0, 0) + Eigen::AngleAxisd(-0.7, Eigen::Vector3d::UnitY()) *
+                                                                Eigen::Vector3d(0.3, 0, 0));
+  EXPECT_NEAR((r.T_base_tool(q).t - (Eigen::Vector3d(0.1, 0, h) + arm)).norm(), 0.0, 1e-12);
+  // Each segment keeps placement errors of its own; YAML keeps the mimic.
+  EXPECT_EQ(r.NumGeometryParameters(), 4 * kUrdfParamsPerJoint);
+  const RobotModel y = RobotModel::Parse(r.ToYaml(), "column.yaml");
+  EXPECT_EQ(y.NumActuated(), 3);
+  EXPECT_NEAR((y.T_base_tool(y.ChainValues(qa)).t - r.T_base_tool(q).t).norm(), 0.0, 1e-12);
+  // A massless top segment (mass 0, as ROS's virtual links) adds nothing.
+  EXPECT_TRUE(r.HasMasses());
+}
+
+TEST(Urdf, DeepChainsAreRefusedByNameNotByTheStack) {
+  // 60,000 fixed links in one chain (issue 53: the recursive walks overflowed the stack).
+  std::string xml = "<robot name=\"deep\"><link name=\"l0\"/>";
+  xml += "<joint name=\"j\" type=\"revolute\"><parent link=\"l0\"/><child link=\"l1\"/><axis xyz=\"0 0 1\"/>"
+         "<limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>";
+  for (int i = 1; i < 60000; ++i)
+    xml += "<link name=\"l" + std::to_string(i) + "\"/><joint name=\"f" + std::to_string(i) +
+           "\" type=\"fixed\"><parent link=\"l" + std::to_string(i) + "\"/><child link=\"l" +
+           std::to_string(i + 1) + "\"/></joint>";
+  xml += "<link name=\"l60000\"/></robot>";
+  const std::string e = ErrorOf([&] { ParseUrdf(xml, "deep.urdf"); });
+  EXPECT_NE(e.find("deep.urdf: 60001 <link> elements; a robot has at most 10000"), std::string::npos) << e;
+  // Under the bound, a long fixed tail and a tip given walk without recursion.
+  std::string ok = "<robot name=\"long\"><link name=\"l0\"/>";
+  ok += "<joint name=\"j\" type=\"revolute\"><parent link=\"l0\"/><child link=\"l1\"/><axis xyz=\"0 0 1\"/>"
+        "<limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>";
+  for (int i = 1; i < 9000; ++i)
+    ok += "<link name=\"l" + std::to_string(i) + "\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" "
+          "ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link><joint name=\"f" + std::to_string(i) +
+          "\" type=\"fixed\"><parent link=\"l" + std::to_string(i) + "\"/><child link=\"l" + std::to_string(i + 1) +
+          "\"/><origin xyz=\"0.0001 0 0\"/></joint>";
+  ok += "<link name=\"l9000\"/></robot>";
+  const RobotModel r = ParseUrdf(ok, "long.urdf", {"", "l9000"});
+  EXPECT_EQ(r.NumJoints(), 1);
+  EXPECT_NEAR(r.Joints()[0].mass_kg, 8999.0, 1e-9);
+  const RobotModel t = ParseUrdf(ok, "long.urdf");
+  EXPECT_EQ(t.Urdf()->tip_link, "l9000");
+}
+
+TEST(Urdf, RealConstructionRobotAsPublished) {
+  MCMS_REQUIRE_DATA(dir, "hilti-trailblazer");
+  const RobotModel r = ReadUrdf(dir / "trailblazer.urdf", {"", "prism"});
+  // The column's two segments mimic the motor's joint, which the logs record.
+  ASSERT_EQ(r.NumJoints(), 8);
+  ASSERT_EQ(r.NumActuated(), 7);
+  EXPECT_EQ(r.ActuatedJoints()[0].name, "column_prismatic_joint");
+  EXPECT_NEAR(r.ActuatedJoints()[0].lower, 1.48, 1e-9);
+  EXPECT_NEAR(r.ActuatedJoints()[0].upper, 3.972, 1e-9);
+  EXPECT_EQ(r.Joints()[0].mimics, "column_prismatic_joint");
+  EXPECT_EQ(r.Joints()[2].name, "dsr_joint1");
+  EXPECT_TRUE(r.HasMasses());
+  // Without --tip-link: the prism and the drill tip hang from the same joint; the tool-like one.
+  const RobotModel d = ReadUrdf(dir / "trailblazer.urdf");
+  EXPECT_EQ(d.Urdf()->tip_link, "drill_tip");
+  EXPECT_NE(d.Urdf()->tip_note.find("prism"), std::string::npos) << d.Urdf()->tip_note;
 }
 
 }  // namespace
