@@ -241,6 +241,7 @@ TEST_P(HiddenEffect, IsNamedWhereItIsWithItsSizeAndAHeldOutGain) {
     for (double v : h.p) std::printf(" %.4g", v);
     std::printf("\n%s", a.report.Text().c_str());
     EXPECT_FALSE(a.report.effects.empty());
+    EXPECT_EQ(a.report.nested.failed, 0) << "issue 51: a fit below the model it extends";
     if (a.report.effects.empty()) continue;
     const AuditEffect& e = a.report.effects[0];
     EXPECT_EQ(e.name, h.name);
@@ -274,6 +275,9 @@ TEST(AuditCameras, CleanRecordingsAtTheDesignedFalseAlarmRate) {
   for (int seed = 100; seed < 100 + kSets; ++seed) {
     const Recording rec = Make({}, seed);
     const CameraAuditResult a = AuditCameraModel(rec.rig, rec.target, rec.results);
+    // Issue 51: no candidate's fit ends below the model it extends.
+    EXPECT_EQ(a.report.nested.failed, 0) << "seed " << seed;
+    EXPECT_GE(a.report.nested.worst_relative_lr, -NestedFits::kTolerance) << "seed " << seed;
     if (!a.report.clean) {
       ++alarms;
       std::printf("seed %d: false alarm\n%s", seed, a.report.Text().c_str());

@@ -247,6 +247,9 @@ TEST(AppAuditFusion, CleanInclinometerLogsRarelyRaiseAnAlarm) {
     const fs::path d = test::ScratchDir("audit_fusion_incl_clean");
     test::Write(d, test::MovingLogs(o));
     const InclinometerAuditResult r = AuditInclinometerLogs(d, 0.01 / 2);
+    // Issue 51: no nested fit ends below the model it extends.
+    EXPECT_EQ(r.report.nested.failed, 0) << "seed " << seed;
+    EXPECT_GE(r.report.nested.worst_relative_lr, -NestedFits::kTolerance) << "seed " << seed;
     if (!r.report.clean) {
       ++alarms_default;
       std::printf("seed %d: %s", seed, r.report.Text().c_str());
@@ -276,6 +279,9 @@ TEST(AppAuditFusion, CleanLogsThroughTheCommandAtTheDesignedRate) {
     const test::CliRun run = test::Mcms(d, std::string(kAudit).append(" --inclinometer incl.csv"));
     ASSERT_EQ(run.code, 0) << run.out << run.err;
     const nlohmann::json j = nlohmann::json::parse(std::ifstream(d / "a.json"));
+    // Issue 51: the robot and inclinometer audits' nested fits, every one at or above its base.
+    EXPECT_EQ(j["nested_fits"]["failed"].get<long>(), 0) << "seed " << seed;
+    EXPECT_GT(j["nested_fits"]["count"].get<long>(), 0) << "seed " << seed;
     if (!j["clean"].get<bool>()) {
       ++alarms;
       std::printf("seed %d:\n%s", seed, run.out.c_str());

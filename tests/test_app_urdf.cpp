@@ -110,6 +110,9 @@ TEST(AppUrdf, RealTiagoAuditExplainsAnotherDayBetterThanFigaroh) {
   EXPECT_NE(run.out.find("columns not used: shipped_row marker_std_mm"), std::string::npos) << run.out;
   const nlohmann::json rep = ReadJson(dir / "audit" / "report.json");
   ASSERT_EQ(rep["validation"].size(), 1u);
+  // Issue 51: no nested fit below the model it extends on the real TIAGo.
+  EXPECT_EQ(rep["nested_fits"]["failed"].get<long>(), 0);
+  EXPECT_GE(rep["nested_fits"]["worst_relative_lr"].get<double>(), -1e-6);
   const auto& s = rep["validation"][0];
   EXPECT_EQ(s["rows"], 62);
   for (const char* m : {"registration", "geometry", "final"}) {

@@ -117,6 +117,9 @@ TEST(LensAudit, CleanDataNamesNoRicherLensAcrossSeeds) {
     opt.candidates = {"LENSMODEL_OPENCV5", "LENSMODEL_OPENCV8"};
     const LensAuditResult r = AuditLens(ReadMrcalOptimizationInputs(path), opt);
     ASSERT_EQ(r.fits.size(), 3u);
+    // Issue 51: a richer lens never fits worse than the one it contains.
+    EXPECT_EQ(r.report.nested.failed, 0) << "seed " << seed;
+    EXPECT_GT(r.report.nested.count, 0);
     if (!r.report.clean) ++named;
     std::printf("seed %d: %zu views, RMS %.4f px, held-out %.4f px; %s\n", static_cast<int>(seed),
                 in.observations.size(), r.fits[0].rms_px, r.fits[0].heldout_rms_px,

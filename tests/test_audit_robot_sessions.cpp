@@ -344,5 +344,34 @@ TEST(Sessions, RealConstructionRobotReadAsPublished) {
       << flat.notes[0];
 }
 
+// The construction robot fitted on its level-floor session, each of its stations placed
+// from its own rows, and scored frozen on the pallet session with each station placed from
+// its four square stationing points: no nested fit below its base, the geometry better than
+// the registered robot file on the other session's evaluation points.
+TEST(Sessions, RealConstructionRobotCalibratedOnFlatScoredOnPallet) {
+  MCMS_REQUIRE_DATA(dir, "hilti-trailblazer");
+  const RobotModel r = RobotModel::Read(dir / "trailblazer.urdf", {"", "prism"});
+  const RobotLog flat = ReadRobotLog(dir / "flat.yaml", r);
+  const RobotLog pallet = ReadRobotLog(dir / "pallet.yaml", r);
+  const RobotAuditResult res = AuditRobot(r, flat, {}, {pallet});
+  const std::string text = res.report.Text();
+  std::printf("%s", text.c_str());
+  ExpectNestedFitsHold(res.report, "construction robot, flat");
+  ASSERT_EQ(res.report.validation.size(), 1u);
+  const SessionScore& s = res.report.validation[0];
+  const ModelScore& reg = ModelOf(s, "registration");
+  const ModelScore& geo = ModelOf(s, "geometry");
+  EXPECT_EQ(geo.placements.size(), 10u);
+  for (const auto& p : geo.placements) {
+    EXPECT_GE(p.stationing_rows, 3) << p.station;  // the square's four points (one may be missing)
+    EXPECT_LE(p.stationing_rows, 4) << p.station;
+  }
+  EXPECT_LT(geo.points[0].p95_xy_m, 0.85 * reg.points[0].p95_xy_m) << text;
+  EXPECT_LT(geo.points[0].mean_m, 0.75 * reg.points[0].mean_m) << text;
+  // A geometric term the poses cannot see, or that runs to its bound, is held, never named.
+  for (const AuditEffect& e : res.report.effects)
+    for (const auto& [name, sg] : e.sigma) EXPECT_LT(sg, 0.02) << e.name << " " << name;
+}
+
 }  // namespace
 }  // namespace mcms
