@@ -341,8 +341,16 @@ class Auditor {
   // beside every other.
   // *sigma (optional) receives each term's parameter sigmas (the noise scales' empty), the
   // poses marginalised (the covariance of the whole fit, inverted).
+  // *state (optional): the frames' poses to start from (when it holds one per frame) and,
+  // on return, the poses reached with each camera's chi-square at unit noise scale and its
+  // number of ball images (what the camera's scale is refitted from).
+  struct JointState {
+    std::vector<std::array<double, 6>> pose;
+    std::vector<double> chi2;  // per camera, whitened by the blob covariances alone
+    std::vector<long> n;       // ball images per camera
+  };
   double JointFit(std::vector<CameraModelTerm>* terms_io, const std::vector<double>& scale,
-                  std::vector<std::vector<double>>* sigma = nullptr) const {
+                  std::vector<std::vector<double>>* sigma = nullptr, JointState* state = nullptr) const {
     std::vector<CameraModelTerm>& terms = *terms_io;
     const Target target_x = ExtendTarget(target_, terms);
     std::vector<int> free;
@@ -353,7 +361,9 @@ class Auditor {
     po.cost_function_ownership = ceres::TAKE_OWNERSHIP;
     ceres::Problem problem(po);
     std::vector<std::array<double, 6>> pose(frames_.size(), std::array<double, 6>{});
+    if (state && state->pose.size() == frames_.size()) pose = state->pose;
     std::vector<bool> used(frames_.size(), false);
+    std::vector<std::pair<ceres::ResidualBlockId, int>> block_camera;
     double log_scales = 0;
     for (size_t i = 0; i < frames_.size(); ++i) {
       const Frame& f = frames_[i];
@@ -378,12 +388,23 @@ class Auditor {
           blocks.push_back(terms[k].parameters.data());
         }
         cost->SetNumResiduals(2);
-        problem.AddResidualBlock(cost, nullptr, blocks);
+        block_camera.emplace_back(problem.AddResidualBlock(cost, nullptr, blocks), x.camera);
         log_scales += 2 * std::log(scale[x.camera]);
       }
     }
     if (problem.NumResidualBlocks() == 0) return 0;
     const ceres::Solver::Summary summary = SolveSilently(ceres::DENSE_SCHUR, 50, &problem);
+    if (state) {
+      state->pose = pose;
+      state->chi2.assign(rig_.size(), 0.0);
+      state->n.assign(rig_.size(), 0);
+      for (const auto& [id, c] : block_camera) {
+        double cost = 0;
+        problem.EvaluateResidualBlock(id, false, &cost, nullptr, nullptr);
+        state->chi2[c] += 2 * cost * scale[c] * scale[c];
+        ++state->n[c];
+      }
+    }
     if (sigma) {
       // The terms' covariance with the poses marginalised: the inverse of the Schur
       // complement of the information matrix, the poses eliminated frame by frame (each
@@ -434,6 +455,37 @@ class Auditor {
         for (size_t i = 0; i < terms[k].parameters.size(); ++i, ++j) (*sigma)[k].push_back(s[j]);
     }
     return -summary.final_cost - log_scales;  // final_cost = chi2 / 2
+  }
+
+  // The joint fit with camera `camera`'s noise scale refitted too (mode: free, within the
+  // band, or fixed), alternating the least squares and the scale's closed form
+  // s^2 = chi2 / (2 n), from *state's poses: every step raises the likelihood, so a model
+  // started at the solution of the one it contains never ends below it. *scale_io holds
+  // the scale used on return.
+  double JointFitWithScale(std::vector<CameraModelTerm>* terms_io, std::vector<double>* scale_io, int camera,
+                           ScaleMode mode, JointState* state) const {
+    double ll = JointFit(terms_io, *scale_io, nullptr, state);
+    if (camera < 0 || mode == ScaleMode::kFixed) return ll;
+    for (int it = 0; it < 8; ++it) {
+      const double chi2 = state->chi2[camera];
+      const long n = state->n[camera];
+      if (n == 0) break;
+      double s = std::sqrt(chi2 / (2.0 * n));
+      if (mode == ScaleMode::kBand) s = std::clamp(s, 1.0 / (1.0 + o_.noise_tolerance), 1.0 + o_.noise_tolerance);
+      const double s0 = (*scale_io)[camera];
+      // The likelihood at the same poses and terms with the new scale, in closed form.
+      const double ll_s = ll + 0.5 * chi2 * (1 / (s0 * s0) - 1 / (s * s)) - 2.0 * n * std::log(s / s0);
+      if (!(ll_s > ll + 1e-9 * std::max(1.0, std::abs(ll)))) break;
+      (*scale_io)[camera] = s;
+      std::vector<CameraModelTerm> t = *terms_io;
+      JointState st = *state;
+      const double ll_next = JointFit(&t, *scale_io, nullptr, &st);
+      if (!(ll_next >= ll_s)) return ll_s;  // the least squares lost its start: the scale step alone
+      *terms_io = std::move(t);
+      *state = std::move(st);
+      ll = ll_next;
+    }
+    return ll;
   }
 
   // Associates every camera's blobs with the balls and re-fits the leave-one-out poses
@@ -1448,12 +1500,32 @@ CameraAuditResult AuditCameraModel(const CameraRig& rig, const Target& target, c
         // it, and only refitted beside it does it give that part back. The noise scales are
         // each model's own (the candidate's camera's fitted with it, within the band).
         std::vector<CameraModelTerm> t0 = terms;
-        const double base = a.JointFit(&t0, scale);
+        Auditor::JointState base_state;
+        const double base = a.JointFit(&t0, scale, nullptr, &base_state);
         for (size_t i : pool) {
           std::vector<double> sc = scale;
           if (cands[i].camera_unit) sc[cands[i].unit] = cands[i].scale;
           std::vector<CameraModelTerm> t = cands[i].fitted;
-          cands[i].lr = sel[i].lr = 2 * (a.JointFit(&t, sc) - base);
+          double ll = a.JointFit(&t, sc);
+          if (ll < base) {
+            // Started from its units' fits (and its camera's scale from them), the candidate
+            // ended below the model it extends (issue 51): solved again from that model's
+            // joint solution, its terms at no effect and its camera's noise scale refitted
+            // beside them; the better of the two solves counts.
+            std::vector<CameraModelTerm> t1 = t0;
+            for (const CameraModelTerm* term : {&cands[i].term, cands[i].pair ? &cands[i].term2 : nullptr}) {
+              if (!term) continue;
+              t1.push_back(*term);
+              t1.back().parameters = term->extension.InitialParameters();
+            }
+            std::vector<double> sc1 = scale;
+            Auditor::JointState st = base_state;
+            const bool noise = cands[i].term.extension.effect == Effect::kPixelNoiseScale;
+            const ScaleMode mode =
+                noise ? ScaleMode::kFree : UnitScaleMode(cands[i].camera_unit, cands[i].unit, noise_named);
+            ll = std::max(ll, a.JointFitWithScale(&t1, &sc1, cands[i].camera_unit ? cands[i].unit : -1, mode, &st));
+          }
+          cands[i].lr = sel[i].lr = 2 * (ll - base);
           rep.nested.Record(cands[i].lr, base);
         }
         dec = DecideStep(sel, tested, rule);
