@@ -412,7 +412,7 @@ void AddValidationPlots(const RobotModel& robot, const RobotLog& v, const Proble
   all.title = session + " (frozen): point 1's error per posture";
   all.covariate = "posture (row of " + session + ")";
   for (int i = 0; i < s.rows; ++i) all.x.push_back(i + 1);
-  for (const char* name : {"registration", "geometry", "final"})
+  for (const char* name : {"nominal", "registration", "geometry", "final"})
     if (const ModelScore* m = Model(name)) {
       std::vector<double> y;
       for (const auto& e : m->errors) y.push_back(e.empty() ? std::nan("") : e[0].norm() * 1e3);
@@ -903,20 +903,28 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       s.log = v.source.string();
       s.rows = static_cast<int>(v.rows.size());
       s.group_of_row = PostureGroups(log, v);
+      if (v.has_stations) {
+        // The robot file as given (issue 52: the publisher's baseline): nothing fitted, not
+        // even the tool, each station placed from its stationing rows.
+        Eigen::VectorXd as_given = nominal.theta;
+        as_given.segment(6, pb.ts).setZero();
+        s.models.push_back(ScoreModel("nominal", v, PointPredictions(pv, as_given), s.group_of_row, place));
+      }
+      const size_t final_at = s.models.size() + 2;
       for (const auto& [name, fit] : {std::pair<const char*, const FitResult*>{"registration", &nominal},
                                       {"geometry", &geo},
                                       {"final", &fin}})
         s.models.push_back(ScoreModel(name, v, PointPredictions(pv, fit->theta), s.group_of_row, place));
       for (const auto& [name, fit] : without)
         s.models.push_back(ScoreModel(name, v, PointPredictions(pv, fit.theta), s.group_of_row, place));
-      for (const auto& e : s.models[2].errors) s.scored_rows += !e.empty();
+      for (const auto& e : s.models[final_at].errors) s.scored_rows += !e.empty();
       AddValidationPlots(robot, v, pv, s, without_ext, &result.validation_plots);
       // What remains there: the residual tests on the final model's residuals (as placed).
       {
         FitResult frozen = fin;
         Exact(pv, fin.theta, AllRows(pv), &frozen.R);
         for (int i = 0; i < pv.N; ++i) {
-          const Pose& C = s.models[2].correction[i];
+          const Pose& C = s.models[final_at].correction[i];
           if (C.R == Mat3::Identity() && C.t == Vec3::Zero()) continue;
           const Pose T = C * PredictedTool(pv, pv.rows[i], fin.theta);
           frozen.R.row(i).head(3) = (T.t - pv.rows[i].p).transpose();

@@ -93,6 +93,8 @@ std::string MovedText(const SessionScore& s) {
   const ModelScore* reg = ModelNamed(s, "registration");
   const ModelScore* geo = ModelNamed(s, "geometry");
   const ModelScore* fin = ModelNamed(s, "final");
+  const ModelScore* nom = ModelNamed(s, "nominal");
+  if (nom && reg) lines += MovedLine("the tool and each station's placement (nominal -> registration)", *nom, *reg);
   if (reg && geo) lines += MovedLine("geometry (registration -> geometry)", *reg, *geo);
   const std::string prefix = "final without ";
   if (fin)
@@ -257,8 +259,11 @@ std::string ValidationText(const std::vector<SessionScore>& sessions) {
       }
     out += MovedText(s);
     if (pm && pm->stations.size() > 1) {
-      const ModelScore* reg = ModelNamed(s, "registration");
-      out += "  per station (point 1, mm; registration -> final): mean, 95 % xy, 95 % |z|, max\n";
+      // From the robot file as given where it was scored (the baseline a user of the robot
+      // has), else from the registration alone.
+      const ModelScore* reg = ModelNamed(s, "nominal");
+      if (!reg) reg = ModelNamed(s, "registration");
+      out += "  per station (point 1, mm; " + (reg ? reg->model + " -> " : std::string()) + "final): mean, 95 % xy, 95 % |z|, max\n";
       for (size_t k = 0; k < pm->stations.size(); ++k) {
         const auto& [name, p] = pm->stations[k];
         const PointScore* r = nullptr;

@@ -5,8 +5,10 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdint>
+#include <cstdio>
 #include <fstream>
-#include <set>
+#include <map>
 #include <utility>
 
 #include "core/error.h"
@@ -31,16 +33,57 @@ std::vector<std::string> Entries(const std::filesystem::path& root) {
   return out;
 }
 
-// The record an output folder keeps of what its run wrote: "mcms <kind>", then one
-// relative path per line. Empty kind when there is none.
-std::pair<std::string, std::set<std::string>> ReadManifest(const std::filesystem::path& folder) {
+// What an entry of an output folder is, as its record keeps it: "d" for a folder, "l <hash>"
+// for a symbolic link (of its target), "f <size> <hash>" for a file (64-bit FNV-1a of its
+// bytes). A record names only what its run wrote as it wrote it: an entry added to the record
+// by hand, or a file changed since, no longer matches and is the user's (issue 53: a record
+// edited to list notes.txt must not let a run delete it).
+std::string Fingerprint(const std::filesystem::path& p) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const auto st = fs::symlink_status(p, ec);
+  if (ec) return "?";
+  uint64_t h = 14695981039346656037ull;
+  const auto Mix = [&h](const char* b, size_t n) {
+    for (size_t i = 0; i < n; ++i) h = (h ^ static_cast<unsigned char>(b[i])) * 1099511628211ull;
+  };
+  char hex[17];
+  const auto Hex = [&] {
+    std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+    return std::string(hex);
+  };
+  if (fs::is_symlink(st)) {
+    const std::string target = fs::read_symlink(p, ec).string();
+    Mix(target.data(), target.size());
+    return "l " + Hex();
+  }
+  if (fs::is_directory(st)) return "d";
+  if (!fs::is_regular_file(st)) return "?";
+  std::ifstream in(p, std::ios::binary);
+  if (!in) return "?";
+  std::vector<char> buf(1 << 16);
+  uint64_t size = 0;
+  while (in) {
+    in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+    const auto n = static_cast<size_t>(in.gcount());
+    Mix(buf.data(), n);
+    size += n;
+  }
+  return "f " + std::to_string(size) + " " + Hex();
+}
+
+// The record an output folder keeps of what its run wrote: "mcms <kind>", then one line per
+// entry, its relative path, a tab and its fingerprint. Empty kind when there is none.
+std::pair<std::string, std::map<std::string, std::string>> ReadManifest(const std::filesystem::path& folder) {
   std::ifstream in(folder / kManifest);
-  std::pair<std::string, std::set<std::string>> m;
+  std::pair<std::string, std::map<std::string, std::string>> m;
   std::string line;
   if (!in || !std::getline(in, line) || line.rfind("mcms ", 0) != 0) return m;
   m.first = line.substr(5);
-  while (std::getline(in, line))
-    if (!line.empty()) m.second.insert(line);
+  while (std::getline(in, line)) {
+    const size_t tab = line.rfind('\t');
+    if (!line.empty()) m.second[line.substr(0, tab)] = tab == std::string::npos ? "" : line.substr(tab + 1);
+  }
   return m;
 }
 
@@ -57,8 +100,11 @@ void RequireReplaceableFolder(const std::filesystem::path& folder, const std::ve
   // anything else (the user's own files) is refused, and nothing in it is touched.
   const auto [recorded_kind, recorded] = ReadManifest(folder);
   std::vector<std::string> foreign;
-  for (const std::string& e : Entries(folder))
-    if (e != kManifest && !recorded.count(e)) foreign.push_back(e);
+  for (const std::string& e : Entries(folder)) {
+    if (e == kManifest) continue;
+    const auto it = recorded.find(e);
+    if (it == recorded.end() || it->second != Fingerprint(folder / e)) foreign.push_back(e);
+  }
   if (recorded_kind == kind && foreign.empty()) {
     // Replacing it removes every file in it: a folder inside that cannot be written would
     // stop that half-way (and leave the old output beside the new one).
@@ -83,7 +129,8 @@ void RequireReplaceableFolder(const std::filesystem::path& folder, const std::ve
   if (recorded_kind != kind)
     Throw(what, ": folder ", folder.string(), " holds the output of mcms ", recorded_kind, ", not of ", kind,
           "; nothing in it was touched: choose a new folder or remove it");
-  Throw(what, ": folder ", folder.string(), " holds an earlier ", kind, " and files that run did not write: ", list,
+  Throw(what, ": folder ", folder.string(), " holds an earlier ", kind,
+        " and files that run did not write (or that changed since): ", list,
         "; nothing in it was touched: move them out, or choose a new folder");
 }
 
@@ -92,7 +139,7 @@ void RecordOutputFolder(const std::filesystem::path& folder, const std::string& 
   std::erase(written, std::string(kManifest));
   std::ofstream m(folder / kManifest);
   m << "mcms " << kind << "\n";
-  for (const std::string& e : written) m << e << "\n";
+  for (const std::string& e : written) m << e << "\t" << Fingerprint(folder / e) << "\n";
   if (!m.flush()) Throw("cannot write ", (folder / kManifest).string());
 }
 

@@ -12,10 +12,12 @@ namespace mcms {
 
 // `write` fills a temporary folder beside `folder`, which is renamed into place only when
 // `write` returned normally; the folder records what the run wrote in `.mcms-output`
-// ("mcms <kind>", then one relative path per line). An existing `folder` is replaced only
-// when it is empty or holds an earlier output of the same `kind` (e.g. "render") and
-// nothing but what that run recorded: a folder with any other file (the user's own, an
-// output of another command, one written before the record existed) is refused before
+// ("mcms <kind>", then per entry its relative path and fingerprint: size and content hash of
+// a file). An existing `folder` is replaced only when it is empty or holds an earlier output
+// of the same `kind` (e.g. "render") and nothing but what that run recorded, unchanged: a
+// folder with any other file (the user's own, a file the record names but the run did not
+// write as it stands, an output of another command, one written before the record existed)
+// is refused before
 // `write` runs, and nothing in it is touched (InputError naming `what`, e.g. "fov-map -o",
 // the folder and the foreign files; `marker_files` are named in the message). What an
 // interrupted run left beside the folder (".<name>.partial-PID" of a process that no

@@ -12,7 +12,8 @@ Which lines are commands (decided per block, the same way on every page):
 - an indented block (lines of 4 spaces after a blank line, outside fences) whose first line
   starts with a command: `mcms`, `cd`, `cp`, `python3`, `/usr/bin/python3`, `cmp`, `diff`,
   `ls`, `./scripts/...`, `./build/...`, `build/...` or `examples/...`, optionally after
-  `VAR=value` assignments.
+  `VAR=value` assignments, or a line that is one `VAR=value` assignment (a path the next
+  lines use).
   Other indented blocks (Python, formulas) and plain fences (diagrams) are not commands.
 A trailing backslash continues a command; `#` comment lines are skipped, trailing comments
 are kept (bash ignores them). Commands written inline in the prose (synopses like
@@ -49,7 +50,7 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHELL_INFO = {"sh", "bash", "shell", "console"}
 COMMAND_START = re.compile(r"^(\w+=\S*\s+)*(mcms|cd|cp|python3|/usr/bin/python3|cmp|diff|ls|\./scripts/\S*|"
-                           r"\./build/\S*|build/\S*|examples/\S*)(\s|$)")
+                           r"\./build/\S*|build/\S*|examples/\S*)(\s|$)|^\w+=\S*\s*$")
 NOT_RUN = re.compile(r"^\s*<!--\s*not run:\s*(.*?)\s*-->\s*$")
 NEEDS_DATA = re.compile(r"^\s*<!--\s*needs data:\s*(\S+)\s*-->\s*$")
 

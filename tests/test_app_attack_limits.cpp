@@ -212,6 +212,22 @@ TEST(AttackLimits, OutputFoldersHoldingTheUsersFilesAreRefusedAndKept) {
   // A file added to it since is the user's: refused, kept.
   test::WriteText(d / "aud" / "mine.txt", "x\n");
   ExpectRefused(d, "audit robot log.csv -o aud -q", {"aud", "mine.txt"});
+  // Issue 53: the record edited to list it (with or without a fingerprint made up) does not
+  // make it the run's: refused, kept; and so is a file the run wrote that was edited since.
+  {
+    const std::string record = test::ReadAll(d / "aud" / ".mcms-output");
+    test::WriteText(d / "aud" / ".mcms-output", record + "mine.txt\n");
+    ExpectRefused(d, "audit robot log.csv -o aud -q", {"aud", "mine.txt", "or that changed since"});
+    test::WriteText(d / "aud" / ".mcms-output", record + "mine.txt\tf 2 0000000000000000\n");
+    ExpectRefused(d, "audit robot log.csv -o aud -q", {"aud", "mine.txt"});
+    EXPECT_EQ(test::ReadAll(d / "aud" / "mine.txt"), "x\n");
+    fs::remove(d / "aud" / "mine.txt");
+    test::WriteText(d / "aud" / ".mcms-output", record);
+    test::WriteText(d / "aud" / "report.txt", test::ReadAll(d / "aud" / "report.txt") + "my remark\n");
+    ExpectRefused(d, "audit robot log.csv -o aud -q", {"aud", "report.txt", "or that changed since"});
+    EXPECT_NE(test::ReadAll(d / "aud" / "report.txt").find("my remark"), std::string::npos);
+    test::WriteText(d / "aud" / "mine.txt", "x\n");
+  }
   // Another command's output folder is not replaced either.
   ExpectRefused(d, "fov-map -o aud --quiet", {"aud", "audit robot", "not of"});
 

@@ -346,8 +346,9 @@ TEST(Sessions, RealConstructionRobotReadAsPublished) {
 
 // The construction robot fitted on its level-floor session, each of its stations placed
 // from its own rows, and scored frozen on the pallet session with each station placed from
-// its four square stationing points: no nested fit below its base, the geometry better than
-// the registered robot file on the other session's evaluation points.
+// its four square stationing points: no nested fit below its base, the publisher's baseline
+// reproduced, the geometry better than the registered robot file on the other session's
+// evaluation points.
 TEST(Sessions, RealConstructionRobotCalibratedOnFlatScoredOnPallet) {
   MCMS_REQUIRE_DATA(dir, "hilti-trailblazer");
   const RobotModel r = RobotModel::Read(dir / "trailblazer.urdf", {"", "prism"});
@@ -366,6 +367,14 @@ TEST(Sessions, RealConstructionRobotCalibratedOnFlatScoredOnPallet) {
     EXPECT_GE(p.stationing_rows, 3) << p.station;  // the square's four points (one may be missing)
     EXPECT_LE(p.stationing_rows, 4) << p.station;
   }
+  // The publisher's baseline (its example_kabsch.py: the URDF as given, each station placed
+  // by Kabsch on its four square points), as the data README tabulates it for pallet.yaml:
+  // mean 8.30, 95 % xy 16.31, 95 % |z| 6.41 mm.
+  const ModelScore& nom = ModelOf(s, "nominal");
+  EXPECT_NEAR(nom.points[0].mean_m * 1e3, 8.30, 0.1) << text;
+  EXPECT_NEAR(nom.points[0].p95_xy_m * 1e3, 16.31, 0.1) << text;
+  EXPECT_NEAR(nom.points[0].p95_z_m * 1e3, 6.41, 0.1) << text;
+  EXPECT_EQ(nom.points[0].rows, 316);
   EXPECT_LT(geo.points[0].p95_xy_m, 0.85 * reg.points[0].p95_xy_m) << text;
   EXPECT_LT(geo.points[0].mean_m, 0.75 * reg.points[0].mean_m) << text;
   // A geometric term the poses cannot see, or that runs to its bound, is held, never named.
