@@ -744,6 +744,47 @@ Eigen::Matrix3Xd PointsOfRow(const RobotLog& log, int i) {
 // Kabsch: the pose mapping `ref` (body frame) onto `P` (meas frame), least squares.
 Pose Align(const Eigen::Matrix3Xd& ref, const Eigen::Matrix3Xd& P) { return RigidFit(ref, P); }
 
+// Measured orientations (qw, qx, qy, qz) against the robot, once the positions fit: the
+// tool's rotation on the flange, (R_meas_base R_base_flange)^T R_meas_tool, is one rotation
+// in every row, to a fraction of a degree for any robot its description fits. Spread over
+// tens of degrees, they are not the robot's tool orientations: read scalar-last (the same
+// four numbers as x, y, z, w), the usual mix-up, is said when that makes them agree.
+// The median angle of each row's rotation from their chordal mean is compared with 10 deg.
+double MedianSpreadDeg(const std::vector<Mat3>& R) {
+  Mat3 sum = Mat3::Zero();
+  for (const Mat3& r : R) sum += r;
+  Eigen::JacobiSVD<Mat3> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 D = Mat3::Identity();
+  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0) D(2, 2) = -1;
+  const Mat3 mean = svd.matrixU() * D * svd.matrixV().transpose();
+  std::vector<double> a;
+  for (const Mat3& r : R) a.push_back(Eigen::AngleAxisd(mean.transpose() * r).angle());
+  return SelectedMedian(a) * 180 / std::numbers::pi;
+}
+
+void CheckOrientationsFitTheRobot(const RobotModel& robot, const RobotLog& log, const std::vector<Pose>& flange,
+                                  const Pose& T) {
+  std::vector<Mat3> tool, tool_xyzw;
+  for (size_t i = 0; i < log.rows.size(); ++i) {
+    if (!log.rows[i].R_meas_tool) return;
+    const Mat3 to_flange = (T.R * flange[i].R).transpose();
+    const Eigen::Quaterniond q(*log.rows[i].R_meas_tool);
+    const Eigen::Quaterniond alt(q.z(), q.w(), q.x(), q.y());  // the same four numbers, scalar last
+    tool.push_back(to_flange * *log.rows[i].R_meas_tool);
+    tool_xyzw.push_back(to_flange * alt.normalized().toRotationMatrix());
+  }
+  if (tool.size() < 4) return;
+  const double spread = MedianSpreadDeg(tool);
+  if (!(spread > 10)) return;
+  const double spread_xyzw = MedianSpreadDeg(tool_xyzw);
+  Throw(log.source.empty() ? std::string("robot log") : log.source.string(), ": the measured orientations (qw, qx, ",
+        "qy, qz) do not follow robot '", robot.Name(), "': the tool's rotation on the flange they imply varies by ",
+        Num4(spread), " deg (median from its mean) where a robot its description fits keeps it within a degree",
+        spread_xyzw < 2 ? "; read scalar-last they agree to " + Num4(spread_xyzw) +
+                              " deg: quaternions x, y, z, w under qw, qx, qy, qz? expected qw, qx, qy, qz (scalar first)"
+                        : std::string("; are the orientations those of the tool whose positions the log gives?"));
+}
+
 // Rows of another layout among the others (x and y exchanged in some rows, a row in
 // another unit): once the scale is right, the best rigid registration and tool position
 // leave residuals of the size of the motion itself, where any robot the description
@@ -779,7 +820,10 @@ void CheckRowsFitTheRobot(const RobotModel& robot, const RobotLog& log) {
   }
   const double rms = std::sqrt(ss / N);
   const double spread = std::sqrt((dst.colwise() - dst.rowwise().mean()).squaredNorm() / N);
-  if (!(rms > std::max(0.1 * spread, 0.02))) return;
+  if (!(rms > std::max(0.1 * spread, 0.02))) {
+    CheckOrientationsFitTheRobot(robot, log, flange, T);
+    return;
+  }
   Throw(log.source.empty() ? std::string("robot log") : log.source.string(),
         ": with the best registration and tool position, robot '", robot.Name(),
         "' explains the measured positions only to ", Num4(1e3 * rms), " mm RMS while they spread over ",

@@ -48,34 +48,55 @@ constexpr size_t kMaxSortableRows = 2000;         // a longer table shows its fi
 // Why `s` is not UTF-8 text ("" when it is): a NUL byte, a control character other than
 // tab, line feed, carriage return and form feed, or a byte sequence that is not UTF-8 (a
 // sequence cut at the end of a bounded read is allowed).
+// The length of the UTF-8 sequence at s[i] (1 for ASCII); 0 where it is not UTF-8, -1 where
+// a valid start is cut by the end of `s`.
+int Utf8Length(const std::string& s, size_t i) {
+  const auto c = static_cast<unsigned char>(s[i]);
+  if (c < 0x80) return 1;
+  int len = 0;  // the sequence's length by its lead byte
+  if (c >= 0xc2 && c <= 0xdf) len = 2;
+  else if (c >= 0xe0 && c <= 0xef) len = 3;
+  else if (c >= 0xf0 && c <= 0xf4) len = 4;
+  if (len == 0) return 0;
+  for (int k = 1; k < len; ++k) {
+    if (i + k >= s.size()) return -1;
+    if ((static_cast<unsigned char>(s[i + k]) & 0xc0) != 0x80) return 0;
+  }
+  return len;
+}
+
+bool ControlCharacter(unsigned char c) { return c < 0x20 && c != '\t' && c != '\n' && c != '\r' && c != '\f'; }
+
 std::string NotText(const std::string& s) {
   for (size_t i = 0; i < s.size();) {
     const auto c = static_cast<unsigned char>(s[i]);
-    if (c < 0x80) {
-      if (c == 0) return "a NUL byte at " + std::to_string(i);
-      if (c < 0x20 && c != '\t' && c != '\n' && c != '\r' && c != '\f')
-        return "control character " + std::to_string(c) + " at " + std::to_string(i);
-      ++i;
-      continue;
-    }
-    int len = 0;  // the sequence's length by its lead byte
-    if (c >= 0xc2 && c <= 0xdf) len = 2;
-    else if (c >= 0xe0 && c <= 0xef) len = 3;
-    else if (c >= 0xf0 && c <= 0xf4) len = 4;
+    if (c == 0) return "a NUL byte at " + std::to_string(i);
+    if (ControlCharacter(c)) return "control character " + std::to_string(c) + " at " + std::to_string(i);
+    const int len = Utf8Length(s, i);
+    if (len < 0) return "";
     if (len == 0) return "a byte that is not UTF-8 at " + std::to_string(i);
-    for (int k = 1; k < len; ++k) {
-      if (i + k >= s.size()) return "";
-      if ((static_cast<unsigned char>(s[i + k]) & 0xc0) != 0x80) return "a byte that is not UTF-8 at " + std::to_string(i);
-    }
     i += len;
   }
   return "";
 }
 
+// `s` escaped for HTML; a byte that is not UTF-8 or a control character (a file name is any
+// bytes but '/' and NUL) becomes U+FFFD, so the page stays UTF-8.
 std::string Html(const std::string& s) {
   std::string o;
   o.reserve(s.size());
-  for (char c : s) {
+  for (size_t i = 0; i < s.size(); ++i) {
+    const char c = s[i];
+    const int len = Utf8Length(s, i);
+    if (len <= 0 || (len == 1 && ControlCharacter(static_cast<unsigned char>(c)))) {
+      o += "\xef\xbf\xbd";
+      continue;
+    }
+    if (len > 1) {
+      o.append(s, i, static_cast<size_t>(len));
+      i += static_cast<size_t>(len) - 1;
+      continue;
+    }
     switch (c) {
       case '<':
         o += "&lt;";
@@ -232,6 +253,7 @@ struct File {
   fs::path path;
   std::string name;  // relative to the report folder
   uintmax_t size = 0;
+  bool link = false;  // a symbolic link: listed, never read
 };
 
 std::string FigureHtml(const std::string& svg, const std::string& caption) {
@@ -1158,12 +1180,17 @@ void ListFolder(const fs::path& dir, std::vector<File>* files_out,
     if (name.empty() || name[0] == '.' || name.find(".partial-") != std::string::npos ||
         Lower(e.path().extension().string()) == ".html")
       continue;
+    if (e.is_symlink(ec)) {
+      // A link is listed, never followed: it may name any file of the system (issue 53).
+      files.push_back({e.path(), name + " (a symbolic link, not followed)", 0, true});
+      continue;
+    }
     if (e.is_directory(ec) && name == "plots") {
       // The audits' plots/ folder: its figures are part of the run (the first screen shows
       // the one of a named effect).
       std::vector<File> plots;
       for (const auto& p : fs::directory_iterator(e.path(), ec))
-        if (p.is_regular_file(ec) && p.path().filename().string()[0] != '.' &&
+        if (!p.is_symlink(ec) && p.is_regular_file(ec) && p.path().filename().string()[0] != '.' &&
             p.path().filename().string().find(".partial-") == std::string::npos)
           plots.push_back({p.path(), "plots/" + p.path().filename().string(), p.file_size(ec)});
       files.insert(files.end(), plots.begin(), plots.end());
@@ -1194,7 +1221,8 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   std::vector<const File*> svgs, csvs, reports, inputs, others;
   for (const auto& f : files) {
     const std::string ext = Lower(f.path.extension().string());
-    (ext == ".svg"                                                                ? svgs
+    (f.link               ? others
+     : ext == ".svg"                                                                ? svgs
      : ext == ".csv"                                                              ? csvs
      : ext == ".txt" || ext == ".md" || ext == ".log"                             ? reports
      : ext == ".yaml" || ext == ".yml" || ext == ".json" || ext == ".cameramodel" ? inputs

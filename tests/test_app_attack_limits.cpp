@@ -471,6 +471,24 @@ TEST(AttackLimits, SecondAttackFindings) {
   fs::remove(d / "rp" / "report.html");
   ASSERT_EQ(test::Mcms(d, "report rp").code, 0);
   EXPECT_EQ(test::Mcms(d, "report rp").code, 0) << "its own page is replaced";
+  // Issue 53: a link in the folder to a system file is listed, never followed into the page;
+  // a file name that is not UTF-8 is shown with U+FFFD, the page stays UTF-8.
+  {
+    fs::create_directories(d / "rl");
+    test::WriteText(d / "rl" / "notes.txt", "run notes\n");
+    test::WriteText(d / "rl" / "odd\xff\xfe.txt", "x\n");
+    test::WriteText(d / "secret.yaml", "token: s3cr3t-value\n");
+    fs::remove(d / "rl" / "robot.yaml");
+    fs::create_symlink(d / "secret.yaml", d / "rl" / "robot.yaml");
+    fs::remove(d / "rl" / "report.html");
+    const CliRun r = test::Mcms(d, "report rl");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const std::string page = test::ReadAll(d / "rl" / "report.html");
+    EXPECT_EQ(page.find("s3cr3t-value"), std::string::npos) << "a link followed into the page";
+    EXPECT_NE(page.find("robot.yaml (a symbolic link, not followed)"), std::string::npos);
+    EXPECT_EQ(page.find("\xff"), std::string::npos) << "a byte that is not UTF-8 in the page";
+    EXPECT_NE(page.find("odd\xef\xbf\xbd\xef\xbf\xbd.txt"), std::string::npos);
+  }
 
   // 9 levels of 9 aliases: 387 million values once expanded.
   std::string bomb = "a0: &a0 [x, x, x, x, x, x, x, x, x]\n";

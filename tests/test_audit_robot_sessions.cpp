@@ -314,6 +314,27 @@ TEST(Sessions, GarbageInRobotLogsIsNamed) {
   for (auto& r : line.rows) r.other_points = {r.p_meas + Vec3(0.05, 0, 0), r.p_meas + Vec3(0.1, 0, 0)};
   e = ErrorOf([&] { FitRigidBody(line); });
   EXPECT_NE(e.find("points of the rigid body lie on one line"), std::string::npos) << e;
+  // Measured orientations in x, y, z, w order under qw..qz (issue 53: the audit answered
+  // with 651 mm residuals): named, where the right order passes.
+  {
+    RobotLog six = log;
+    const Pose T{ExpSO3(Vec3(0.01, -0.02, 1.2)), Vec3(2.0, 0.5, -0.2)};
+    const Pose tool{ExpSO3(Vec3(0.3, 0.1, -0.2)), Vec3(0.01, -0.02, 0.06)};
+    for (size_t i = 0; i < six.rows.size(); ++i) {
+      auto& r = six.rows[i];
+      const Pose P = T * kr5.T_base_flange(r.q) * tool;
+      const double k = static_cast<double>(i);
+      r.p_meas = P.t + 2e-5 * Vec3(std::sin(k), std::cos(3 * k), std::sin(7 * k));  // a tracker's noise
+      r.R_meas_tool = P.R;
+    }
+    EXPECT_NO_THROW(CheckRobotLogPlausible(six, kr5));
+    for (auto& r : six.rows) {
+      const Eigen::Quaterniond q(*r.R_meas_tool);
+      r.R_meas_tool = Eigen::Quaterniond(q.x(), q.y(), q.z(), q.w()).normalized().toRotationMatrix();
+    }
+    e = ErrorOf([&] { CheckRobotLogPlausible(six, kr5); });
+    EXPECT_NE(e.find("quaternions x, y, z, w under qw, qx, qy, qz?"), std::string::npos) << e;
+  }
   // A chain beyond any robot's.
   std::vector<Joint> many(kMaxRobotJoints + 1);
   e = ErrorOf([&] { RobotModel("many", ChainConvention::kStandard, many); });
