@@ -282,8 +282,37 @@ RobotModel RobotModel::Read(const std::filesystem::path& path, const ChainSelect
   return Parse(ReadTextFile(path), "robot file " + path.string());
 }
 
+namespace {
+
+// The mesh files a URDF names (<mesh filename>, relative to its folder or file://) are part
+// of what a user keeps beside it: recorded as inputs of the run, so that no output replaces
+// one (issue 53: calib-robot -o meshes/base.stl). package:// and remote names are not
+// resolved here.
+void NoteMeshFiles(const std::string& xml, const std::filesystem::path& urdf) {
+  TiXmlDocument doc;
+  doc.Parse(xml.c_str());
+  if (doc.Error() || !doc.RootElement()) return;
+  std::vector<const TiXmlElement*> stack{doc.RootElement()};
+  while (!stack.empty()) {
+    const TiXmlElement* e = stack.back();
+    stack.pop_back();
+    if (e->ValueStr() == "mesh" && e->Attribute("filename")) {
+      std::string f = e->Attribute("filename");
+      if (f.rfind("file://", 0) == 0) f = f.substr(7);
+      if (!f.empty() && f.find("://") == std::string::npos)
+        NoteInputRead(std::filesystem::path(f).is_absolute() ? std::filesystem::path(f) : urdf.parent_path() / f);
+    }
+    for (const TiXmlElement* c = e->FirstChildElement(); c; c = c->NextSiblingElement()) stack.push_back(c);
+  }
+}
+
+}  // namespace
+
 RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& chain) {
-  return ParseUrdf(ReadTextFile(path), "robot file " + path.string(), chain);
+  const std::string xml = ReadTextFile(path);
+  RobotModel r = ParseUrdf(xml, "robot file " + path.string(), chain);
+  NoteMeshFiles(xml, path);
+  return r;
 }
 
 RobotModel ParseUrdf(const std::string& xml, const std::string& source, const ChainSelection& chain) {

@@ -138,6 +138,13 @@ class Reader {
     if (!(v > 0)) Bad(n, field, "expected a number > 0" + Found(n));
     return v;
   }
+  // A camera's frame rate: from a time-lapse's one frame in 1000 s to a high-speed
+  // camera's 1 MHz (issue 53: 1e-300 Hz rendered frame times of 63 digits).
+  double Rate(const YAML::Node& n, const std::string& field) const {
+    const double v = Positive(n, field);
+    if (!(v >= 1e-3 && v <= 1e6)) Bad(n, field, "expected a frame rate from 0.001 to 1e6 Hz" + Found(n));
+    return v;
+  }
   long long Integer(const YAML::Node& n, const std::string& field, long long min) const {
     long long v = 0;
     bool ok = n.IsScalar();
@@ -377,7 +384,7 @@ void ParseExplicitMotion(const Reader& r, const YAML::Node& n, Scenario* s) {
   if (!poses.IsSequence() || poses.size() == 0)
     r.Bad(poses, "motion.poses", "expected a non-empty list of {t_m, q_wxyz, time_s}" + r.Found(poses));
   std::optional<double> rate;
-  if (n["rate_hz"]) rate = r.Positive(n["rate_hz"], "motion.rate_hz");
+  if (n["rate_hz"]) rate = r.Rate(n["rate_hz"], "motion.rate_hz");
   for (size_t i = 0; i < poses.size(); ++i) {
     const YAML::Node p = poses[i];
     const std::string f = "motion.poses[" + std::to_string(i) + "]";
@@ -404,7 +411,7 @@ void ParseLissajous(const Reader& r, const YAML::Node& n, Scenario* s) {
          "motion");
   const long long frames = r.Integer(r.Require(n, "frames", "motion", "number of frames"), "motion.frames", 1);
   if (frames > 10000000) r.Bad(n["frames"], "motion.frames", "expected at most 10000000 frames");
-  const double rate = r.Positive(r.Require(n, "rate_hz", "motion", "frame rate in Hz"), "motion.rate_hz");
+  const double rate = r.Rate(r.Require(n, "rate_hz", "motion", "frame rate in Hz"), "motion.rate_hz");
   const double start = n["start_s"] ? r.Number(n["start_s"], "motion.start_s") : 0.0;
   const Vec3 centre = r.Vector3(r.Require(n, "centre_m", "motion", "centre of the path"), "motion.centre_m");
   const Vec3 amp = r.Vector3(r.Require(n, "amplitude_m", "motion", "half extent of the path"), "motion.amplitude_m");

@@ -121,6 +121,19 @@ TEST(AttackLimits, TwoOutputsOnOneFileAreRefusedNamingBoth) {
   ExpectRefused(d, "calib-robot m.yaml -o x.yaml --report x.yaml --quiet",
                 {"calib-robot -o x.yaml", "calib-robot --report x.yaml", "name the same file"});
   ExpectRefused(d, "calib-robot m.yaml -o x.yaml --report sub/../x.yaml --quiet", {"name the same file"});
+  // A file the robot's URDF names (a mesh) is the user's, like the URDF (issue 53).
+  {
+    std::string urdf = test::ReadAll(kSource / "examples" / "robots" / "kuka_kr5_arc.urdf");
+    const std::string link = "<link name=\"A1_link\">";
+    urdf.replace(urdf.find(link), link.size(),
+                 link + "<visual><geometry><mesh filename=\"meshes/a1.xml\"/></geometry></visual>");
+    test::WriteText(d / "kr5m.urdf", urdf);
+    fs::create_directories(d / "meshes");
+    test::WriteText(d / "meshes" / "a1.xml", "<mesh of the user's/>\n");
+    ExpectRefused(d, "calib-robot m.yaml --robot kr5m.urdf -o meshes/a1.xml --quiet",
+                  {"meshes/a1.xml", "which this run read; it was not replaced"});
+    EXPECT_EQ(test::ReadAll(d / "meshes" / "a1.xml"), "<mesh of the user's/>\n");
+  }
   ExpectRefused(d, "calib-robot m.yaml -o x.yaml --plot x.yaml --quiet", {"--plot", "name the same file"});
   ExpectRefused(d, "fov-map --quiet -o out --json out/fov.json", {"fov-map -o out", "fov-map --json out/fov.json",
                                                                  "inside the other's output folder"});
