@@ -178,8 +178,12 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
   } else {
     s.robot = RobotModel::Default();
   }
-  // The fusion estimates T_base_flange; the target's mounting is T_flange_target.
-  s.robot.SetT_flange_tool(Pose::Identity());
+  // The fusion estimates T_base_flange; the target's mounting is T_flange_target. The
+  // flange of a DH table is its last frame (a tool it names is not the flange); that of a
+  // URDF is its tip link, reached through the fixed joints after the last moving one
+  // (issue 53: a DH table written as a URDF puts its flange frame there, the last moving
+  // link's frame sitting on the joint's axis).
+  if (!s.robot.Urdf()) s.robot.SetT_flange_tool(Pose::Identity());
 
   const YAML::Node br = root["T_base_rig"];
   if (!br) y.Fail(root, "missing 'T_base_rig' (the rig frame registered in the robot base)");

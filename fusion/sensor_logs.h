@@ -25,8 +25,10 @@
 //
 //  Setup (YAML; every key carries its unit; unknown keys are errors):
 //    robot: kr5.yaml                  # optional; relative to the setup file; default
-//                                     # RobotModel::Default() (KUKA KR 5 arc). Its tool
-//                                     # frame is ignored: the fusion estimates the flange.
+//                                     # RobotModel::Default() (KUKA KR 5 arc). The fusion
+//                                     # estimates the flange: a DH table's last frame (its
+//                                     # tool ignored), a URDF's tip link (the tool-like leaf
+//                                     # through the fixed joints after the last moving one).
 //    T_base_rig:                      # the rig (camera) frame registered in the robot base
 //      translation_m: [x, y, z]
 //      quaternion_wxyz: [w, x, y, z]
@@ -114,7 +116,7 @@ struct InclinometerLog {
 
 struct FusionSetup {
   std::filesystem::path source;
-  RobotModel robot;                        // T_flange_tool reset to identity
+  RobotModel robot;  // ends at the flange: a DH table's last frame (its tool reset), a URDF's tip link
   Pose T_base_rig;
   Mat6 T_base_rig_covariance = Mat6::Zero();  // [dtheta; dp], base frame
   Pose T_flange_target;

@@ -465,8 +465,10 @@ PoseWithCovariance CameraFlangePose(const Pose& T_rig_target, const Mat6& covari
 
 PoseWithCovariance RobotFlangePose(const Eigen::VectorXd& q, const FusionSetup& setup, double encoder_scale,
                                    double accuracy_scale) {
-  const PoseWithCovariance out = RobotFlangePose(setup.robot, q, encoder_scale * setup.robot.EncoderCovariance(),
-                                                 accuracy_scale * setup.robot_accuracy_covariance);
+  // The setup's robot ends at the fusion's flange (fusion/sensor_logs.h: its tool frame).
+  const PoseWithCovariance out =
+      RobotFlangePose(setup.robot, q, encoder_scale * setup.robot.EncoderCovariance(),
+                      accuracy_scale * setup.robot_accuracy_covariance, RobotModel::EndFrame::kTool);
   if (out.covariance.llt().info() != Eigen::Success || !(out.covariance.diagonal().minCoeff() > 0))
     Throw("robot '", setup.robot.Name(),
           "': its pose covariance is singular; give encoder sigmas in the robot file or ",

@@ -17,10 +17,10 @@ PoseWithCovariance CameraFlangePose(const CellGeometry& cell, const Pose& T_rig_
 }
 
 PoseWithCovariance RobotFlangePose(const RobotModel& robot, const Eigen::VectorXd& q, const Eigen::MatrixXd& Q,
-                                   const Mat6& accuracy_covariance) {
+                                   const Mat6& accuracy_covariance, RobotModel::EndFrame end) {
   PoseWithCovariance out;
-  out.T = robot.T_base_flange(q);
-  out.covariance = robot.PoseCovariance(q, Q, RobotModel::EndFrame::kFlange) + accuracy_covariance;
+  out.T = end == RobotModel::EndFrame::kTool ? robot.T_base_tool(q) : robot.T_base_flange(q);
+  out.covariance = robot.PoseCovariance(q, Q, end) + accuracy_covariance;
   out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
   return out;
 }

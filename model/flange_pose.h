@@ -32,8 +32,11 @@ struct CellGeometry {
 PoseWithCovariance CameraFlangePose(const CellGeometry& cell, const Pose& T_rig_target, const Mat6& covariance_rig);
 
 // T_base_flange from joint readings q with joint covariance Q (n x n) through the robot's
-// kinematics (J Q J^T, paper eq. 8), plus the robot's absolute-accuracy covariance.
+// kinematics (J Q J^T, paper eq. 8), plus the robot's absolute-accuracy covariance. `end`:
+// the frame the fusion calls the flange (kTool where the robot's tool frame is that flange,
+// as a fusion setup's robot: a URDF's tip link).
 PoseWithCovariance RobotFlangePose(const RobotModel& robot, const Eigen::VectorXd& q, const Eigen::MatrixXd& Q,
-                                   const Mat6& accuracy_covariance);
+                                   const Mat6& accuracy_covariance,
+                                   RobotModel::EndFrame end = RobotModel::EndFrame::kFlange);
 
 }  // namespace mcms

@@ -346,3 +346,36 @@ TEST(BadInput, FusionWindowsBeyondOrOutsideTheLogs) {
 
 }  // namespace
 }  // namespace mcms
+
+namespace mcms {
+namespace {
+
+// Issue 53: one flange for both descriptions of a robot. The KR 5 as its DH table (the
+// default) and as the URDF written from it fuse the same logs to the same poses: the URDF's
+// flange is its tip link, through the fixed joint after A6.
+TEST(AppFuse, TheSameRobotAsUrdfFusesTheSame) {
+  const auto d = test::ScratchDir("fuse_urdf_flange");
+  const fs::path ex = fs::path(MCMS_SOURCE_DIR) / "examples";
+  const RobotModel dh = RobotModel::Default();
+  const RobotModel urdf = RobotModel::Read(ex / "robots" / "kuka_kr5_arc.urdf");
+  for (double a : {0.1, 0.7, -0.2}) {
+    const Eigen::VectorXd q = Eigen::VectorXd::Constant(6, a);
+    const Pose A = dh.T_base_flange(q), B = urdf.T_base_tool(q);
+    EXPECT_LT((A.t - B.t).norm(), 1e-12) << a;
+    EXPECT_LT((A.R - B.R).norm(), 1e-12) << a;
+  }
+  for (const char* f : {"tracker_poses.csv", "robot_joints.csv", "inclinometer.csv", "fusion_setup.yaml"})
+    fs::copy_file(ex / "fusion" / f, d / f, fs::copy_options::overwrite_existing);
+  test::WriteText(d / "setup_urdf.yaml", test::ReadAll(d / "fusion_setup.yaml") + "robot: " +
+                                             (ex / "robots" / "kuka_kr5_arc.urdf").string() + "\n");
+  const std::string run = "fuse --tracker tracker_poses.csv --robot robot_joints.csv --inclinometer inclinometer.csv -q";
+  ASSERT_EQ(test::Mcms(d, run + " --setup fusion_setup.yaml -o dh.csv").code, 0);
+  const CliRun r = test::Mcms(d, run + " --setup setup_urdf.yaml -o urdf.csv");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const std::string a = test::ReadAll(d / "dh.csv"), b = test::ReadAll(d / "urdf.csv");
+  EXPECT_EQ(b.find("robot excluded"), std::string::npos);
+  EXPECT_EQ(std::count(a.begin(), a.end(), '\n'), std::count(b.begin(), b.end(), '\n'));
+}
+
+}  // namespace
+}  // namespace mcms
