@@ -167,15 +167,30 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
   FusionSetup s;
   s.source = source;
   y.Keys(root,
-         {"robot", "T_base_rig", "T_flange_target", "inclinometer", "robot_accuracy", "kalman",
-          "consistency_significance"},
+         {"robot", "base_link", "tip_link", "T_base_rig", "T_flange_target", "inclinometer", "robot_accuracy",
+          "kalman", "consistency_significance"},
          "setup");
   if (const YAML::Node r = root["robot"]) {
     fs::path p = r.as<std::string>();
     if (p.is_relative()) p = base_dir / p;
     if (!fs::exists(p)) y.Fail(r, "robot: file ", p.string(), " does not exist");
-    s.robot = RobotModel::Read(p);
+    // A URDF's chain: the setup's base_link and tip_link, as the robot commands' --base-link
+    // and --tip-link (named so in the messages: fuse has no such options).
+    ChainSelection chain;
+    if (root["base_link"]) chain.base_link = root["base_link"].as<std::string>();
+    if (root["tip_link"]) chain.tip_link = root["tip_link"].as<std::string>();
+    try {
+      s.robot = RobotModel::Read(p, chain);
+    } catch (const InputError& e) {
+      std::string w = e.what();
+      for (const auto& [option, key] : {std::pair<std::string, std::string>{"--tip-link", "tip_link (a key of the setup)"},
+                                        {"--base-link", "base_link (a key of the setup)"}})
+        for (size_t at = w.find(option); at != std::string::npos; at = w.find(option, at + key.size()))
+          w.replace(at, option.size(), key);
+      Throw(source.string(), ": ", w);
+    }
   } else {
+    if (root["base_link"] || root["tip_link"]) y.Fail(root, "base_link and tip_link pick the chain of a URDF given as robot:");
     s.robot = RobotModel::Default();
   }
   // The fusion estimates T_base_flange; the target's mounting is T_flange_target. The
@@ -375,8 +390,6 @@ JointLog ReadJointLog(const fs::path& path, const RobotModel& robot) {
           " joints of robot '", robot.Name(), "'; q<i>_deg is also accepted for revolute joints)");
   };
   if (!t.HasColumn("time_s")) refuse("missing column 'time_s'");
-  if (static_cast<int>(t.header.size()) != n + 1)
-    refuse("found ", t.header.size() - 1, " joint columns");
   std::vector<std::pair<int, double>> cols;
   for (int i = 0; i < n; ++i) {
     std::string base = "q";
@@ -391,6 +404,10 @@ JointLog ReadJointLog(const fs::path& path, const RobotModel& robot) {
     if (!any) refuse("missing column for joint ", i + 1, " ('", robot.Joints()[i].name, "')");
     cols.push_back(UnitColumn(t, header_line, base, units));
   }
+  // Counted after each joint's column is found (issue 53: q4_rad left out was told "found
+  // 3 joint columns").
+  if (static_cast<int>(t.header.size()) != n + 1)
+    refuse("found ", t.header.size() - 1, " joint columns");
   const int time = t.Column("time_s");
   JointLog log;
   log.source = path;

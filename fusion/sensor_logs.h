@@ -29,6 +29,8 @@
 //                                     # estimates the flange: a DH table's last frame (its
 //                                     # tool ignored), a URDF's tip link (the tool-like leaf
 //                                     # through the fixed joints after the last moving one).
+//    tip_link: tool0                  # optional, a URDF robot's chain (as --tip-link and
+//    base_link: base_link             # --base-link of the robot commands)
 //    T_base_rig:                      # the rig (camera) frame registered in the robot base
 //      translation_m: [x, y, z]
 //      quaternion_wxyz: [w, x, y, z]

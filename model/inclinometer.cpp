@@ -18,6 +18,11 @@ bool Inclinometer::IsValid(std::string* why) const {
     s << "bias must be finite";
   else if (!(sigma > 0) || !std::isfinite(sigma))
     s << "sigma must be positive and finite, is " << sigma;
+  else if (!(sigma <= 0.1))  // issue 53: 1e300 was taken; no tilt sensor is worse than 6 deg
+    s << "sigma is " << sigma << " rad (" << sigma * 180 / std::numbers::pi
+      << " deg); a tilt sensor's noise is at most 0.1 rad: is it in another unit?";
+  else if (!(bias.cwiseAbs().maxCoeff() <= 0.1))
+    s << "bias is (" << bias.x() << ", " << bias.y() << ") rad; a tilt sensor's zero is off by at most 0.1 rad";
   else if (!(period > 0) || !std::isfinite(period))
     s << "period must be positive and finite, is " << period;
   else if (!(range > 0) || !(range < 0.5 * std::numbers::pi))

@@ -519,7 +519,7 @@ TEST(AttackLimits, SecondAttackFindings) {
   ExpectRefused(d, "convert-robot deep.urdf -o r.yaml", {"deep.urdf", "nested more than 100 deep"});
 
   fs::copy_file(kSource / "examples" / "robot_measurements.yaml", d / "m.yaml", fs::copy_options::overwrite_existing);
-  ExpectRefused(d, "calib-robot m.yaml -o r.yaml --quiet --position-sigma-mm 1e-300", {"--position-sigma-mm", "1e-6 to 1000"});
+  ExpectRefused(d, "calib-robot m.yaml -o r.yaml --quiet --position-sigma-mm 1e-300", {"--position-sigma-mm", "1e-4 mm (an interferometer's 0.1 um) to 1000 mm"});
   ExpectRefused(d, "iso9283 --simulate --cycles 2000000000 -o x.csv", {"--cycles"});
   ExpectRefused(d, "paper fusion --repetitions 1000000 --points 1000000", {"--repetitions", "1e7"});
 

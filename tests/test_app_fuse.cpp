@@ -229,9 +229,15 @@ TEST(AppFuse, BadRobotLogsAreRefused) {
   {
     Logs l = clean;
     for (auto& s : l.files["joints.csv"]) s = s.substr(0, s.rfind(','));
-    ExpectRefused(
-        "robot_count", l,
-        {"joints.csv line 1: found 5 joint columns", "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad", "6 joints"});
+    // The joint whose column is missing is named (issue 53), not the count.
+    ExpectRefused("robot_count", l,
+                  {"joints.csv line 1: missing column for joint 6 ('A6')",
+                   "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad", "6 joints"});
+  }
+  {
+    Logs l = clean;
+    for (auto& s : l.files["joints.csv"]) s += s.rfind("time_s", 0) == 0 ? ",q7_rad" : ",0";
+    ExpectRefused("robot_extra", l, {"joints.csv line 1: found 7 joint columns", "6 joints"});
   }
   {
     Logs l = clean;
@@ -375,6 +381,19 @@ TEST(AppFuse, TheSameRobotAsUrdfFusesTheSame) {
   const std::string a = test::ReadAll(d / "dh.csv"), b = test::ReadAll(d / "urdf.csv");
   EXPECT_EQ(b.find("robot excluded"), std::string::npos);
   EXPECT_EQ(std::count(a.begin(), a.end(), '\n'), std::count(b.begin(), b.end(), '\n'));
+  // A URDF of two arms: the setup names the chain with tip_link (fuse has no --tip-link).
+  test::WriteText(d / "two.urdf", R"(<robot name="two"><link name="b"/>
+    <joint name="j1" type="revolute"><parent link="b"/><child link="l1"/><axis xyz="0 0 1"/>
+      <limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="l1"/>
+    <joint name="j2" type="revolute"><parent link="b"/><child link="l2"/><axis xyz="0 1 0"/>
+      <limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="l2"/></robot>)");
+  test::WriteText(d / "setup_two.yaml", test::ReadAll(d / "fusion_setup.yaml") + "robot: two.urdf\n");
+  const CliRun two = test::Mcms(d, run + " --setup setup_two.yaml -o two.csv");
+  EXPECT_EQ(two.code, 2);
+  EXPECT_NE(two.err.find("setup_two.yaml"), std::string::npos) << two.err;
+  EXPECT_NE(two.err.find("give tip_link (a key of the setup)"), std::string::npos) << two.err;
+  EXPECT_EQ(two.err.find("--tip-link"), std::string::npos) << two.err;
+  EXPECT_FALSE(fs::exists(d / "two.csv"));
 }
 
 }  // namespace

@@ -267,6 +267,10 @@ TEST(StreamFusion, BadAccuracyCovariancesAndWindowFilesAreRefused) {
   negative.replace(negative.find("1e-8"), 4, "-1e-8");
   EXPECT_NE(message(negative + "]\n").find("positive semi-definite"), std::string::npos);
   EXPECT_NE(message(diag + "]\n  orientation_sigma_rad: 1e-4\n").find("not both"), std::string::npos);
+  // Issue 53: an inclinometer sigma of 1e300 rad is no tilt sensor.
+  EXPECT_NE(message(diag + "]\ninclinometer:\n  sigma_rad: 1e300\n").find("at most 0.1 rad: is it in another unit?"),
+            std::string::npos);
+  EXPECT_EQ(message(diag + "]\ninclinometer:\n  sigma_rad: 1e-4\n"), "no error");
 
   const fs::path d = test::ScratchDir("fusion_stream_windows");
   const auto windows_error = [&](const std::string& text) {
