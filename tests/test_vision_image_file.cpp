@@ -691,6 +691,15 @@ TEST(MappedReader, TruncatedPgmAndTiffAreRefusedWithTheFile) {
     EXPECT_TRUE(r.image.empty());
     EXPECT_NE(r.problem.find("cannot decode " + (d / name).string() + ": truncated PGM"), std::string::npos) << r.problem;
   }
+  {  // maxval 0 (issue 53: told only "cannot decode")
+    std::string pgm = "P5\n64 48\n0\n";
+    pgm += std::string(64 * 48, '\0');
+    test::WriteText(d / "z.pgm", pgm);
+    const Read r = ReadIt(d / "z.pgm", std::array<int, 2>{64, 48});
+    EXPECT_TRUE(r.image.empty());
+    EXPECT_NE(r.problem.find("z.pgm: its PGM header gives maxval 0; expected 1 to 65535"), std::string::npos)
+        << r.problem;
+  }
   {  // a TIFF whose strip runs past the end of the file
     Bytes b = BigEndianTiff(im);
     const Bytes tail(b.begin() + 8 + long(im.total() * 2), b.end());

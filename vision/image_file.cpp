@@ -780,7 +780,12 @@ Mapped MapPgm(const Mapping& m, const std::string& name, cv::Mat* image, bool* c
     ++i;  // the one byte after the number
   }
   const int64_t w = v[0], hh = v[1], maxval = v[2];
-  if (w <= 0 || hh <= 0 || maxval <= 0 || maxval > 65535) return Mapped::kNotHandled;
+  if (w > 0 && hh > 0 && (maxval <= 0 || maxval > 65535)) {  // issue 53: told only "cannot decode"
+    *problem = "cannot decode " + name + ": its PGM header gives maxval " + std::to_string(maxval) +
+               "; expected 1 to 65535 (the brightest value a pixel may have)";
+    return Mapped::kFailed;
+  }
+  if (w <= 0 || hh <= 0) return Mapped::kNotHandled;
   const int bytes = maxval < 256 ? 1 : 2;
   const size_t need = static_cast<size_t>(w) * static_cast<size_t>(hh) * bytes;
   if (n - i < need) {
