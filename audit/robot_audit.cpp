@@ -909,6 +909,9 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
         Eigen::VectorXd as_given = nominal.theta;
         as_given.segment(6, pb.ts).setZero();
         s.models.push_back(ScoreModel("nominal", v, PointPredictions(pv, as_given), s.group_of_row, place));
+        // The same with the tilts its accelerometers measured (issue 52): nothing fitted.
+        const auto tilted = NominalWithMeasuredTilt(robot, v);
+        if (!tilted.empty()) s.models.push_back(ScoreModel("nominal + tilt", v, tilted, s.group_of_row, place));
       }
       const size_t final_at = s.models.size() + 2;
       for (const auto& [name, fit] : {std::pair<const char*, const FitResult*>{"registration", &nominal},

@@ -19,6 +19,7 @@
 #include "core/io.h"
 #include "core/statistics.h"
 #include "core/yaml.h"
+#include "model/tilt_sensor.h"
 
 namespace mcms {
 
@@ -479,6 +480,15 @@ RobotLog ReadStationingDataset(const std::filesystem::path& path, const YAML::No
             t.m.role = placed ? RowRole::kEvaluation : RowRole::kSpare;
             if (!placed) ++unplaced;
           }
+          // The two ADXL355 read as tilt sensors, named by the URDF links they sit on.
+          for (const auto& [key, link] : {std::pair<const char*, const char*>{"tilt_sensor_base_accel", "tilt_sensor_base"},
+                                          {"tilt_sensor_column_accel", "tilt_sensor_column_tip"}})
+            if (e[key]) {
+              const auto a = ReadList(e[key], where + " " + key);
+              if (a.size() != 3) Throw(where, ": ", key, " must have 3 numbers, has ", a.size());
+              CheckAccelerometerReading(Vec3(a[0], a[1], a[2]), where + " " + key);
+              t.m.accel.push_back({link, Vec3(a[0], a[1], a[2])});
+            }
           t.m.line = e.Mark().line + 1;
           t.m.source = where;
           rows.push_back(t);

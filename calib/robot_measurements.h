@@ -48,6 +48,9 @@ struct RobotMeasurement {
   // instrument or the robot set up anew); "" = the log's one placement.
   std::string station;
   RowRole role = RowRole::kEvaluation;
+  // Accelerometers at rest fixed to links of the robot's URDF (issue 52): per sensor, its
+  // link's name and its specific force in the sensor's frame (m/s^2; at rest, g upward).
+  std::vector<std::pair<std::string, Vec3>> accel;
   int line = 0;        // 1-based line in the file (0: made in code)
   std::string source;  // where it came from, for messages ("file.yaml measurement 5 (line 23)")
   int NumPoints() const { return 1 + static_cast<int>(other_points.size()); }

@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "core/statistics.h"
+#include "model/tilt_sensor.h"
 
 namespace mcms {
 
@@ -105,6 +107,44 @@ std::string MovedText(const SessionScore& s) {
 }
 
 }  // namespace
+
+std::vector<std::vector<Vec3>> NominalWithMeasuredTilt(const RobotModel& robot, const RobotLog& log) {
+  if (!log.has_stations || log.NumPoints() != 1 || log.rows.empty() || log.rows.front().accel.empty()) return {};
+  std::vector<LinkMount> mounts;
+  for (const auto& [link, a] : log.rows.front().accel) mounts.push_back(MountOnChain(robot, link));
+  const size_t ns = mounts.size();
+  for (const RobotMeasurement& r : log.rows) {
+    if (r.accel.size() != ns) return {};
+    for (size_t k = 0; k < ns; ++k)
+      if (r.accel[k].first != mounts[k].link) return {};
+  }
+  // Per station, each sensor's mean reading over its stationing rows.
+  std::map<std::string, std::vector<Vec3>> ref;
+  std::map<std::string, int> count;
+  for (const RobotMeasurement& r : log.rows) {
+    if (r.role != RowRole::kStationing) continue;
+    auto& v = ref[r.station];
+    v.resize(ns, Vec3::Zero());
+    for (size_t k = 0; k < ns; ++k) v[k] += r.accel[k].second;
+    ++count[r.station];
+  }
+  std::vector<std::vector<Vec3>> out(log.rows.size());
+  for (size_t i = 0; i < log.rows.size(); ++i) {
+    const RobotMeasurement& r = log.rows[i];
+    const std::vector<Pose> frames = robot.LinkFrames(r.q);
+    const Vec3 p = robot.T_base_tool(r.q).t;
+    const auto it = ref.find(r.station);
+    if (it == ref.end()) {
+      out[i] = {p};
+      continue;
+    }
+    std::vector<MeasuredTilt> tilts;
+    for (size_t k = 0; k < ns; ++k)
+      tilts.push_back({mounts[k], TiltSince(it->second[k] / count[r.station], r.accel[k].second)});
+    out[i] = {TiltCorrected(frames, tilts, p)};
+  }
+  return out;
+}
 
 ModelScore ScoreModel(const std::string& model, const RobotLog& log, const std::vector<std::vector<Vec3>>& predicted,
                       const std::vector<PostureGroup>& groups, const PlacementOptions& o) {

@@ -211,8 +211,6 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
 
 namespace {
 
-constexpr double kStandardGravity = 9.80665;
-
 // Torque on joint i (of a robot whose link frames are `frames`) of a force f at point p of
 // link k (1-based; moved by joints 1..k).
 void AddPointTorque(const RobotModel& robot, const std::vector<Pose>& frames, int k, const Vec3& p, const Vec3& f,
@@ -268,10 +266,9 @@ Eigen::MatrixXd GravityLever(const RobotModel& robot, const Eigen::VectorXd& q) 
 }
 
 Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorXd& q) {
-  constexpr double kG = 9.80665;
   const std::vector<Pose> frames = robot.LinkFrames(q);
   const Vec3 p = frames.back().t;
-  const Vec3 force(0.0, 0.0, -kG);
+  const Vec3 force(0.0, 0.0, -kStandardGravity);
   Eigen::VectorXd tau(robot.NumJoints());
   for (int i = 0; i < robot.NumJoints(); ++i) {
     const JointAxis ax = robot.AxisOf(frames, i);

@@ -35,6 +35,8 @@ struct ToolMass {
 
 // Which part of a URDF tree is the robot: empty names mean the URDF's root link, and the tip
 // that is unambiguous (the one leaf farthest from the base in movable joints).
+inline constexpr double kStandardGravity = 9.80665;  // m/s^2
+
 struct ChainSelection {
   std::string base_link, tip_link;
 };

@@ -282,6 +282,55 @@ RobotModel RobotModel::Read(const std::filesystem::path& path, const ChainSelect
   return Parse(ReadTextFile(path), "robot file " + path.string());
 }
 
+LinkMount MountOnChain(const RobotModel& robot, const std::string& link) {
+  const UrdfSource* u = robot.Urdf();
+  if (!u) Throw("a sensor on link '", link, "': robot '", robot.Name(), "' is not a URDF, which names its links");
+  urdf::ModelInterfaceSharedPtr model;
+  {
+    std::lock_guard<std::mutex> lock(ParserMutex());
+    CollectingHandler handler;
+    console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
+    console_bridge::useOutputHandler(&handler);
+    try {
+      model = urdf::parseURDF(u->text);
+    } catch (const std::exception&) {
+      model.reset();
+    }
+    console_bridge::useOutputHandler(previous);
+  }
+  if (!model) Throw(u->source, ": cannot be read again to place link '", link, "'");
+  const auto start = model->getLink(link);
+  if (!start)
+    Throw(u->source, ": a sensor on link '", link, "', which is not a link of the URDF (links: ",
+          NameList(LinkNames(*model)), ")");
+  LinkMount out;
+  out.link = link;
+  Pose T;  // T_<current link>_<sensor link>
+  for (auto l = start; l;) {
+    if (l->name == u->base_link) {
+      out.frame = 0;
+      out.R_frame_link = T.R;
+      return out;
+    }
+    const auto j = l->parent_joint;
+    if (!j) break;
+    for (int i = 0; i < robot.NumJoints(); ++i)
+      if (robot.Joints()[i].name == j->name) {
+        out.frame = i + 1;
+        out.R_frame_link = T.R;
+        return out;
+      }
+    if (j->type != urdf::Joint::FIXED)
+      Throw(u->source, ": a sensor on link '", link, "', which moves with joint '", j->name,
+            "', not a joint of the chain from '", u->base_link, "' to '", u->tip_link,
+            "': a sensor is read on the chain's links");
+    T = ToPose(j->parent_to_joint_origin_transform) * T;
+    l = model->getLink(j->parent_link_name);
+  }
+  Throw(u->source, ": a sensor on link '", link, "', which is not on the chain from '", u->base_link, "' to '",
+        u->tip_link, "' (nor fixed to one of its links)");
+}
+
 namespace {
 
 // The mesh files a URDF names (<mesh filename>, relative to its folder or file://) are part

@@ -45,6 +45,19 @@ bool IsUrdfFile(const std::filesystem::path& path);
 RobotModel ReadUrdf(const std::filesystem::path& path, const ChainSelection& chain = {});
 RobotModel ParseUrdf(const std::string& xml, const std::string& source, const ChainSelection& chain = {});
 
+// Where a sensor fixed to URDF link `link` rides on the robot's chain (issue 52: tilt
+// sensors named by their links): the index into RobotModel::LinkFrames of the moving link it
+// is fixed to (0: the chain's base) and its rotation in that frame (the fixed joints'
+// origins between). InputError naming the link: not a link of the URDF (the links listed),
+// on a branch off the chain (a moving joint between it and the chain), or the robot not
+// read from a URDF.
+struct LinkMount {
+  std::string link;
+  int frame = 0;
+  Mat3 R_frame_link = Mat3::Identity();
+};
+LinkMount MountOnChain(const RobotModel& robot, const std::string& link);
+
 // The robot's URDF with every chain joint's <origin> set to the model's placement (for a
 // calibrated model: the corrections folded in, exactly: FK of the written file equals the
 // model's T_base_flange), every other element as it was. `comments` (joint name -> text)
