@@ -41,6 +41,29 @@ std::mutex& ParserMutex() {
   return m;
 }
 
+// urdfdom's model of `xml`, its console messages collected (one parse at a time: the
+// console handler is global); InputError naming `source` with them when it fails.
+urdf::ModelInterfaceSharedPtr ParseWithUrdfdom(const std::string& xml, const std::string& source) {
+  urdf::ModelInterfaceSharedPtr model;
+  std::lock_guard<std::mutex> lock(ParserMutex());
+  CollectingHandler handler;
+  console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
+  console_bridge::useOutputHandler(&handler);
+  try {
+    model = urdf::parseURDF(xml);
+  } catch (const std::exception& e) {
+    handler.messages.push_back(e.what());
+    model.reset();
+  }
+  console_bridge::useOutputHandler(previous);
+  if (!model) {
+    std::string why;
+    for (const auto& m : handler.messages) why += (why.empty() ? "" : "; ") + m;
+    Throw(source, ": not a URDF that urdfdom can read: ", why.empty() ? std::string("(no reason given)") : why);
+  }
+  return model;
+}
+
 Pose ToPose(const urdf::Pose& p) {
   const Eigen::Quaterniond q(p.rotation.w, p.rotation.x, p.rotation.y, p.rotation.z);
   const double n = q.norm();
@@ -285,20 +308,7 @@ RobotModel RobotModel::Read(const std::filesystem::path& path, const ChainSelect
 LinkMount MountOnChain(const RobotModel& robot, const std::string& link) {
   const UrdfSource* u = robot.Urdf();
   if (!u) Throw("a sensor on link '", link, "': robot '", robot.Name(), "' is not a URDF, which names its links");
-  urdf::ModelInterfaceSharedPtr model;
-  {
-    std::lock_guard<std::mutex> lock(ParserMutex());
-    CollectingHandler handler;
-    console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
-    console_bridge::useOutputHandler(&handler);
-    try {
-      model = urdf::parseURDF(u->text);
-    } catch (const std::exception&) {
-      model.reset();
-    }
-    console_bridge::useOutputHandler(previous);
-  }
-  if (!model) Throw(u->source, ": cannot be read again to place link '", link, "'");
+  const urdf::ModelInterfaceSharedPtr model = ParseWithUrdfdom(u->text, u->source);
   const auto start = model->getLink(link);
   if (!start)
     Throw(u->source, ": a sensor on link '", link, "', which is not a link of the URDF (links: ",
@@ -420,25 +430,7 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
                 "'>; expected three finite numbers (m)");
       }
   }
-  urdf::ModelInterfaceSharedPtr model;
-  {
-    std::lock_guard<std::mutex> lock(ParserMutex());
-    CollectingHandler handler;
-    console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
-    console_bridge::useOutputHandler(&handler);
-    try {
-      model = urdf::parseURDF(xml);
-    } catch (const std::exception& e) {
-      handler.messages.push_back(e.what());
-      model.reset();
-    }
-    console_bridge::useOutputHandler(previous);
-    if (!model) {
-      std::string why;
-      for (const auto& m : handler.messages) why += (why.empty() ? "" : "; ") + m;
-      Throw(source, ": not a URDF that urdfdom can read: ", why.empty() ? std::string("(no reason given)") : why);
-    }
-  }
+  const urdf::ModelInterfaceSharedPtr model = ParseWithUrdfdom(xml, source);
   const urdf::ModelInterface& m = *model;
   const auto root = m.getRoot();
   if (!root) Throw(source, ": the URDF has no root link");
