@@ -109,7 +109,10 @@ std::string MovedText(const SessionScore& s) {
 }  // namespace
 
 std::vector<std::vector<Vec3>> NominalWithMeasuredTilt(const RobotModel& robot, const RobotLog& log) {
-  if (!log.has_stations || log.NumPoints() != 1 || log.rows.empty() || log.rows.front().accel.empty()) return {};
+  // A robot described without its links (a DH table) has nowhere to put a sensor.
+  if (!robot.Urdf() || !log.has_stations || log.NumPoints() != 1 || log.rows.empty() ||
+      log.rows.front().accel.empty())
+    return {};
   std::vector<LinkMount> mounts;
   for (const auto& [link, a] : log.rows.front().accel) mounts.push_back(MountOnChain(robot, link));
   const size_t ns = mounts.size();

@@ -91,8 +91,8 @@ ModelScore ScoreModel(const std::string& model, const RobotLog& log, const std::
 // The robot file as given with the tilts its accelerometers measured (model/tilt_sensor.h;
 // issue 52), per row the tool point in the robot's base frame: each sensor's tilt since the
 // mean reading of its station's stationing rows (where the station was placed), point 1 of
-// a one-point log. Empty when the log has no stations or no accelerometer readings, or a
-// sensor is missing from a row of its station. InputError naming the link when a sensor
+// a one-point log. Empty when the log has no stations or no accelerometer readings, a
+// sensor is missing from a row, or the robot is not a URDF (nothing names its links). InputError naming the link when a sensor
 // is on no link of the chain (model/urdf.h MountOnChain).
 std::vector<std::vector<Vec3>> NominalWithMeasuredTilt(const RobotModel& robot, const RobotLog& log);
 
