@@ -492,12 +492,14 @@ SelectionResult RunSelection(const Problem& pb, const std::vector<Option>& opts,
           }
           const Tried c = FitCandidate(pb, *with_geometry, sc[i].option, sc[i].terms);
           const double lr = 2.0 * (c.fit.loglik - with_geometry->loglik);
-          nested->Record(lr, with_geometry->loglik);
+          // A ratio below zero within the solver's tolerance is a zero (shown as such, not
+          // "-0.0"); beyond it, a failed solve, recorded and shown as it is.
+          const bool solved = nested->Record(lr, with_geometry->loglik);
           if (ChiSquareSurvival(lr, k) >= alpha) {
             std::snprintf(b, sizeof b,
                           "%s: likelihood ratio %.1f on the model, but only %.1f on top of every identifiable DH "
                           "parameter: what it explains, the geometry explains too; not named",
-                          op.key.c_str(), t.lr, lr);
+                          op.key.c_str(), t.lr, solved ? std::max(lr, 0.0) : lr);
             say(b);
             unconfirmed.push_back({t.bic, b});
             continue;
