@@ -60,6 +60,17 @@ std::string Fixed(double v, int digits) {
 // Where `geometry` acts, as reports name it.
 std::string GeometryWhere(const RobotModel& robot) { return Extension{Effect::kGeometry, -1, 0}.Where(robot); }
 
+// Whether a row of the problem carries a measured tilt (issue 52); the problem without them.
+bool HasTilt(const Problem& pb) {
+  for (const RowData& r : pb.rows)
+    if (!(r.tilt.R == Mat3::Identity() && r.tilt.t == Vec3::Zero())) return true;
+  return false;
+}
+Problem WithoutTilt(Problem pb) {
+  for (RowData& r : pb.rows) r.tilt = Pose::Identity();
+  return pb;
+}
+
 // Per row of another session, each measured point as the model theta predicts it (the fit's
 // placement): the rigid body's points, or the one point.
 std::vector<std::vector<Vec3>> PointPredictions(const Problem& pv, const Eigen::VectorXd& theta) {
@@ -893,6 +904,10 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
                              Refit(TermsOf([&](const Finding& x) { return &x != &f && !x.undecided; }))});
           without_ext.push_back({opts[f.option].key, opts[f.option].ext});
         }
+    // With tilt sensors (issue 52), the geometry fitted as if the log had none.
+    std::optional<FitResult> geo_untilted;
+    if (HasTilt(pb) && !ident.params.empty())
+      geo_untilted = FitModel(WithoutTilt(pb), Union(base_free, ident.params), nominal.theta, nominal.noise);
     PlacementOptions place;
     place.noise = fin.noise.topLeftCorner(3, 3);
     place.false_alarm = o.false_alarm;
@@ -908,11 +923,15 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
         // even the tool, each station placed from its stationing rows.
         Eigen::VectorXd as_given = nominal.theta;
         as_given.segment(6, pb.ts).setZero();
-        s.models.push_back(ScoreModel("nominal", v, PointPredictions(pv, as_given), s.group_of_row, place));
+        s.models.push_back(ScoreModel("nominal", v, PointPredictions(WithoutTilt(pv), as_given), s.group_of_row, place));
         // The same with the tilts its accelerometers measured (issue 52): nothing fitted.
-        const auto tilted = NominalWithMeasuredTilt(robot, v);
-        if (!tilted.empty()) s.models.push_back(ScoreModel("nominal + tilt", v, tilted, s.group_of_row, place));
+        if (HasTilt(pv))
+          s.models.push_back(ScoreModel("nominal + tilt", v, PointPredictions(pv, as_given), s.group_of_row, place));
       }
+      // The geometry fitted and scored without the measured tilts: what they move there.
+      if (geo_untilted && HasTilt(pv))
+        s.models.push_back(ScoreModel("geometry without tilt", v, PointPredictions(WithoutTilt(pv), geo_untilted->theta),
+                                      s.group_of_row, place));
       const size_t final_at = s.models.size() + 2;
       for (const auto& [name, fit] : {std::pair<const char*, const FitResult*>{"registration", &nominal},
                                       {"geometry", &geo},

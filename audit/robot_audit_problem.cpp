@@ -12,6 +12,7 @@
 
 #include "audit/model_selection.h"
 #include "calib/robot_calibration.h"
+#include "calib/robot_validation.h"
 #include "core/error.h"
 
 namespace mcms::robot_audit {
@@ -36,13 +37,14 @@ PoseT<T> ToolInBaseT(const Problem& pb, const RowData& row, const T* tl, const s
   using M3 = Eigen::Matrix<T, 3, 3>;
   const V3 t_tool = pb.tool0.t.cast<T>() + V3(tl[0], tl[1], tl[2]);
   PoseT<T> out;
-  out.t = F.R * t_tool + F.t;
+  const M3 C = row.tilt.R.cast<T>();
+  out.t = C * (F.R * t_tool + F.t) + row.tilt.t.cast<T>();
   if (pb.six) {
     M3 Rt;
     ceres::AngleAxisToRotationMatrix(tl + 3, Rt.data());
-    out.R = F.R * Rt * pb.tool0.R.cast<T>();
+    out.R = C * F.R * Rt * pb.tool0.R.cast<T>();
   } else {
-    out.R = F.R * pb.tool0.R.cast<T>();
+    out.R = C * F.R * pb.tool0.R.cast<T>();
   }
   return out;
 }
@@ -285,10 +287,12 @@ Problem MakeProblem(const RobotModel& robot, const RobotLog& log, const RobotAud
   // stood (jitter never flips the direction of the last move).
   const Eigen::VectorXd jitter = JitterTolerance(robot, o.repeat_tolerance);
   Eigen::VectorXd at = log.rows.front().q;
+  const std::vector<Pose> tilt = MeasuredTiltCorrections(robot, log);
   for (int i = 0; i < N; ++i) {
     const RobotMeasurement& lr = log.rows[i];
     RowData r;
     r.q = lr.q;
+    if (!tilt.empty()) r.tilt = tilt[i];
     r.p = lr.p_meas;
     if (lr.R_meas_tool) r.R = *lr.R_meas_tool;
     if (K >= 3) r.p = body_pose[i].t, r.R = body_pose[i].R;

@@ -33,6 +33,9 @@ struct RowData {
   MeasurementContext c;
   Vec3 p = Vec3::Zero();      // measured position (the point, or the rigid body's origin)
   Mat3 R = Mat3::Identity();  // measured orientation (6-D)
+  // The rigid motion (base frame) the row's measured tilts give the tool (calib/
+  // robot_validation.h MeasuredTiltCorrections; identity without tilt sensors).
+  Pose tilt = Pose::Identity();
 };
 
 struct Problem {

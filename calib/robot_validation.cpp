@@ -70,14 +70,20 @@ const ModelScore* ModelNamed(const SessionScore& s, const std::string& name) {
   return nullptr;
 }
 
-// Point 1 without -> with a cause, mean / 95 % (mm), overall and per posture group.
+// Point 1 without -> with a cause, mean / 95 % (mm), overall and per posture group; with
+// stations (a gravity-aligned instrument placed per station), the 95 % horizontal too.
 std::string MovedLine(const std::string& cause, const ModelScore& without, const ModelScore& with) {
   std::string out = "    " + cause + ":";
   char b[200];
+  const bool xy = !with.stations.empty();
   const auto Add = [&](const char* group, const std::vector<PointScore>& a, const std::vector<PointScore>& c) {
     if (a.empty() || c.empty()) return;
-    std::snprintf(b, sizeof b, " %s %.3f/%.3f -> %.3f/%.3f;", group, a[0].mean_m * 1e3, a[0].p95_m * 1e3,
-                  c[0].mean_m * 1e3, c[0].p95_m * 1e3);
+    if (xy)
+      std::snprintf(b, sizeof b, " %s %.3f/%.3f/%.3f -> %.3f/%.3f/%.3f;", group, a[0].mean_m * 1e3, a[0].p95_m * 1e3,
+                    a[0].p95_xy_m * 1e3, c[0].mean_m * 1e3, c[0].p95_m * 1e3, c[0].p95_xy_m * 1e3);
+    else
+      std::snprintf(b, sizeof b, " %s %.3f/%.3f -> %.3f/%.3f;", group, a[0].mean_m * 1e3, a[0].p95_m * 1e3,
+                    c[0].mean_m * 1e3, c[0].p95_m * 1e3);
     out += b;
   };
   Add("all", without.points, with.points);
@@ -96,23 +102,31 @@ std::string MovedText(const SessionScore& s) {
   const ModelScore* geo = ModelNamed(s, "geometry");
   const ModelScore* fin = ModelNamed(s, "final");
   const ModelScore* nom = ModelNamed(s, "nominal");
-  if (nom && reg) lines += MovedLine("the tool and each station's placement (nominal -> registration)", *nom, *reg);
+  const ModelScore* tilt = ModelNamed(s, "nominal + tilt");
+  const ModelScore* geo_untilted = ModelNamed(s, "geometry without tilt");
+  if (nom && tilt) lines += MovedLine("the measured tilt, nothing fitted (nominal -> nominal + tilt)", *nom, *tilt);
+  if (geo_untilted && geo)
+    lines += MovedLine("the measured tilt with the geometry (geometry without tilt -> geometry)", *geo_untilted, *geo);
+  if (tilt && reg)
+    lines += MovedLine("the tool and each station's placement (nominal + tilt -> registration)", *tilt, *reg);
+  else if (nom && reg)
+    lines += MovedLine("the tool and each station's placement (nominal -> registration)", *nom, *reg);
   if (reg && geo) lines += MovedLine("geometry (registration -> geometry)", *reg, *geo);
   const std::string prefix = "final without ";
   if (fin)
     for (const ModelScore& m : s.models)
       if (m.model.rfind(prefix, 0) == 0) lines += MovedLine(m.model.substr(prefix.size()), m, *fin);
   if (lines.empty()) return lines;
-  return "  what each cause moved there (point 1, mean/95 % mm, without -> with it):\n" + lines;
+  const bool xy = fin && !fin->stations.empty();
+  return std::string("  what each cause moved there (point 1, mean/95 %") + (xy ? "/95 % horizontal" : "") +
+         " mm, without -> with it):\n" + lines;
 }
 
 }  // namespace
 
-std::vector<std::vector<Vec3>> NominalWithMeasuredTilt(const RobotModel& robot, const RobotLog& log) {
+std::vector<Pose> MeasuredTiltCorrections(const RobotModel& robot, const RobotLog& log) {
   // A robot described without its links (a DH table) has nowhere to put a sensor.
-  if (!robot.Urdf() || !log.has_stations || log.NumPoints() != 1 || log.rows.empty() ||
-      log.rows.front().accel.empty())
-    return {};
+  if (!robot.Urdf() || !log.has_stations || log.rows.empty() || log.rows.front().accel.empty()) return {};
   std::vector<LinkMount> mounts;
   for (const auto& [link, a] : log.rows.front().accel) mounts.push_back(MountOnChain(robot, link));
   const size_t ns = mounts.size();
@@ -131,20 +145,15 @@ std::vector<std::vector<Vec3>> NominalWithMeasuredTilt(const RobotModel& robot, 
     for (size_t k = 0; k < ns; ++k) v[k] += r.accel[k].second;
     ++count[r.station];
   }
-  std::vector<std::vector<Vec3>> out(log.rows.size());
+  std::vector<Pose> out(log.rows.size(), Pose::Identity());
   for (size_t i = 0; i < log.rows.size(); ++i) {
     const RobotMeasurement& r = log.rows[i];
-    const std::vector<Pose> frames = robot.LinkFrames(r.q);
-    const Vec3 p = robot.T_base_tool(r.q).t;
     const auto it = ref.find(r.station);
-    if (it == ref.end()) {
-      out[i] = {p};
-      continue;
-    }
+    if (it == ref.end()) continue;
     std::vector<MeasuredTilt> tilts;
     for (size_t k = 0; k < ns; ++k)
       tilts.push_back({mounts[k], TiltSince(it->second[k] / count[r.station], r.accel[k].second)});
-    out[i] = {TiltCorrected(frames, tilts, p)};
+    out[i] = TiltCorrection(robot.LinkFrames(r.q), tilts);
   }
   return out;
 }

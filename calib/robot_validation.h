@@ -88,13 +88,14 @@ struct PlacementOptions {
 ModelScore ScoreModel(const std::string& model, const RobotLog& log, const std::vector<std::vector<Vec3>>& predicted,
                       const std::vector<PostureGroup>& groups, const PlacementOptions& options);
 
-// The robot file as given with the tilts its accelerometers measured (model/tilt_sensor.h;
-// issue 52), per row the tool point in the robot's base frame: each sensor's tilt since the
-// mean reading of its station's stationing rows (where the station was placed), point 1 of
-// a one-point log. Empty when the log has no stations or no accelerometer readings, a
-// sensor is missing from a row, or the robot is not a URDF (nothing names its links). InputError naming the link when a sensor
-// is on no link of the chain (model/urdf.h MountOnChain).
-std::vector<std::vector<Vec3>> NominalWithMeasuredTilt(const RobotModel& robot, const RobotLog& log);
+// Per row of `log`, the rigid motion (robot base frame) its accelerometers' measured tilts
+// give the tool (model/tilt_sensor.h TiltCorrection; issue 52): each sensor's tilt since
+// the mean reading of its station's stationing rows (where the station was placed), on
+// the chain's nominal frames at the row's joint values. Empty when the log has no stations
+// or no accelerometer readings, a sensor is missing from a row, or the robot is not a URDF
+// (nothing names its links). InputError naming the link when a sensor is on no link of the
+// chain (model/urdf.h MountOnChain).
+std::vector<Pose> MeasuredTiltCorrections(const RobotModel& robot, const RobotLog& log);
 
 // Text for reports: per session, a table of the models (point 1: mean, 95 %, max, RMS mm;
 // with stations, 95 % horizontal and |z|), where the instrument was placed, what each cause

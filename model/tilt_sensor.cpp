@@ -21,7 +21,7 @@ void CheckAccelerometerReading(const Vec3& a, const std::string& where) {
 
 Mat3 TiltSince(const Vec3& a0, const Vec3& a) { return Eigen::Quaterniond::FromTwoVectors(a, a0).toRotationMatrix(); }
 
-Vec3 TiltCorrected(const std::vector<Pose>& frames, std::vector<MeasuredTilt> tilts, const Vec3& p) {
+Pose TiltCorrection(const std::vector<Pose>& frames, std::vector<MeasuredTilt> tilts) {
   std::stable_sort(tilts.begin(), tilts.end(),
                    [](const MeasuredTilt& x, const MeasuredTilt& y) { return x.mount.frame < y.mount.frame; });
   std::vector<Mat3> A;
@@ -29,13 +29,13 @@ Vec3 TiltCorrected(const std::vector<Pose>& frames, std::vector<MeasuredTilt> ti
     const Mat3 R = frames.at(t.mount.frame).R * t.mount.R_frame_link;
     A.push_back(R * t.D * R.transpose());
   }
-  Vec3 out = p;
-  for (size_t j = tilts.size(); j-- > 0;) {
+  Pose C = Pose::Identity();
+  for (size_t j = 0; j < tilts.size(); ++j) {
     const Vec3& o = frames[tilts[j].mount.frame].t;
     const Mat3 W = j == 0 ? A[0] : Mat3(A[j] * A[j - 1].transpose());
-    out = o + W * (out - o);
+    C = C * Pose{W, o - W * o};
   }
-  return out;
+  return C;
 }
 
 }  // namespace mcms

@@ -33,10 +33,11 @@ struct MeasuredTilt {
   Mat3 D = Mat3::Identity();  // TiltSince, in the sensor's frame
 };
 
-// Point p (base frame, of a link above every sensor) moved by the measured tilts: with the
-// chain's link frames `frames` (RobotModel::LinkFrames), each sensor's rotation taken to
-// the base frame, A_j; applied from the farthest sensor in: p <- o_j + A_j A_{j-1}^T (p - o_j),
-// o_j its frame's origin (A_{-1} = I).
-Vec3 TiltCorrected(const std::vector<Pose>& frames, std::vector<MeasuredTilt> tilts, const Vec3& p);
+// The rigid motion C (base frame) the measured tilts give everything above every sensor:
+// with the chain's link frames `frames` (RobotModel::LinkFrames), each sensor's rotation
+// taken to the base frame, A_j; applied from the farthest sensor in, p <- o_j + A_j
+// A_{j-1}^T (p - o_j), o_j its frame's origin (A_{-1} = I). A point p of the tool moves to
+// C p, the tool's pose X to C X.
+Pose TiltCorrection(const std::vector<Pose>& frames, std::vector<MeasuredTilt> tilts);
 
 }  // namespace mcms
