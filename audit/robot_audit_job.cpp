@@ -1,7 +1,10 @@
 #include <cstdio>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "audit/robot_audit.h"
+#include "audit/tilt_sensor_audit.h"
 #include "audit/robot_audit_problem.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -66,6 +69,10 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
   const RobotModel robot = CoverReadings(described, logs, &reading_notes);
   RobotAuditResult r = AuditRobot(robot, log, job.options, validate);
   r.report.notes.insert(r.report.notes.begin(), reading_notes.begin(), reading_notes.end());
+  // Tilt sensors on the chain (issue 52): their readings against their forward model.
+  TiltSensorAuditOptions tilt_options;
+  tilt_options.false_alarm = job.options.false_alarm;
+  const std::vector<TiltSensorAuditResult> tilt = AuditTiltSensors(robot, log, tilt_options);
   std::ostringstream text;
   text << "robot log " << job.log.string() << ": " << log.rows.size() << " measurements ("
        << (log.NumPoints() >= 3 ? std::to_string(log.NumPoints()) + " points of a rigid body: its pose"
@@ -90,6 +97,7 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
   std::snprintf(buf, sizeof buf, "extended model: position residual RMS %.4f mm\n",
                 PositionRms(r.extended.residuals) * 1e3);
   text << buf;
+  text << TiltSensorAuditText(tilt, robot);
   for (const auto& np : r.next_poses)
     if (!np.poses.empty()) {
       if (np.readings > 0)
@@ -110,6 +118,13 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
       text << buf;
     }
   const std::string report = text.str();
+  // report.json: the robot's audit, with "tilt_sensors" (TiltSensorAuditJson) when the log has them.
+  const auto WriteJson = [&](const std::filesystem::path& path) {
+    if (tilt.empty()) return r.report.WriteJson(path);
+    nlohmann::json j = nlohmann::json::parse(r.report.ToJson());
+    j["tilt_sensors"] = TiltSensorAuditJson(tilt);
+    WriteFileAtomically(path, [&](std::ostream& os) { os << j.dump(2) << "\n"; });
+  };
   if (!job.output_dir.empty()) {
     WriteFolderAtomically(job.output_dir, {"report.json"}, "audit robot", "audit robot -o",
                           [&](const std::filesystem::path& dir) {
@@ -176,10 +191,11 @@ std::string RunRobotAuditJob(const RobotAuditJob& job) {
                               p.WriteSvg(dir / "plots" / ("validation" + std::to_string(++k) + ".svg"));
                             }
                             if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot);
-                            r.report.WriteJson(dir / "report.json");
+                            if (!tilt.empty()) WriteTiltSensorResiduals(dir / "tilt_residuals.csv", tilt);
+                            WriteJson(dir / "report.json");
                           });
   }
-  if (!job.json.empty()) r.report.WriteJson(job.json);
+  if (!job.json.empty()) WriteJson(job.json);
   return report;
 }
 

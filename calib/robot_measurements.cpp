@@ -20,6 +20,7 @@
 #include "core/statistics.h"
 #include "core/yaml.h"
 #include "model/tilt_sensor.h"
+#include "model/urdf.h"
 
 namespace mcms {
 
@@ -242,6 +243,23 @@ RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) 
   const int cstation = Use("station"), crole = Use("role");
   log.has_stations = cstation >= 0;
   log.has_roles = crole >= 0;
+  // Accelerometers on the URDF's links (issue 52): <link>_ax, <link>_ay, <link>_az, m/s^2.
+  std::vector<std::pair<std::string, std::array<int, 3>>> accel;
+  for (size_t c = 0; c < t.header.size(); ++c) {
+    const std::string& h = t.header[c];
+    if (h.size() <= 3 || h.compare(h.size() - 3, 3, "_ax") != 0) continue;
+    const std::string link = h.substr(0, h.size() - 3);
+    const int ay = Use(link + "_ay"), az = Use(link + "_az");
+    used.insert(static_cast<int>(c));
+    if (ay < 0 || az < 0)
+      Throw(src, ": column '", h, "' is an accelerometer's x; give ", link, "_ax, ", link, "_ay and ", link,
+            "_az (m/s^2, in the sensor's frame)");
+    if (!robot.Urdf())
+      Throw(src, ": column '", h, "' reads an accelerometer on link '", link,
+            "', but robot '", robot.Name(), "' is a DH table: give the robot as a URDF that names its links");
+    MountOnChain(robot, link);  // InputError naming the link: not in the URDF, or off the chain
+    accel.push_back({link, {static_cast<int>(c), ay, az}});
+  }
   for (size_t c = 0; c < t.header.size(); ++c)
     if (!used.count(static_cast<int>(c))) log.ignored_columns.push_back(t.header[c]);
   const int n = robot.NumActuated();
@@ -273,6 +291,11 @@ RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) 
     }
     if (ctemp >= 0) r.temperature_c = t.Number(i, ctemp);
     if (cpay >= 0) r.payload_kg = t.Number(i, cpay);
+    for (const auto& [link, c] : accel) {
+      const Vec3 a(t.Number(i, c[0]), t.Number(i, c[1]), t.Number(i, c[2]));
+      CheckAccelerometerReading(a, src + " line " + std::to_string(r.line) + ", columns " + link + "_ax.._az");
+      r.accel.push_back({link, a});
+    }
     if (cstation >= 0) {
       r.station = t.rows[i][cstation];
       if (r.station.empty())

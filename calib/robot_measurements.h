@@ -85,6 +85,8 @@ struct RobotLog {
 //               x1_m ...) for K points of one rigid body;
 //      pose:    qw, qx, qy, qz with one point (the tool's orientation);
 //      temperature_c, payload_kg;
+//      accelerometers: <link>_ax, <link>_ay, <link>_az (m/s^2, the sensor's frame) of a
+//               sensor fixed to that URDF link of the chain (issue 52: tilt sensors);
 //      station: rows that share one placement of the robot in the instrument's frame (any
 //               label); role: stationing, evaluation (also an empty cell) or spare (RowRole);
 //  - or YAML: calib-robot's `measurements:` list or ROS-Industrial industrial_calibration's

@@ -22,6 +22,11 @@ const std::vector<EffectInfo>& EffectCatalog() {
       {Effect::kGeometry, "geometry", SensorKind::kRobot,
        "every geometric parameter the data identify (a DH table's theta offset, d, a, alpha of each joint; a URDF "
        "chain's offsets and placement errors) at once"},
+      {Effect::kLinkCompliance, "link_compliance", SensorKind::kRobot,
+       "a link bends under the moment it carries: its frame tilts by c L M (compliance >= 0, rad per N m^2; seen "
+       "by a tilt sensor above it)"},
+      {Effect::kSegmentPlay, "segment_play", SensorKind::kRobot,
+       "play between telescopic segments: a tilt step with the sign of the moment the link carries (>= 0, rad)"},
       {Effect::kCameraMoved, "camera_moved", SensorKind::kCamera, "the camera's pose in the rig moved (6 dof)"},
       {Effect::kFocalLength, "focal_length", SensorKind::kCamera, "both focal lengths scaled by 1 + s"},
       {Effect::kPrincipalPoint, "principal_point", SensorKind::kCamera, "the principal point shifted (px)"},
@@ -64,8 +69,8 @@ int Extension::NumParameters() const {
     case Effect::kPrincipalPoint:
     case Effect::kInclinometerBias:
     case Effect::kClockDrift: return 2;
-    case Effect::kTargetGeometry:
-    case Effect::kInclinometerMisalignment: return 3;
+    case Effect::kInclinometerMisalignment: return variant == 1 ? 1 : 3;
+    case Effect::kTargetGeometry: return 3;
     default: return 1;
   }
 }
@@ -99,6 +104,8 @@ std::vector<std::string> Extension::ParameterNames() const {
       return variant == 0 ? std::vector<std::string>{"growth", "time_constant_s"}
                           : std::vector<std::string>{"growth_per_K"};
     case Effect::kBacklash: return {"backlash_rad"};
+    case Effect::kLinkCompliance: return {"compliance_rad_per_Nm2"};
+    case Effect::kSegmentPlay: return {"play_rad"};
     case Effect::kErrorMotion: {
       std::vector<std::string> names;
       const char* axes[6] = {"rx", "ry", "rz", "x", "y", "z"};
@@ -115,7 +122,8 @@ std::vector<std::string> Extension::ParameterNames() const {
     case Effect::kPixelNoiseScale: return {"scale"};
     case Effect::kTargetGeometry: return {"dx_m", "dy_m", "dz_m"};
     case Effect::kInclinometerBias: return {"bias_x_rad", "bias_y_rad"};
-    case Effect::kInclinometerMisalignment: return {"rx_rad", "ry_rad", "rz_rad"};
+    case Effect::kInclinometerMisalignment:
+      return variant == 1 ? std::vector<std::string>{"rz_rad"} : std::vector<std::string>{"rx_rad", "ry_rad", "rz_rad"};
     case Effect::kClockOffset: return {"offset_s"};
     case Effect::kClockDrift: return {"offset_s", "rate"};
   }
@@ -174,6 +182,8 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
     case Effect::kErrorMotion:
     case Effect::kLinkLength:
     case Effect::kLinkTwist:
+    case Effect::kLinkCompliance:
+    case Effect::kSegmentPlay:
       if (!robot) bad("needs a robot");
       if (index < 0 || index >= robot->NumJoints())
         bad("joint index " + std::to_string(index) + " is outside the robot's " +
@@ -263,6 +273,25 @@ Eigen::MatrixXd GravityLever(const RobotModel& robot, const Eigen::VectorXd& q) 
   }
   AddPointTorque(robot, frames, n, (frames[n] * robot.T_flange_tool()).t, g, 1.0, L.col(2 * n));
   return L;
+}
+
+Vec3 CarriedMoment(const RobotModel& robot, const Eigen::VectorXd& q, int frame, double payload_kg) {
+  if (!robot.HasMasses())
+    Throw("robot '", robot.Name(), "' gives no link masses (mass_kg per joint); the moment its links carry is not known");
+  const std::vector<Pose> frames = robot.LinkFrames(q);
+  const int n = robot.NumJoints();
+  if (frame < 0 || frame > n) Throw("link frame ", frame, " is outside the robot's frames 0..", n);
+  const Vec3 g(0.0, 0.0, -kStandardGravity);
+  const Vec3 o = frames[frame].t;
+  Vec3 M = Vec3::Zero();
+  for (int k = frame + 1; k <= n; ++k) {
+    const Joint& j = robot.Joints()[k - 1];
+    if (j.mass_kg > 0) M += (frames[k] * j.com_m - o).cross(j.mass_kg * g);
+  }
+  const ToolMass& tm = robot.Tool();
+  if (tm.mass_kg > 0) M += (frames[n] * tm.com_m - o).cross(tm.mass_kg * g);
+  if (payload_kg > 0) M += ((frames[n] * robot.T_flange_tool()).t - o).cross(payload_kg * g);
+  return M;
 }
 
 Eigen::VectorXd GravityTorquePerKg(const RobotModel& robot, const Eigen::VectorXd& q) {

@@ -14,6 +14,8 @@
 //                  radial_distortion (intrinsics), camera_time_offset (the target's pose at
 //                  a shifted time), pixel_noise_scale (the noise model), target_geometry
 //                  (one ball's position on the target);
+//   bending links  link_compliance, segment_play (a link's tilt under the moment it
+//                  carries, seen by a tilt sensor above it: LinkBendingT);
 //   inclinometer   inclinometer_bias, inclinometer_misalignment;
 //   clocks         clock_offset, clock_drift (a sensor's time stamps).
 // Parameter units are SI (rad, m, s); relative factors (scale, focal) are dimensionless.
@@ -37,7 +39,7 @@ namespace mcms {
 enum class Effect {
   // robot
   kJointOffset, kLinkLength, kJointScale, kGravityCompliance, kThermalDrift, kBacklash, kErrorMotion,
-  kLinkTwist, kGeometry,
+  kLinkTwist, kGeometry, kLinkCompliance, kSegmentPlay,
   // cameras
   kCameraMoved, kFocalLength, kPrincipalPoint, kRadialDistortion, kCameraTimeOffset, kPixelNoiseScale,
   kTargetGeometry,
@@ -63,9 +65,12 @@ std::optional<Effect> EffectFromName(std::string_view name);
 
 // One extension: an effect at one place.
 //  index:   the joint (0-based) for joint_offset, joint_scale, gravity_compliance, backlash,
-//           error_motion, link_twist; the link (0-based) for link_length; the camera for
+//           error_motion, link_twist, link_compliance and segment_play (the joint whose
+//           child link bends: its frame tilts); the link (0-based) for link_length; the camera for
 //           camera effects; the ball for target_geometry; unused (-1) otherwise.
-//  variant: link_length 0 = a, 1 = d; thermal_drift 0 = exponential warm-up in time,
+//  variant: link_length 0 = a, 1 = d; inclinometer_misalignment 0 = the mounting rotation
+//           (3), 1 = its turn about the sensor's own vertical alone (1: a tilt of the mount
+//           reads as a bias to first order, a turn about the vertical never does); thermal_drift 0 = exponential warm-up in time,
 //           1 = linear in temperature; error_motion = the number of harmonics (>= 1);
 //           geometry = the robot's number of geometric parameters (RobotModel::
 //           NumGeometryParameters: the error model of model/joint.h, per joint DH [dtheta,
@@ -233,6 +238,33 @@ PoseT<T> ExtendedFlangeT(const RobotModel& robot, const std::vector<Extension>& 
   cc.error_motion = em.empty() ? nullptr : em.data();
   cc.error_motion_harmonics = harmonics;
   return ForwardKinematicsT(robot, q, cc);
+}
+
+// ---- bending links (issue 52) -------------------------------------------------------
+// The moment (N m, base frame, gravity along -z) of the weight of everything link frame
+// `frame` (0 = base, k = after joint k) carries, about that frame's origin: the links beyond
+// it at their centres of mass, the tool's mass and a payload at the tool point. It bends
+// the link below the frame. InputError when the robot gives no masses.
+Vec3 CarriedMoment(const RobotModel& robot, const Eigen::VectorXd& q, int frame, double payload_kg = 0.0);
+
+// The tilt (rotation vector, base frame) of a link's frame under the horizontal part M_h of
+// the moment it carries (CarriedMoment) at a bending length L (m, the link's extended length
+// below the frame): link_compliance p0 L M_h (p0 >= 0, rad per N m^2: a cantilever's
+// L / (E I) per metre; the tilt grows with the extension), segment_play p0 M_h / |M_h|
+// (p0 >= 0, rad: the clearance between telescopic segments taken up with the sign of the
+// moment). Other effects: zero.
+template <typename T>
+Eigen::Matrix<T, 3, 1> LinkBendingT(const Extension& e, const T* p, const Vec3& moment, double length_m) {
+  const Vec3 mh(moment.x(), moment.y(), 0.0);
+  Eigen::Matrix<T, 3, 1> b = Eigen::Matrix<T, 3, 1>::Zero();
+  if (e.effect == Effect::kLinkCompliance) {
+    for (int k = 0; k < 2; ++k) b[k] = p[0] * (length_m * mh[k]);
+  } else if (e.effect == Effect::kSegmentPlay) {
+    const double n = mh.norm();
+    if (n > 1e-9)
+      for (int k = 0; k < 2; ++k) b[k] = p[0] * (mh[k] / n);
+  }
+  return b;
 }
 
 // ---- camera units -----------------------------------------------------------------
