@@ -37,7 +37,7 @@ bool RobotAuditOptions::IsValid(std::string* why) const {
     if (!e) return fail("'" + n + "' is not in the catalog of effects");
     if (Info(*e).sensor != SensorKind::kRobot && *e != Effect::kClockOffset)
       return fail("'" + n + "' is not a robot effect (or clock_offset)");
-    if (*e == Effect::kLinkCompliance || *e == Effect::kSegmentPlay)
+    if (*e == Effect::kLinkCompliance || *e == Effect::kSegmentPlay || *e == Effect::kAxisTilt)
       return fail("'" + n + "' is seen by tilt sensors on the chain, not by the positions: the audit names it from "
                   "the log's accelerometer readings");
   }

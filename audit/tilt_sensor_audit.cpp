@@ -62,6 +62,8 @@ struct Model {
 };
 
 bool Bounded(Effect e) { return e == Effect::kLinkCompliance || e == Effect::kSegmentPlay; }
+// Acts on the link (named by its joint), not on the sensor.
+bool OnLink(Effect e) { return Bounded(e) || e == Effect::kAxisTilt; }
 
 class Auditor {
  public:
@@ -84,7 +86,7 @@ class Auditor {
         mis = e.variant == 1 ? Vec3(R_link_sensor_.col(2) * m.p[k][0]) : Vec3(m.p[k][0], m.p[k][1], m.p[k][2]);
         misaligned = true;
       } else {
-        beta += LinkBendingT<double>(e, m.p[k].data(), r.moment, r.length);
+        beta += LinkBendingT<double>(e, m.p[k].data(), r.moment, r.length, r.R_base_link);
       }
     }
     const Mat3 R = r.R_world_base * ExpSO3(beta) * r.R_base_link;
@@ -143,7 +145,9 @@ class Auditor {
       }
       bool changed = false;
       for (size_t k = 0; k < m.p.size(); ++k)
-        if (Bounded(m.ext[k].effect) && !m.held[k][0] && m.p[k][0] < 0) m.p[k][0] = 0, m.held[k][0] = true, changed = true;
+        for (size_t j = 0; j < m.p[k].size(); ++j)
+          if (Bounded(m.ext[k].effect) && !m.held[k][j] && m.p[k][j] < 0)
+            m.p[k][j] = 0, m.held[k][j] = true, changed = true;
       if (!changed) break;
     }
     // A model with more free parameters never fits worse than where it started (issue 51).
@@ -324,9 +328,10 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
   const std::vector<Extension> catalog = {{Effect::kInclinometerBias, -1, 0},
                                           {Effect::kInclinometerMisalignment, -1, 1},
                                           {Effect::kLinkCompliance, res.bending_joint, 0},
-                                          {Effect::kSegmentPlay, res.bending_joint, 0}};
+                                          {Effect::kSegmentPlay, res.bending_joint, 0},
+                                          {Effect::kAxisTilt, res.bending_joint, 0}};
   const auto Label = [&](const Extension& e) {
-    return std::string(Name(e.effect)) + " at " + (Bounded(e.effect) ? e.Where(robot) : where);
+    return std::string(Name(e.effect)) + " at " + (OnLink(e.effect) ? e.Where(robot) : where);
   };
   for (int step = 0; step < o.max_effects; ++step) {
     struct Tried {
@@ -388,7 +393,7 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     Tried& best = tried[dec.best];
     AuditEffect ef;
     ef.name = Name(best.e.effect);
-    ef.where = Bounded(best.e.effect) ? best.e.Where(robot) : where;
+    ef.where = OnLink(best.e.effect) ? best.e.Where(robot) : where;
     ef.rms_unit = "rad";
     ef.heldout_rms_before = TiltRms(a, cur);
     ef.heldout_rms_after = TiltRms(a, best.m);
@@ -412,7 +417,8 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     for (size_t j = 0; j < names.size(); ++j) {
       ef.parameters.push_back({names[j], cur.p[k][j]});
       ef.sigma.push_back({names[j], sig[k][j]});
-      ef.units.push_back(cur.ext[k].effect == Effect::kLinkCompliance ? "" : "rad");
+      ef.units.push_back(cur.ext[k].effect == Effect::kLinkCompliance || cur.ext[k].effect == Effect::kAxisTilt ? ""
+                                                                                                              : "rad");
     }
   }
   res.noise = S_cur;

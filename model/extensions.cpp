@@ -23,10 +23,13 @@ const std::vector<EffectInfo>& EffectCatalog() {
        "every geometric parameter the data identify (a DH table's theta offset, d, a, alpha of each joint; a URDF "
        "chain's offsets and placement errors) at once"},
       {Effect::kLinkCompliance, "link_compliance", SensorKind::kRobot,
-       "a link bends under the moment it carries: its frame tilts by c L M (compliance >= 0, rad per N m^2; seen "
-       "by a tilt sensor above it)"},
+       "a link bends under the moment it carries: its frame tilts by c L M about each principal axis of its section "
+       "(compliances >= 0, rad per N m^2; seen by a tilt sensor above it)"},
       {Effect::kSegmentPlay, "segment_play", SensorKind::kRobot,
        "play between telescopic segments: a tilt step with the sign of the moment the link carries (>= 0, rad)"},
+      {Effect::kAxisTilt, "axis_tilt", SensorKind::kRobot,
+       "a linear axis leans in proportion to its travel (angular error motion, rad per m in x and y; seen by a tilt "
+       "sensor above it)"},
       {Effect::kCameraMoved, "camera_moved", SensorKind::kCamera, "the camera's pose in the rig moved (6 dof)"},
       {Effect::kFocalLength, "focal_length", SensorKind::kCamera, "both focal lengths scaled by 1 + s"},
       {Effect::kPrincipalPoint, "principal_point", SensorKind::kCamera, "the principal point shifted (px)"},
@@ -68,6 +71,8 @@ int Extension::NumParameters() const {
     case Effect::kCameraMoved: return 6;
     case Effect::kPrincipalPoint:
     case Effect::kInclinometerBias:
+    case Effect::kAxisTilt:
+    case Effect::kLinkCompliance:
     case Effect::kClockDrift: return 2;
     case Effect::kInclinometerMisalignment: return variant == 1 ? 1 : 3;
     case Effect::kTargetGeometry: return 3;
@@ -104,8 +109,9 @@ std::vector<std::string> Extension::ParameterNames() const {
       return variant == 0 ? std::vector<std::string>{"growth", "time_constant_s"}
                           : std::vector<std::string>{"growth_per_K"};
     case Effect::kBacklash: return {"backlash_rad"};
-    case Effect::kLinkCompliance: return {"compliance_rad_per_Nm2"};
+    case Effect::kLinkCompliance: return {"compliance_x_rad_per_Nm2", "compliance_y_rad_per_Nm2"};
     case Effect::kSegmentPlay: return {"play_rad"};
+    case Effect::kAxisTilt: return {"tilt_x_rad_per_m", "tilt_y_rad_per_m"};
     case Effect::kErrorMotion: {
       std::vector<std::string> names;
       const char* axes[6] = {"rx", "ry", "rz", "x", "y", "z"};
@@ -184,6 +190,7 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
     case Effect::kLinkTwist:
     case Effect::kLinkCompliance:
     case Effect::kSegmentPlay:
+    case Effect::kAxisTilt:
       if (!robot) bad("needs a robot");
       if (index < 0 || index >= robot->NumJoints())
         bad("joint index " + std::to_string(index) + " is outside the robot's " +

@@ -14,8 +14,9 @@
 //                  radial_distortion (intrinsics), camera_time_offset (the target's pose at
 //                  a shifted time), pixel_noise_scale (the noise model), target_geometry
 //                  (one ball's position on the target);
-//   bending links  link_compliance, segment_play (a link's tilt under the moment it
-//                  carries, seen by a tilt sensor above it: LinkBendingT);
+//   bending links  link_compliance, segment_play, axis_tilt (a link's tilt under the
+//                  moment it carries, or with its travel, seen by a tilt sensor above it:
+//                  LinkBendingT);
 //   inclinometer   inclinometer_bias, inclinometer_misalignment;
 //   clocks         clock_offset, clock_drift (a sensor's time stamps).
 // Parameter units are SI (rad, m, s); relative factors (scale, focal) are dimensionless.
@@ -39,7 +40,7 @@ namespace mcms {
 enum class Effect {
   // robot
   kJointOffset, kLinkLength, kJointScale, kGravityCompliance, kThermalDrift, kBacklash, kErrorMotion,
-  kLinkTwist, kGeometry, kLinkCompliance, kSegmentPlay,
+  kLinkTwist, kGeometry, kLinkCompliance, kSegmentPlay, kAxisTilt,
   // cameras
   kCameraMoved, kFocalLength, kPrincipalPoint, kRadialDistortion, kCameraTimeOffset, kPixelNoiseScale,
   kTargetGeometry,
@@ -247,18 +248,26 @@ PoseT<T> ExtendedFlangeT(const RobotModel& robot, const std::vector<Extension>& 
 // the link below the frame. InputError when the robot gives no masses.
 Vec3 CarriedMoment(const RobotModel& robot, const Eigen::VectorXd& q, int frame, double payload_kg = 0.0);
 
-// The tilt (rotation vector, base frame) of a link's frame under the horizontal part M_h of
-// the moment it carries (CarriedMoment) at a bending length L (m, the link's extended length
-// below the frame): link_compliance p0 L M_h (p0 >= 0, rad per N m^2: a cantilever's
-// L / (E I) per metre; the tilt grows with the extension), segment_play p0 M_h / |M_h|
-// (p0 >= 0, rad: the clearance between telescopic segments taken up with the sign of the
-// moment). Other effects: zero.
+// The tilt (rotation vector, base frame) of a link's frame (orientation R_base_link) under
+// the horizontal part M_h of the moment it carries (CarriedMoment) at a bending length L (m,
+// the link's extended length below the frame): link_compliance (p0, p1) L M about the
+// link frame's x and y axes (>= 0, rad per N m^2: a cantilever's L / (E I) per metre for
+// each principal axis of its section; the tilt grows with the extension), segment_play
+// p0 M_h / |M_h| (p0 >= 0, rad: the clearance between telescopic segments taken up with
+// the sign of the moment), axis_tilt (p0, p1) L (rad per m, base frame x and y: a linear
+// axis's angular error motion, its moving part leaning in proportion to its travel, ISO
+// 230-1's pitch and yaw; the constant part is the sensor's bias). Other effects: zero.
 template <typename T>
-Eigen::Matrix<T, 3, 1> LinkBendingT(const Extension& e, const T* p, const Vec3& moment, double length_m) {
+Eigen::Matrix<T, 3, 1> LinkBendingT(const Extension& e, const T* p, const Vec3& moment, double length_m,
+                                    const Mat3& R_base_link) {
   const Vec3 mh(moment.x(), moment.y(), 0.0);
   Eigen::Matrix<T, 3, 1> b = Eigen::Matrix<T, 3, 1>::Zero();
   if (e.effect == Effect::kLinkCompliance) {
-    for (int k = 0; k < 2; ++k) b[k] = p[0] * (length_m * mh[k]);
+    const Vec3 ml = R_base_link.transpose() * moment;
+    Eigen::Matrix<T, 3, 1> bl(p[0] * (length_m * ml.x()), p[1] * (length_m * ml.y()), T(0));
+    b = R_base_link.cast<T>() * bl;
+  } else if (e.effect == Effect::kAxisTilt) {
+    for (int k = 0; k < 2; ++k) b[k] = p[k] * length_m;
   } else if (e.effect == Effect::kSegmentPlay) {
     const double n = mh.norm();
     if (n > 1e-9)
