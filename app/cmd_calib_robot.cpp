@@ -67,7 +67,14 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   job.estimate_only = a.estimate;
   for (const auto& v : a.validate) job.validate.push_back(v);
   if (!a.base_guess.empty()) job.base_guess = PoseFromArgs(a.base_guess, "calib-robot", "--base-guess");
-  if (!a.tool_guess.empty()) job.tool_guess = PoseFromArgs(a.tool_guess, "calib-robot", "--tool-guess");
+  if (!a.tool_guess.empty()) {
+    job.tool_guess = PoseFromArgs(a.tool_guess, "calib-robot", "--tool-guess");
+    const double d = job.tool_guess->t.norm();
+    if (d > kMaxToolOffsetM)
+      Throw("calib-robot: --tool-guess puts the tool ", d, " m from the flange; expected at most ", kMaxToolOffsetM,
+            " m (x y z in metres: ", d > 1000 * 0.01 && d < 1000 * kMaxToolOffsetM ? "millimetres?" : "mistyped?",
+            ")");
+  }
   job.fixed = a.fixed;
   job.error_motion_harmonics = a.error_motion;
   // From a laser interferometer's 0.1 um to a tape measure (issue 53: 1e-6 mm was taken and

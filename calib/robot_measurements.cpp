@@ -651,6 +651,28 @@ void CheckDuplicateRows(const RobotLog& log) {
   }
 }
 
+// The best similarity from the model's tool positions src to the measured ones dst (3 x N):
+// its scale with a rotation, with a rotation or reflection, whether the best is a
+// reflection, and (optional) the RMS residual of the rotation's fit relative to the
+// measured positions' spread.
+void SimilarityScale(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst, double* scale, double* scale_any,
+                     bool* mirrored, double* relative_rms) {
+  const int N = src.cols();
+  const Eigen::Matrix3Xd a = src.colwise() - src.rowwise().mean(), b = dst.colwise() - dst.rowwise().mean();
+  const double var_src = std::max(a.squaredNorm() / N, 1e-300), var_dst = b.squaredNorm() / N;
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(b * a.transpose() / N, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Vector3d d(1, 1, 1);
+  *mirrored = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0;
+  if (*mirrored) d[2] = -1;
+  *scale = svd.singularValues().dot(d) / var_src;
+  *scale_any = svd.singularValues().sum() / var_src;  // rotation or reflection
+  if (relative_rms) {
+    // Umeyama: residual variance var_dst - (sum d_k s_k)^2 / var_src.
+    const double sd = svd.singularValues().dot(d);
+    *relative_rms = std::sqrt(std::max(0.0, var_dst - sd * sd / var_src) / std::max(var_dst, 1e-300));
+  }
+}
+
 // Measured positions in another unit than metres, a robot description of another size,
 // swapped axes, or joints that do not move the tool: the best similarity between the tool
 // positions the robot's model gives for the logged joints and the measured ones has a
@@ -675,18 +697,44 @@ void CheckScale(const RobotModel& robot, const RobotLog& log) {
           ": neither the logged joints nor the measured positions move (every row measures the same "
           "place): measurements spread over the workspace are needed");
   }
-  Eigen::JacobiSVD<Eigen::Matrix3d> svd(b * a.transpose() / N, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Vector3d d(1, 1, 1);
-  const bool mirrored = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0;
-  if (mirrored) d[2] = -1;
-  const double scale = svd.singularValues().dot(d) / var_src;
-  const double scale_any = svd.singularValues().sum() / var_src;  // rotation or reflection
+  double scale = 0, scale_any = 0;
+  bool mirrored = false;
+  SimilarityScale(src, dst, &scale, &scale_any, &mirrored, nullptr);
   if (scale > 0.8 && scale < 1.25) return;
   if (mirrored && scale_any > 0.8 && scale_any < 1.25)
     Throw(src_name, ": the measured positions are a mirror image of where robot '", robot.Name(),
           "' puts its tool at the logged joints (a rotation fits them only at scale ", Num4(scale),
           ", a reflection at ", Num4(scale_any),
           "): two of the x, y, z columns swapped, or one axis's sign flipped?");
+  // One joint in another unit than its header says (a prismatic joint in mm, radians under
+  // a _deg header): the positions fit once that joint's values are rescaled.
+  const int n = robot.NumJoints();
+  const struct {
+    double factor;
+    const char* hint;
+  } kUnits[] = {{1e-3, "millimetres where metres are read?"},
+                {1e3, "metres where millimetres are read?"},
+                {180.0 / std::numbers::pi, "radians under a _deg header?"},
+                {std::numbers::pi / 180.0, "degrees where radians are read?"}};
+  for (int j = 0; j < n; ++j)
+    for (const auto& u : kUnits) {
+      Eigen::Matrix3Xd s2(3, N);
+      bool inside = true;  // a reading rescaled beyond the joint's range is not what was meant
+      for (int i = 0; i < N && inside; ++i) {
+        Eigen::VectorXd q = log.rows[i].q;
+        q[j] *= u.factor;
+        inside = robot.WithinLimits(q, nullptr, RobotModel::kLimitSlack);
+        if (inside) s2.col(i) = robot.T_base_tool(q).t;
+      }
+      if (!inside) continue;
+      double sc = 0, sc_any = 0, rel = 1;
+      bool mir = false;
+      SimilarityScale(s2, dst, &sc, &sc_any, &mir, &rel);
+      if (sc > 0.8 && sc < 1.25 && rel < 0.05)
+        Throw(src_name, ": the measured positions fit robot '", robot.Name(), "' once joint ", JointName(robot, j),
+              "'s logged values are taken ", Num4(u.factor), " times as large (", u.hint,
+              "); give each joint in the unit its column's header says");
+    }
   std::string unit;
   if (std::abs(std::log10(scale) - 3.0) < 0.05)
     unit = " (millimetres under metre headers?)";
@@ -742,8 +790,31 @@ void CheckRowsFitTheRobot(const RobotModel& robot, const RobotLog& log);  // bel
 
 }  // namespace
 
+// Measured positions that never move while the joints move the tool (a position column
+// filled once and copied down): named before the rows are compared with each other.
+void CheckPositionsMove(const RobotModel& robot, const RobotLog& log) {
+  for (const std::string& st : log.Stations()) {
+    std::vector<Vec3> tool, meas;
+    for (const auto& r : log.rows)
+      if (r.station == st) tool.push_back(robot.T_base_tool(r.q).t), meas.push_back(r.p_meas);
+    if (meas.size() < 2) continue;
+    double spread_meas = 0, spread_tool = 0;
+    for (size_t i = 1; i < meas.size(); ++i) {
+      spread_meas = std::max(spread_meas, (meas[i] - meas[0]).norm());
+      spread_tool = std::max(spread_tool, (tool[i] - tool[0]).norm());
+    }
+    if (spread_meas < 1e-6 && spread_tool > 1e-4)
+      Throw(log.source.empty() ? std::string("robot log") : log.source.string(),
+            st.empty() ? std::string() : " station " + st,
+            ": the measured positions do not move (every row measures the same point within 1 um) while the "
+            "logged joints move the tool over ",
+            Num4(spread_tool), " m: are the position columns filled per row?");
+  }
+}
+
 void CheckRobotLogPlausible(const RobotLog& log, const RobotModel& robot) {
   CheckRobotLog(log, robot);
+  CheckPositionsMove(robot, log);
   CheckDuplicateRows(log);
   CheckRigid(log);
   // The checks against one placement of the instrument: per station where the log has them.

@@ -22,6 +22,9 @@ constexpr double kMaxRenderPixels = 2e8;
 // Lengths of a robot (DH a and d, URDF origins, the tool, registration guesses): no robot
 // or measuring volume is larger (m).
 constexpr double kMaxRobotLengthM = 1000.0;
+// A tool's offset from the flange (m): an end effector, a measuring bar or a marker cluster
+// reaches a few metres; beyond this the number is in another unit (mm?) or not a tool.
+constexpr double kMaxToolOffsetM = 10.0;
 // An encoder's noise (rad or m): beyond it a reading says nothing about the joint.
 constexpr double kMaxEncoderSigma = 0.1;
 // A link, a tool or a payload (kg).

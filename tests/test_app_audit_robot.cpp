@@ -203,6 +203,30 @@ TEST(BadInput, RobotLogsWhoseMisfitHasACauseInTheInput) {
                           for (int j = 1; j <= 6; ++j) c[j].assign(1, '0');
                         }),
                 {"log.csv", "same place in every row", "joint columns"});
+  // Issue 53: positions that never move, and one joint in another unit than its header,
+  // are named as such (not "give positions in metres").
+  ExpectRefused("positions_never_move",
+                MapRows(good,
+                        [](std::vector<std::string>& c) {
+                          c[7] = "1.5", c[8] = "0.25", c[9] = "0.75";
+                        }),
+                {"log.csv", "the measured positions do not move", "position columns filled"});
+  {
+    std::string deg = good;
+    deg.replace(deg.find("q3_rad"), 6, "q3_deg");
+    ExpectRefused("radians_under_deg", deg, {"log.csv", "once joint A3's logged values are taken 57.3 times as large",
+                                             "radians under a _deg header?"});
+  }
+  {
+    const fs::path d = test::ScratchDir("calib_robot_tool_500m");
+    test::WriteText(d / "log.csv", good);
+    const CliRun r = Mcms("calib-robot log.csv --tool-guess 0 0 500 1 0 0 0 -o robot.yaml", d);
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("--tool-guess puts the tool 500 m from the flange; expected at most 10 m"), std::string::npos)
+        << r.err;
+    EXPECT_NE(r.err.find("millimetres?"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(d / "robot.yaml"));
+  }
   // --folds beyond what the rows allow (audit lens refuses the equivalent).
   const fs::path d = test::ScratchDir("audit_robot_bad_folds");
   test::WriteText(d / "log.csv", good);
