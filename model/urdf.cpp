@@ -228,13 +228,15 @@ std::string InertialXml(double mass, const Vec3& com) {
 std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std::string>& comments) {
   const int n = robot.NumJoints();
   std::ostringstream x;
-  x << "<?xml version=\"1.0\"?>\n<!--" << CommentText("written by mcms from the " +
-                                                          std::string(robot.Convention() == ChainConvention::kStandard
-                                                                          ? "standard"
-                                                                          : "modified") +
-                                                          " DH table of robot '" + robot.Name() +
-                                                          "'; joint i's link frame sits on its axis, the DH frame "
-                                                          "follows it by the link's a, alpha (and d)")
+  const bool urdf = robot.Convention() == ChainConvention::kUrdf;
+  x << "<?xml version=\"1.0\"?>\n<!--"
+    << CommentText(urdf ? "written by mcms from the URDF-convention chain of robot '" + robot.Name() +
+                              "' (its YAML form): one link per joint, the tool as the fixed link 'tool'"
+                        : "written by mcms from the " +
+                              std::string(robot.Convention() == ChainConvention::kStandard ? "standard" : "modified") +
+                              " DH table of robot '" + robot.Name() +
+                              "'; joint i's link frame sits on its axis, the DH frame follows it by the link's a, "
+                              "alpha (and d)")
     << "-->\n";
   x << "<robot name=\"" << XmlName(robot.Name()) << "\">\n";
   const bool masses = robot.HasMasses();
@@ -246,7 +248,18 @@ std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std
     const Joint& j = robot.Joints()[i];
     if (j.Harmonics() > 0)
       Throw("robot '", robot.Name(), "': joint ", j.name, " has error motion, which a URDF cannot hold");
-    const DhSplit s = SplitDh(robot.Convention(), j);
+    DhSplit s;
+    if (urdf) {
+      // origin, then the joint's own offset (theta_offset or d) at the joint.
+      Pose motion;
+      if (j.type == JointType::kRevolute)
+        motion.R = Eigen::AngleAxisd(j.theta_offset, j.axis).toRotationMatrix();
+      else
+        motion.t = j.d * j.axis;
+      s = {j.origin * motion, Pose::Identity()};
+    } else {
+      s = SplitDh(robot.Convention(), j);
+    }
     std::string name = XmlName(j.name.empty() ? "joint_" + std::to_string(i + 1) : j.name);
     while (used.count(name) || used.count(name + "_link")) name += "_";
     used.insert(name);
@@ -264,7 +277,10 @@ std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std
     if (const auto c = comments.find(j.name); c != comments.end())
       x << "    <!--" << CommentText(c->second) << "-->\n";
     x << "    <parent link=\"" << parent << "\"/>\n    <child link=\"" << link << "\"/>\n    " << OriginXml(origin)
-      << "\n    <axis xyz=\"0 0 1\"/>\n";
+      << "\n    <axis xyz=\"" << (urdf ? Triple(j.axis) : std::string("0 0 1")) << "\"/>\n";
+    if (!j.mimics.empty())
+      x << "    <mimic joint=\"" << XmlName(j.mimics) << "\" multiplier=\"" << Num(j.mimic_multiplier) << "\" offset=\""
+        << Num(j.mimic_offset) << "\"/>\n";
     if (!rev || !open) {
       // effort and velocity are not known from a DH table (0: not given).
       const double lo = std::isfinite(j.lower) ? j.lower : -1e3, hi = std::isfinite(j.upper) ? j.upper : 1e3;
@@ -279,6 +295,24 @@ std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std
   x << "  </link>\n";
   x << "  <joint name=\"tool_joint\" type=\"fixed\">\n    <parent link=\"" << parent
     << "\"/>\n    <child link=\"tool\"/>\n    " << OriginXml(tail * robot.T_flange_tool()) << "\n  </joint>\n";
+  // The joints mimic joints follow, where the chain does not hold them: each on a massless
+  // branch off the base, its range the one its first mimic joint's limits imply.
+  std::set<std::string> drivers;
+  for (const Joint& j : robot.Joints()) {
+    if (j.mimics.empty() || drivers.count(j.mimics)) continue;
+    bool in_chain = false;
+    for (const Joint& k : robot.Joints()) in_chain |= k.name == j.mimics;
+    if (in_chain) continue;
+    drivers.insert(j.mimics);
+    const std::string name = XmlName(j.mimics);
+    double lo = (j.lower - j.mimic_offset) / j.mimic_multiplier, hi = (j.upper - j.mimic_offset) / j.mimic_multiplier;
+    if (lo > hi) std::swap(lo, hi);
+    x << "  <link name=\"" << name << "_driver\"/>\n  <joint name=\"" << name << "\" type=\""
+      << (j.type == JointType::kRevolute ? "revolute" : "prismatic") << "\">\n    <parent link=\"base_link\"/>\n"
+      << "    <child link=\"" << name << "_driver\"/>\n    <axis xyz=\"" << Triple(j.axis) << "\"/>\n"
+      << "    <limit lower=\"" << Num(std::isfinite(lo) ? lo : -1e3) << "\" upper=\"" << Num(std::isfinite(hi) ? hi : 1e3)
+      << "\" effort=\"0\" velocity=\"0\"/>\n  </joint>\n";
+  }
   x << "</robot>\n";
   return x.str();
 }
@@ -581,8 +615,8 @@ std::string UrdfText(const RobotModel& robot, const std::map<std::string, std::s
     if (j.Harmonics() > 0)
       Throw("robot '", robot.Name(), "': joint ", j.name, " has error motion, which a URDF cannot hold");
   const UrdfSource* src = robot.Urdf();
-  if (robot.Convention() != ChainConvention::kUrdf) return DhChainUrdf(robot, comments);
-  if (!src) Throw("robot '", robot.Name(), "' was not read from a URDF; there is no URDF to write back");
+  // A DH table, or a URDF chain read from its YAML form: a new URDF of the chain.
+  if (robot.Convention() != ChainConvention::kUrdf || !src) return DhChainUrdf(robot, comments);
   TiXmlDocument doc;
   doc.Parse(src->text.c_str());
   if (doc.Error()) Throw(src->source, ": cannot be parsed again to write it back: ", doc.ErrorDesc());

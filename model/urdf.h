@@ -62,7 +62,8 @@ LinkMount MountOnChain(const RobotModel& robot, const std::string& link);
 // calibrated model: the corrections folded in, exactly: FK of the written file equals the
 // model's T_base_flange), every other element as it was. `comments` (joint name -> text)
 // are written as an XML comment before that joint's <origin>: the parameters with sigma.
-// For a robot not read from a URDF (a DH table), a new URDF of the chain: links
+// For a robot not read from a URDF (a DH table, or a URDF chain read back from its YAML
+// form), a new URDF of the chain (mimic joints with their drivers on branches): links
 // <joint>_link, the masses as inertials, the tool as a fixed joint to the link `tool`.
 // InputError for a robot with error motion (URDF cannot hold it).
 std::string UrdfText(const RobotModel& robot, const std::map<std::string, std::string>& comments = {});

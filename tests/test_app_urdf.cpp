@@ -12,6 +12,7 @@
 #include "model/urdf.h"
 #include "tests/cli_runner.h"
 #include "tests/test_util.h"
+#include "tests/urdf_robots.h"
 
 namespace mcms {
 namespace {
@@ -210,6 +211,54 @@ TEST(AppUrdf, DhRobotAndItsUrdfGiveTheSameAuditAndCalibration) {
     EXPECT_NEAR(pd["estimate"].get<double>(), pu["estimate"].get<double>(), 1e-8) << n;
     EXPECT_NEAR(pd["sigma"].get<double>(), pu["sigma"].get<double>(), 1e-6 * pd["sigma"].get<double>() + 1e-12) << n;
   }
+}
+
+}  // namespace
+}  // namespace mcms
+
+namespace mcms {
+namespace {
+
+// Issue 53: URDF -> YAML -> URDF -> YAML: convert-robot reads back what it wrote (a URDF
+// chain's YAML form written as a new URDF, mimic joints with their driver on a branch),
+// and the forward kinematics stay the robot's.
+TEST(AppUrdf, ConvertRobotReadsBackWhatItWrote) {
+  const auto dir = test::ScratchDir("app_urdf_roundtrip");
+  test::WriteText(dir / "seven.urdf", test::SevenJointUrdf());
+  ASSERT_EQ(Mcms(dir, "convert-robot seven.urdf -o a.yaml").code, 0);
+  auto r = Mcms(dir, "convert-robot a.yaml -o b.urdf");
+  ASSERT_EQ(r.code, 0) << r.err;
+  r = Mcms(dir, "convert-robot b.urdf -o c.yaml");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const RobotModel a = RobotModel::Read(dir / "seven.urdf"), c = RobotModel::Read(dir / "c.yaml");
+  ASSERT_EQ(a.NumJoints(), c.NumJoints());
+  Eigen::VectorXd q(a.NumJoints());
+  for (int k = 0; k < 5; ++k) {
+    for (int j = 0; j < q.size(); ++j) {
+      const Joint& jt = a.Joints()[j];
+      const double lo = std::isfinite(jt.lower) ? jt.lower : -3, hi = std::isfinite(jt.upper) ? jt.upper : 3;
+      q[j] = lo + (hi - lo) * (0.1 + 0.2 * k);
+    }
+    const Pose x = a.T_base_tool(q), y = c.T_base_tool(q);
+    EXPECT_LT((x.t - y.t).norm(), 1e-9);
+    EXPECT_LT((x.R - y.R).norm(), 1e-9);
+  }
+  // The construction robot's column: two mimic segments driven by one joint the chain does
+  // not hold.
+  if (const auto data = test::RealData("hilti-trailblazer")) {
+    const auto hilti = *data / "trailblazer.urdf";
+    ASSERT_EQ(Mcms(dir, "convert-robot " + hilti.string() + " --tip-link prism -o h.yaml").code, 0);
+    r = Mcms(dir, "convert-robot h.yaml -o h.urdf");
+    ASSERT_EQ(r.code, 0) << r.err;
+    r = Mcms(dir, "convert-robot h.urdf -o h2.yaml");
+    ASSERT_EQ(r.code, 0) << r.err;
+    const RobotModel h = RobotModel::Read(hilti, {"", "prism"}), h2 = RobotModel::Read(dir / "h2.yaml");
+    ASSERT_EQ(h.NumActuated(), h2.NumActuated());
+    Eigen::VectorXd qa(h.NumActuated());
+    qa << 2.5, 0.3, -0.4, 1.2, 0.2, -0.7, 0.9;
+    EXPECT_LT((h.T_base_tool(h.ChainValues(qa)).t - h2.T_base_tool(h2.ChainValues(qa)).t).norm(), 1e-9);
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
