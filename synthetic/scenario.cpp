@@ -341,8 +341,16 @@ CameraRig ParseRig(const Reader& r, const YAML::Node& n) {
       r.Bad(n, "rig", e.what());
     }
   }
-  if (n.IsMap() && n["cameras"]) return ParseInlineRig(r, n);
-  if (n.IsMap() && n["type"]) return ParseGeneratedRig(r, n);
+  const auto Checked = [&](CameraRig rig) {
+    try {
+      rig.CheckBaselines("rig");
+    } catch (const InputError& e) {
+      r.Bad(n, "rig", e.what());
+    }
+    return rig;
+  };
+  if (n.IsMap() && n["cameras"]) return Checked(ParseInlineRig(r, n));
+  if (n.IsMap() && n["type"]) return Checked(ParseGeneratedRig(r, n));
   r.Bad(n, "rig", "expected a rig file name, a map with 'cameras', or a generator map with 'type'" + r.Found(n));
 }
 

@@ -139,6 +139,20 @@ TEST(Inputs, NonFiniteExtrinsicsAndADegenerateRigAreRefused) {
   ExpectTrackRefused(d, {"rig.yaml: cameras 'cam0' and 'cam1' are both at", "a rig needs a baseline"});
 }
 
+// Issue 53: a scenario whose generated rig puts two cameras at one position is refused by
+// render with the check track applies (it rendered, and track then refused).
+TEST(Inputs, ScenarioWithTwoCamerasAtOnePositionIsNotRendered) {
+  const fs::path d = test::ScratchDir("inputs_two_cams_one_place");
+  std::string s = test::ReadAll(fs::path(MCMS_SOURCE_DIR) / "examples" / "short_scenario.yaml");
+  const std::string from = "[[0.8, 0.7, 2.2], [-0.8, 0.7, 2.2]";
+  ASSERT_NE(s.find(from), std::string::npos);
+  s.replace(s.find(from), from.size(), "[[0.8, 0.7, 2.2], [0.8, 0.7, 2.2]");
+  test::WriteText(d / "s.yaml", s);
+  ExpectRefused(d, "render --quiet " + (d / "s.yaml").string() + " -o " + (d / "out").string(),
+                {"s.yaml", "cameras 'cam0' and 'cam1' are both at (0.8, 0.7, 2.2) m", "a rig needs a baseline"},
+                d / "out");
+}
+
 TEST(Inputs, RigThatIsAFolderOrAScalarIsRefused) {
   const fs::path d = Copy("rigfile");
   fs::remove(d / "rig.yaml");

@@ -511,16 +511,20 @@ CameraRig CameraRig::Read(const fs::path& path) {
     }
     rig.names.push_back(name);
   }
-  // A rig whose cameras share one centre has no baseline: nothing can be triangulated.
-  for (size_t i = 0; i < rig.size(); ++i)
-    for (size_t j = i + 1; j < rig.size(); ++j) {
-      const Vec3 ci = rig.cameras[i].T_cam_rig().Inverse().t, cj = rig.cameras[j].T_cam_rig().Inverse().t;
-      if ((ci - cj).norm() < kMinBaseline)
-        Throw(path.string(), ": cameras '", rig.names[i], "' and '", rig.names[j], "' are both at (", ci.x(), ", ",
-              ci.y(), ", ", ci.z(), ") m in the rig frame (", (ci - cj).norm() * 1e3,
-              " mm apart, at least 1 mm needed); check their rt_cam_rig: a rig needs a baseline");
-    }
+  rig.CheckBaselines(path.string());
   return rig;
+}
+
+void CameraRig::CheckBaselines(const std::string& where) const {
+  // A rig whose cameras share one centre has no baseline: nothing can be triangulated.
+  for (size_t i = 0; i < size(); ++i)
+    for (size_t j = i + 1; j < size(); ++j) {
+      const Vec3 ci = cameras[i].T_cam_rig().Inverse().t, cj = cameras[j].T_cam_rig().Inverse().t;
+      if ((ci - cj).norm() < kMinBaseline)
+        Throw(where, ": cameras '", names[i], "' and '", names[j], "' are both at (", ci.x(), ", ", ci.y(), ", ",
+              ci.z(), ") m in the rig frame (", (ci - cj).norm() * 1e3,
+              " mm apart, at least 1 mm needed); check their positions (rt_cam_rig): a rig needs a baseline");
+    }
 }
 
 void CameraRig::Write(const fs::path& path) const {

@@ -100,6 +100,9 @@ struct CameraRig {
   //       imagersize: [1280, 1024]
   //       rt_cam_rig: [rx, ry, rz, tx, ty, tz]   # rotation vector (rad), metres
   static CameraRig Read(const std::filesystem::path& path);
+  // InputError naming `where` and the two cameras when two share one centre (within 1 mm):
+  // a rig without a baseline triangulates nothing. Read checks it; so does a scenario.
+  void CheckBaselines(const std::string& where) const;
   // Writes the rig file with inline cameras, and if `models_dir` is given also one
   // .cameramodel per camera there.
   void Write(const std::filesystem::path& path) const;
