@@ -1,5 +1,7 @@
 #include "core/io.h"
 
+#include <cstring>
+
 #include <signal.h>
 #include <unistd.h>
 
@@ -85,6 +87,8 @@ void RemoveStaleTemporaries(const fs::path& dir, const std::string& prefix) {
   }
 }
 
+std::string SystemWriteReason() { return errno ? std::string(": ") + std::strerror(errno) : std::string(); }
+
 void WriteFileAtomically(const fs::path& path, const std::function<void(std::ostream&)>& write) {
   RequireNotReadThisRun(path, false);
   {
@@ -101,11 +105,14 @@ void WriteFileAtomically(const fs::path& path, const std::function<void(std::ost
   const fs::path tmp = path.string() + ".partial-" + std::to_string(::getpid());
   const RemovedOnInterrupt remove_if_interrupted(tmp);
   try {
+    errno = 0;
     std::ofstream out(tmp, std::ios::binary);
-    if (!out) Throw("cannot write output file ", path.string());
+    if (!out) Throw("cannot write output file ", path.string(), SystemWriteReason());
     write(out);
     out.flush();
-    if (!out) Throw("error while writing output file ", path.string());
+    if (out) out.close();
+    // The system's reason (no space left on device, file too large, ...) where it gave one.
+    if (!out) Throw("error while writing output file ", path.string(), SystemWriteReason());
   } catch (...) {
     std::error_code ec;
     fs::remove(tmp, ec);

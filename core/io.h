@@ -46,6 +46,10 @@ void RemoveStaleTemporaries(const std::filesystem::path& dir, const std::string&
 // place only when `write` returned normally, so a failure leaves no partial file.
 // Refused (RequireNotReadThisRun) when the file is one the run read. What a killed run
 // left beside it ("<name>.partial-PID") is removed first.
+// ": <the system's reason>" for the last failed write (errno: "No space left on device",
+// "File too large", ...), "" when the system gave none. Clear errno before the writes.
+std::string SystemWriteReason();
+
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write);
 

@@ -195,6 +195,14 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
   } catch (const fs::filesystem_error& e) {
     fs::remove_all(tmp, ec);
     Throw(what, ": cannot write ", out.string(), ": ", e.code().message());
+  } catch (const InputError& e) {
+    // A file of the folder that could not be written is named where it was to go, not in
+    // the hidden folder it was being written to.
+    fs::remove_all(tmp, ec);
+    std::string m = e.what();
+    const std::string from = tmp.string(), to = out.string();
+    for (size_t at = 0; (at = m.find(from, at)) != std::string::npos; at += to.size()) m.replace(at, from.size(), to);
+    throw InputError(m);
   } catch (...) {
     fs::remove_all(tmp, ec);
     throw;

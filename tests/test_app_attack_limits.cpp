@@ -644,3 +644,27 @@ TEST(AttackLimits, ThirdAttackFindings) {
 
 }  // namespace
 }  // namespace mcms
+
+namespace mcms {
+namespace {
+
+// Issue 53: a disk that fills up (here a file-size limit, which fails the writes as a full
+// disk does) is named by the system's reason at the file it was writing, never through a
+// temporary name, and nothing is left behind.
+TEST(AttackLimits, AWriteThatFailsSaysWhy) {
+  const auto d = test::ScratchDir("attack_write_fails");
+  const CliRun r = test::Shell(d, std::string("bash -c 'trap \"\" XFSZ; ulimit -f 20; exec ") + MCMS_CLI +
+                                      " demo --points 3 -o out -q'");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("error while writing output file"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("File too large"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("/out/"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("partial"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(d / "out"));
+  for (const auto& e : std::filesystem::directory_iterator(d))
+    EXPECT_EQ(e.path().filename().string().find("partial"), std::string::npos) << e.path();
+  std::filesystem::remove_all(d);
+}
+
+}  // namespace
+}  // namespace mcms

@@ -1,6 +1,7 @@
 #include "tracking/sequence.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <condition_variable>
 #include <exception>
@@ -427,8 +428,9 @@ PoseCsvWriter::PoseCsvWriter(fs::path path, std::vector<std::string> extra_colum
   RemoveStaleTemporaries(path_.parent_path(), path_.filename().string() + ".rows.partial-");  // of killed runs
   rows_path_ = path_.string() + ".rows.partial-" + std::to_string(::getpid());
   rows_guard_ = std::make_unique<RemovedOnInterrupt>(rows_path_);
+  errno = 0;
   rows_out_ = std::make_unique<std::ofstream>(rows_path_, std::ios::binary | std::ios::trunc);
-  if (!*rows_out_) Throw("cannot write output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
+  if (!*rows_out_) Throw("cannot write output file ", path_.string(), SystemWriteReason());
 }
 
 PoseCsvWriter::~PoseCsvWriter() {
@@ -447,6 +449,7 @@ void PoseCsvWriter::Add(const FrameResult& f, const std::vector<double>& extra) 
     return std::string(buf);
   };
   std::ostream& o = *rows_out_;
+  errno = 0;
   std::string reason = f.reason;
   std::replace(reason.begin(), reason.end(), ',', ';');
   std::replace(reason.begin(), reason.end(), '"', '\'');
@@ -465,14 +468,15 @@ void PoseCsvWriter::Add(const FrameResult& f, const std::vector<double>& extra) 
     for (int c = 0; c < 6; ++c) o << "," << (f.T_rig_target ? num(f.cov(r, c)) : std::string());
   for (double v : extra) o << "," << (std::isnan(v) ? std::string() : num(v));
   o << "\n";
-  if (!o) Throw("error while writing output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
+  if (!o) Throw("error while writing output file ", path_.string(), SystemWriteReason());
   ++rows_;
 }
 
 void PoseCsvWriter::Finish(const std::vector<std::string>& comments) {
   if (finished_) return;
+  errno = 0;
   rows_out_->flush();
-  if (!*rows_out_) Throw("error while writing output file ", path_.string(), " (its temporary file ", rows_path_.string(), ")");
+  if (!*rows_out_) Throw("error while writing output file ", path_.string(), SystemWriteReason());
   rows_out_.reset();
   WriteFileAtomically(path_, [&](std::ostream& o) {
     for (const std::string& line : comments) o << "# " << line << "\n";
