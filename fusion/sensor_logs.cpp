@@ -174,6 +174,8 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
     fs::path p = r.as<std::string>();
     if (p.is_relative()) p = base_dir / p;
     if (!fs::exists(p)) y.Fail(r, "robot: file ", p.string(), " does not exist");
+    if (fs::is_directory(p))
+      y.Fail(r, "robot: ", p.string(), " is a folder; expected the robot's description file (YAML or URDF)");
     // A URDF's chain: the setup's base_link and tip_link, as the robot commands' --base-link
     // and --tip-link (named so in the messages: fuse has no such options).
     ChainSelection chain;
@@ -187,7 +189,7 @@ FusionSetup ParseRoot(const YAML::Node& root, const Yaml& y, const fs::path& sou
                                         {"--base-link", "base_link (a key of the setup)"}})
         for (size_t at = w.find(option); at != std::string::npos; at = w.find(option, at + key.size()))
           w.replace(at, option.size(), key);
-      Throw(source.string(), ": ", w);
+      Throw(source.string(), ", robot: ", w);
     }
   } else {
     if (root["base_link"] || root["tip_link"]) y.Fail(root, "base_link and tip_link pick the chain of a URDF given as robot:");

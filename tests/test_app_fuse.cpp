@@ -394,6 +394,14 @@ TEST(AppFuse, TheSameRobotAsUrdfFusesTheSame) {
   EXPECT_NE(two.err.find("give tip_link (a key of the setup)"), std::string::npos) << two.err;
   EXPECT_EQ(two.err.find("--tip-link"), std::string::npos) << two.err;
   EXPECT_FALSE(fs::exists(d / "two.csv"));
+  // Issue 53: `robot: .` names the setup, its line and the key.
+  test::WriteText(d / "setup_dot.yaml", test::ReadAll(d / "fusion_setup.yaml") + "robot: .\n");
+  const CliRun dot = test::Mcms(d, run + " --setup setup_dot.yaml -o dot.csv");
+  EXPECT_EQ(dot.code, 2);
+  EXPECT_NE(dot.err.find("setup_dot.yaml"), std::string::npos) << dot.err;
+  EXPECT_NE(dot.err.find("robot: "), std::string::npos) << dot.err;
+  EXPECT_NE(dot.err.find("is a folder; expected the robot's description file"), std::string::npos) << dot.err;
+  EXPECT_FALSE(fs::exists(d / "dot.csv"));
 }
 
 }  // namespace
