@@ -4,6 +4,7 @@
 #include <limits>
 
 #include "core/error.h"
+#include "core/limits.h"
 
 namespace mcms {
 
@@ -93,6 +94,20 @@ PathCharacteristics PathAccuracyRepeatability(const std::vector<Vec3>& commanded
   for (int r = 0; r < n; ++r)
     if (attained[r].size() < 2)
       Throw("ISO 9283 path characteristics: attained run ", r + 1, " has ", attained[r].size(), " points; at least 2 are needed");
+  // A run in another unit than the commanded path (mm against m) never meets its planes.
+  const auto Length = [](const std::vector<Vec3>& p) {
+    double L = 0;
+    for (size_t k = 1; k < p.size(); ++k) L += (p[k] - p[k - 1]).norm();
+    return L;
+  };
+  const double Lc = Length(commanded);
+  for (int r = 0; r < n; ++r) {
+    const double ratio = Length(attained[r]) / Lc;
+    if (!(ratio > 0.05 && ratio < 20))
+      Throw("ISO 9283 path characteristics: attained run ", r + 1, " is ", ratio,
+            " times as long as the commanded path", LengthUnitHint(ratio),
+            "; give the commanded and the attained paths in the same unit (metres)");
+  }
 
   PathCharacteristics c;
   for (int i = 0; i < m; ++i) {

@@ -91,7 +91,7 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
   // Numbered columns q1_rad.. (q<i>_deg, q<i>_m): how many the log has.
   int numbered = 0;
   for (int i = 1;; ++i) {
-    const std::string q = "q" + std::to_string(i);
+    const std::string q = std::string("q").append(std::to_string(i));  // (GCC 12 -Wrestrict misfires on "q" + ...)
     if (Find(q + "_rad") < 0 && Find(q + "_deg") < 0 && Find(q + "_m") < 0) break;
     numbered = i;
   }
@@ -134,7 +134,7 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
             robot.HasMimicJoints() ? " actuated joints (its mimic joints follow them)" : " joints",
             "; give the robot description the log was measured with (--robot)");
     for (int i = 0; i < n; ++i) {
-      Take(i, "q" + std::to_string(i + 1), "");
+      Take(i, std::string("q").append(std::to_string(i + 1)), "");
       if (jc.column[i] < 0)
         Throw(src, ": no column for joint ", i + 1, " (q", i + 1, act[i].type == JointType::kRevolute
                                                                      ? "_rad or q" + std::to_string(i + 1) + "_deg"
@@ -735,15 +735,7 @@ void CheckScale(const RobotModel& robot, const RobotLog& log) {
               "'s logged values are taken ", Num4(u.factor), " times as large (", u.hint,
               "); give each joint in the unit its column's header says");
     }
-  std::string unit;
-  if (std::abs(std::log10(scale) - 3.0) < 0.05)
-    unit = " (millimetres under metre headers?)";
-  else if (std::abs(std::log10(scale) - 2.0) < 0.05)
-    unit = " (centimetres?)";
-  else if (std::abs(scale / 39.37 - 1.0) < 0.05)
-    unit = " (inches?)";
-  else if (std::abs(std::log10(scale) + 3.0) < 0.05)
-    unit = " (kilometres?)";
+  const std::string unit = LengthUnitHint(scale);
   Throw(src_name, ": the measured positions are ", Num4(scale), " times as far apart as robot '", robot.Name(),
         "' puts its tool at the logged joints", unit,
         "; give the positions in metres, and the robot description the log was measured with (--robot)");
@@ -805,7 +797,7 @@ void CheckPositionsMove(const RobotModel& robot, const RobotLog& log) {
     }
     if (spread_meas < 1e-6 && spread_tool > 1e-4)
       Throw(log.source.empty() ? std::string("robot log") : log.source.string(),
-            st.empty() ? std::string() : " station " + st,
+            st.empty() ? std::string() : std::string(" station ").append(st),
             ": the measured positions do not move (every row measures the same point within 1 um) while the "
             "logged joints move the tool over ",
             Num4(spread_tool), " m: are the position columns filled per row?");

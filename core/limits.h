@@ -54,6 +54,11 @@ constexpr int kMaxAuditRows = 50000;
 constexpr int kMaxRobotLinks = 10000;
 constexpr int kMaxRobotJoints = 64;
 // InputError unless value is finite and |value| <= limit: "<what> = <value> <unit>: ...".
+// The likely unit of lengths that came out `ratio` times as large as expected, where they
+// should be metres: " (millimetres under metre headers?)", " (centimetres?)",
+// " (inches?)", " (kilometres?)"; "" when none fits (within 5 %, 0.05 decades).
+std::string LengthUnitHint(double ratio);
+
 void CheckMagnitude(double value, double limit, const std::string& what, const std::string& unit);
 
 // A camera's name names its image folder (and a part of output file names): at most this

@@ -81,6 +81,21 @@ TEST(Iso9283, PathAccuracyAndRepeatabilityOnAStraightLine) {
   EXPECT_NEAR(p.AT_p, 0.2, 1e-12);
   EXPECT_NEAR(p.RT_p, lbar + 3 * S, 1e-12);
   for (double a : p.AT_i) EXPECT_NEAR(a, 0.2, 1e-12);
+  // Issue 53: a run in millimetres against a commanded path in metres is named as such,
+  // not as a run that "never crosses the plane".
+  {
+    auto mm = runs;
+    for (Vec3& p : mm[2]) p *= 1000.0;
+    std::string e;
+    try {
+      PathAccuracyRepeatability(cmd, mm);
+    } catch (const InputError& x) {
+      e = x.what();
+    }
+    EXPECT_NE(e.find("attained run 3 is 1100 times as long as the commanded path (millimetres under metre headers?)"),
+              std::string::npos)
+        << e;
+  }
   // A run that stops short never crosses the last normal planes.
   runs[1].resize(5);
   EXPECT_THROW(PathAccuracyRepeatability(cmd, runs), InputError);
