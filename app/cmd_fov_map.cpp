@@ -134,7 +134,7 @@ const McmsCommand kFovMap([](CLI::App& app) {
   sub->add_option("--read-noise", a->read_noise,
                   "noise std of a background pixel in DN, as in mcms track (default: the scenario's read, photon and "
                   "quantization noise)")
-      ->check(NonNegativeNumber());
+      ->check(NonNegativeNumber() & CLI::Range(0.0, kMaxImageDn));
   sub->add_option("--ball-dn", a->ball_dn, "brightness of a ball image in DN (default: the scenario's)")->check(NonNegativeNumber());
   sub->add_option("--background-dn", a->background_dn, "background level in DN (default: the scenario's)")
       ->check(NonNegativeNumber());

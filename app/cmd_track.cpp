@@ -21,11 +21,11 @@ void TrackerCli::Add(CLI::App* cmd) {
       ->check(NonNegativeNumber());
   cmd->add_option("--read-noise", read_noise_dn,
                   "noise std of a background pixel in DN (0 = measure it around each blob)")
-      ->check(NonNegativeNumber());
+      ->check(NonNegativeNumber() & CLI::Range(0.0, kMaxImageDn));
   cmd->add_option("--polarity", polarity, "blobs brighter (bright) or darker (dark) than the background")
       ->check(CLI::IsMember({"bright", "dark"}));
   cmd->add_option("--threshold", threshold_dn, "detection threshold in DN beyond the background (0 = automatic)")
-      ->check(NonNegativeNumber());
+      ->check(NonNegativeNumber() & CLI::Range(0.0, kMaxImageDn));
   cmd->add_option("--noise-frames", noise_frames,
                   "frames (spread over the recording) from which the gain is measured when --gain is not given")
       ->check(PositiveNumber());

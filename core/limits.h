@@ -16,6 +16,10 @@ void CheckThreads(int n, const std::string& what, bool zero_means_all_cores = tr
 // n, or the machine's cores (at least 1) for 0.
 int ThreadsToUse(int n);
 
+// The largest level of a stored image (16 bits, DN): a noise or threshold beyond it is no
+// level an image can hold.
+constexpr double kMaxImageDn = 65535.0;
+
 // Pixels of one rendered image (a 200 MP camera; each costs 4 bytes or more in memory).
 constexpr double kMaxRenderPixels = 2e8;
 

@@ -48,6 +48,10 @@ TEST(AttackLimits, ThreadsBeyondTheLimitAreRefusedBeforeAnyWork) {
   ExpectRefused(d, "render --threads 100000 -o rec -q", {"--threads", "256"});
   ExpectRefused(d, "track rec --threads 100000", {"--threads", "256"});
   ExpectRefused(d, "demo --threads 100000 -o demo", {"--threads", "256"});
+  // Issue 53: a read noise or threshold beyond any level an image holds (was "target never found").
+  ExpectRefused(d, "track rec --read-noise 1e300", {"--read-noise", "65535"});
+  ExpectRefused(d, "track rec --threshold 1e9", {"--threshold", "65535"});
+  ExpectRefused(d, "fov-map --read-noise 1e300 -o out --quiet", {"--read-noise", "65535"});
 }
 
 TEST(AttackLimits, RobotLengthsEncoderNoiseAndMassesBeyondAnyRobot) {
