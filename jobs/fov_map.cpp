@@ -243,6 +243,28 @@ FovMap ComputeFovMap(const CameraRig& rig, const Target& target, const FovMapOpt
   map.target = target;
   map.options = options;
 
+  // A grid no two cameras see (outside the view, behind the rig, in mm): said here, not as
+  // ball images too small for the detector.
+  {
+    const auto Seen = [&](const Vec3& p, const CameraModel& cam) {
+      const Vec3 pc = cam.T_cam_rig() * p;
+      if (!(pc.z() > 0.05)) return false;
+      const Vec2 q = cam.Project(pc);
+      return std::isfinite(q.x()) && std::isfinite(q.y()) && q.x() >= 0 && q.y() >= 0 && q.x() < cam.Width() &&
+             q.y() < cam.Height();
+    };
+    bool any = false;
+    for (size_t i = 0; i < options.grid.size() && !any; ++i) {
+      const Vec3 p = options.grid.Point(i);
+      int n = 0;
+      for (const CameraModel& cam : rig.cameras) n += Seen(p, cam);
+      any = n >= 2;
+    }
+    if (!any)
+      Throw("fov-map --grid ", options.grid.ToString(), ": none of its ", options.grid.size(),
+            " points is in the view of two cameras (points in the rig frame, metres; the rig's cameras look at ",
+            "their common view, e.g. the scenario's look_at_m); give a grid inside the cameras' common view");
+  }
   map.centre_table = TableForBox(rig, target, options, options.grid.lo, options.grid.hi);
   const CentroidCovarianceTable& table = map.centre_table;
   const CentroidCovarianceFn centre_cov = [&table](const Ellipse& e) { return table(e); };

@@ -572,6 +572,9 @@ TEST(AttackLimits, ThirdAttackFindings) {
   test::WriteText(d / "huge.yaml", huge);
   ExpectRefused(d, "render huge.yaml --frames 3 -q -o rec", {"spurious radius", "1000"});
   ExpectRefused(d, "fov-map -o fm --quiet --grid=-1e308:1e308:3,0:0:1,2:2:1", {"--grid", "beyond 1000 m"});
+  // Issue 53: a grid outside every camera's view is said as such (was blamed on the blob detector).
+  ExpectRefused(d, "fov-map -o fm --quiet --grid=100:101:2,0:0:1,0:0:1",
+                {"fov-map --grid", "none of its 2 points is in the view of two cameras"});
   // A camera name too long for a folder name (it blamed -o: 'File name too long').
   std::string long_name = scenario;
   ASSERT_NE(long_name.find("names: [cam0, cam1"), std::string::npos);
