@@ -295,6 +295,26 @@ TEST(Inputs, HugePngHeaderDegradesItsFrameOnly) {
   EXPECT_FALSE(t.rows[3][t.Column("x_m")].empty()) << "three cameras still give a pose";
 }
 
+// Issue 53: a 32-bit float TIFF among the frames (not what a camera stores) degrades its
+// frame with the file named; the run goes on (it aborted the whole track, no file named).
+TEST(Inputs, FloatTiffDegradesItsFrameNamingTheFile) {
+  const fs::path d = Copy("floattiff");
+  const fs::path png = d / "images" / "cam1" / "000002.png";
+  const cv::Mat f(1024, 1280, CV_32FC1, cv::Scalar(12.0f));
+  ASSERT_TRUE(cv::imwrite((d / "float.tif").string(), f));
+  fs::copy_file(d / "float.tif", png, fs::copy_options::overwrite_existing);  // read by its first bytes
+  fs::remove(d / "float.tif");
+  const CliRun r = Mcms("track --quiet " + d.string(), d);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const CsvTable t = ReadCsv(d / "poses.csv");
+  ASSERT_EQ(t.rows.size(), 5u);
+  const int st = t.Column("status"), re = t.Column("reason");
+  EXPECT_EQ(t.rows[2][st], "degraded");
+  EXPECT_NE(t.rows[2][re].find("cam1/000002.png holds CV_32FC1 samples; expected 8- or 16-bit integer images"),
+            std::string::npos)
+      << t.rows[2][re];
+}
+
 // Damaged PNG frames (vision/image_file.h): a wrong CRC, a truncated file and a zlib bomb
 // (a valid stream that inflates to twice the 1280 x 1024 the header gives) each degrade
 // their frame only, with the reason naming the file; nothing of the bomb is inflated beyond

@@ -979,6 +979,12 @@ cv::Mat ReadFrame(const fs::path& p, const ImageFileOptions& options, std::strin
     }
     if (reader) *reader = ImageFileReader::kOpenCv;
   }
+  if (im.depth() != CV_8U && im.depth() != CV_16U) {
+    // A float or 32-bit image (a float TIFF): not what a camera stores; named with the file.
+    *problem = "image " + p.string() + " holds " + cv::typeToString(im.type()) +
+               " samples; expected 8- or 16-bit integer images as the camera stores them";
+    return {};
+  }
   if (expected && (im.cols != (*expected)[0] || im.rows != (*expected)[1])) {
     *problem = "image " + p.string() + " is " + std::to_string(im.cols) + "x" + std::to_string(im.rows) +
                " but the rig says " + std::to_string((*expected)[0]) + "x" + std::to_string((*expected)[1]);
