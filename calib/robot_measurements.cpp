@@ -95,6 +95,14 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
     if (Find(q + "_rad") < 0 && Find(q + "_deg") < 0 && Find(q + "_m") < 0) break;
     numbered = i;
   }
+  // A robot whose URDF names its joints q<k> itself (q6 .. q1 down the chain, say): its
+  // q<k> columns are its joint names, read by name, never by their number.
+  bool numbers_are_names = numbered > 0;
+  for (int i = 1; numbers_are_names && i <= numbered; ++i) {
+    const std::string q = std::string("q").append(std::to_string(i));
+    numbers_are_names = std::any_of(act.begin(), act.end(), [&](const auto& j) { return j.name == q; });
+  }
+  if (numbers_are_names) numbered = 0;
   const auto Take = [&](int i, const std::string& stem, const std::string& label) {
     const bool rev = act[i].type == JointType::kRevolute;
     std::vector<std::pair<std::string, double>> units;

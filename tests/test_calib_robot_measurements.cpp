@@ -95,6 +95,37 @@ TEST(RobotMeasurements, ReadsJointsByNameAndPointsOfARigidBody) {
   EXPECT_LT((again.T_meas_body[3].t - body.T_meas_body[3].t).norm(), 1e-12);
 }
 
+// A URDF that names its joints q7 .. q1 down the chain (the reverse of the log's numbered
+// convention): its q<k>_rad / q<k>_m columns are its joint names and are read by name, never
+// as "joint k of the chain".
+TEST(RobotMeasurements, JointsNamedQInReverseAreReadByName) {
+  const auto dir = test::ScratchDir("robot_measurements_q_reverse");
+  const Truth t = MakeTruth(1, 0.0);
+  const std::string csv = MakeCsv(t, 12, 3);
+  test::WriteText(dir / "log.csv", csv);
+  const RobotLog by_name = ReadRobotLog(dir / "log.csv", Seven());
+  // The same robot with its chain's joints renamed q7 (lift_joint) .. q1 (j6), and the log's
+  // columns renamed so, with their units: lift_joint -> q7_m, j1 -> q6_rad ...
+  std::string urdf = test::SevenJointUrdf();
+  std::string header = csv.substr(0, csv.find('\n'));
+  const std::vector<std::string> names = {"lift_joint", "j1", "j2", "j3", "j4", "j5", "j6"};
+  for (size_t k = 0; k < names.size(); ++k) {
+    const std::string q = std::string("q").append(std::to_string(7 - k));
+    const std::string quoted = "\"" + names[k] + "\"";
+    for (size_t at; (at = urdf.find(quoted)) != std::string::npos;) urdf.replace(at, quoted.size(), "\"" + q + "\"");
+    const std::string col = "," + names[k] + ",";
+    const size_t at = header.find(col);
+    ASSERT_NE(at, std::string::npos) << names[k];
+    header.replace(at, col.size(), "," + q + (k == 0 ? "_m," : "_rad,"));
+  }
+  test::WriteText(dir / "q.csv", header + csv.substr(csv.find('\n')));
+  const RobotModel renamed = ParseUrdf(urdf, "q.urdf", {"world", "tool"});
+  ASSERT_EQ(renamed.ActuatedJoints()[0].name, "q7");
+  const RobotLog by_q = ReadRobotLog(dir / "q.csv", renamed);
+  ASSERT_EQ(by_q.rows.size(), by_name.rows.size());
+  for (size_t i = 0; i < by_q.rows.size(); ++i) EXPECT_EQ(by_q.rows[i].q, by_name.rows[i].q) << "row " << i;
+}
+
 TEST(RobotMeasurements, PostureGroupsOfAnotherSession) {
   RobotLog fitted, other;
   const auto Row = [](double a, double b) {
