@@ -22,6 +22,7 @@ namespace mcms {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
+constexpr int kMinBoardInliers = 4;  // corners in use that fix a board's pose
 
 // One camera's chessboard problem: observation i has its own board pose.
 struct Problem {
@@ -31,6 +32,7 @@ struct Problem {
   std::vector<mrcal_pose_t> frames;  // seeds: T_cam_board as rt
   bool has_warp = false;
   mrcal_calobject_warp_t warp{};
+  int boards_without_inliers = 0;    // observations left out: fewer than kMinBoardInliers in use
   int Nobs() const { return static_cast<int>(frames.size()); }
   int PointsPer() const { return bw * bh; }
 };
@@ -149,14 +151,23 @@ Problem MakeProblem(const MrcalOptimizationInputsData& d) {
     mrcal_pose_t pose;
     pose.r.x = rt[0], pose.r.y = rt[1], pose.r.z = rt[2];
     pose.t.x = rt[3], pose.t.y = rt[4], pose.t.z = rt[5];
-    p.frames.push_back(pose);
+    std::vector<mrcal_point3_t> board(per);
+    int inliers = 0;
     for (size_t k = 0; k < per; ++k) {
-      mrcal_point3_t q;
+      mrcal_point3_t& q = board[k];
       q.x = d.observations_board[3 * (i * per + k)];
       q.y = d.observations_board[3 * (i * per + k) + 1];
       q.z = d.observations_board[3 * (i * per + k) + 2];
-      p.pool.push_back(q);
+      inliers += q.z > 0;
     }
+    // A board with fewer than 4 corners in use (the file's outliers have weight <= 0) fixes
+    // no pose: it would leave the solver a singular system. Left out, and counted.
+    if (inliers < kMinBoardInliers) {
+      ++p.boards_without_inliers;
+      continue;
+    }
+    p.frames.push_back(pose);
+    p.pool.insert(p.pool.end(), board.begin(), board.end());
   }
   return p;
 }
@@ -237,9 +248,17 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
   r.height = p.height;
   for (const mrcal_point3_t& q : p.pool) r.observed.push_back({q.x, q.y, q.z});
   r.points_per_board = std::max(1, p.PointsPer());
+  if (p.boards_without_inliers > 0)
+    r.report.notes.push_back(std::to_string(p.boards_without_inliers) + " board observation(s) of " + r.camera +
+                             " have fewer than " + std::to_string(kMinBoardInliers) +
+                             " corners in use (the file marks the others outliers): left out");
   if (p.Nobs() < options.folds)
-    Throw("audit lens: camera ", r.camera, " has ", p.Nobs(), " board observations, fewer than the ", options.folds,
-          " folds");
+    Throw("audit lens: camera ", r.camera, " has ", p.Nobs(), " board observations",
+          p.boards_without_inliers > 0 ? std::string(" with ").append(std::to_string(kMinBoardInliers)).append(
+                                             " or more corners in use (").append(std::to_string(p.boards_without_inliers)).append(
+                                             " more have their corners marked outliers in the file)")
+                                       : std::string(),
+          ", fewer than the ", options.folds, " folds");
   const std::string nominal = data.lensmodel;
   const std::vector<double>& nominal_intrinsics = data.intrinsics.at(static_cast<size_t>(data.icam_intrinsics));
   const int nominal_params = mrcal_lensmodel_num_params(&static_cast<const mrcal_lensmodel_t&>(Lensmodel(nominal)));

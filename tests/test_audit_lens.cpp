@@ -5,6 +5,8 @@
 // The command and mrcal's real Figueroa calibration: tests/test_app_audit_lens.cpp.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <cmath>
 #include <cstdio>
 #include <regex>
@@ -186,6 +188,29 @@ TEST(LensAudit, BadInputNamesTheFileAndWritesNothing) {
   opt.threads = -1;
   const std::string e4 = test::ErrorOf([&] { AuditLens(ReadMrcalOptimizationInputs(path), opt); });
   EXPECT_NE(e4.find("--threads"), std::string::npos) << e4;
+  // Every corner marked an outlier in the file (weight < 0): named, not handed to the solver
+  // (whose singular system would print CHOLMOD's own lines).
+  opt.threads = 1;
+  MrcalOptimizationInputsData all_out = ReadMrcalOptimizationInputs(path);
+  for (size_t k = 2; k < all_out.observations_board.size(); k += 3) all_out.observations_board[k] = -1.0;
+  const std::string e5 = test::ErrorOf([&] { AuditLens(all_out, opt); });
+  const size_t boards = all_out.indices_frame_camintrinsics_camextrinsics.size();
+  EXPECT_NE(e5.find("has 0 board observations with 4 or more corners in use (" + std::to_string(boards) +
+                    " more have their corners marked outliers in the file)"),
+            std::string::npos)
+      << e5;
+  // Three boards wholly outliers: left out with a note, the others audited.
+  MrcalOptimizationInputsData some_out = ReadMrcalOptimizationInputs(path);
+  const size_t per = static_cast<size_t>(some_out.board_width_n * some_out.board_height_n);
+  for (size_t i : {3u, 17u, 30u})
+    for (size_t k = 0; k < per; ++k) some_out.observations_board[3 * (i * per + k) + 2] = -1.0;
+  opt.candidates = {"LENSMODEL_OPENCV8"};
+  const LensAuditResult r = AuditLens(some_out, opt);
+  const auto& notes = r.report.notes;
+  EXPECT_TRUE(std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
+    return n.find("3 board observation(s) of cam0 have fewer than 4 corners in use") != std::string::npos;
+  }));
+  EXPECT_EQ(r.observed.size(), (boards - 3) * per);
 }
 
 // The held-out folds are solved side by side: every figure is the same, to the bit, on
