@@ -24,6 +24,7 @@ packages=(
   liburdfdom-dev  # robots as ROS describes them (model/urdf.h): urdfdom, with TinyXML and console_bridge
   zlib1g-dev
   libisal-dev  # the PNG frame reader (vision/image_file.h): ISA-L inflate and CRC-32
+  libtiff-dev  # TIFF frames the mapped reader does not take (compressed), with libtiff's messages kept per file
 )
 # What only the tests, benchmarks and the Python module need (test mode): the demo does
 # not wait for Chromium, Dask or the Python references to download.

@@ -623,9 +623,9 @@ TEST(MappedReader, PgmAndUncompressedTiffEqualOpenCv) {
     EXPECT_TRUE(SameImage(ReadIt(d / ("a" + b + ".tif")).image, im));
     WriteBytes(d / ("be" + b + ".tif"), BigEndianTiff(im));
     ExpectSameAsOpenCv(d / ("be" + b + ".tif"), depth == CV_8U ? ImageFileReader::kMapped : ImageFileReader::kCopied);
-    // LZW (OpenCV's default TIFF compression) is the general reader's.
+    // LZW (OpenCV's default TIFF compression) is libtiff's.
     ASSERT_TRUE(cv::imwrite((d / ("lzw" + b + ".tif")).string(), im));
-    ExpectSameAsOpenCv(d / ("lzw" + b + ".tif"), ImageFileReader::kOpenCv);
+    ExpectSameAsOpenCv(d / ("lzw" + b + ".tif"), ImageFileReader::kLibtiff);
   }
   // PGM headers with comments, and a maxval below the bit depth's (OpenCV keeps the values).
   const cv::Mat small = FrameLike(7, 5, CV_8U, 1);
@@ -647,6 +647,72 @@ TEST(MappedReader, PgmAndUncompressedTiffEqualOpenCv) {
   {
     std::ofstream(d / "ascii.pgm") << "P2\n2 2\n255\n1 2\n3 4\n";
     ExpectSameAsOpenCv(d / "ascii.pgm", ImageFileReader::kOpenCv);
+  }
+}
+
+// Damaged TIFFs the mapper does not take: an LZW file cut in half, and an uncompressed one
+// whose strips are scattered (so not the mapper's) with one strip's offset beyond the end.
+// Each names the file and the strip libtiff could not read, and nothing reaches stderr
+// (OpenCV's TIFF decoder would print libtiff's and its own lines there).
+TEST(MappedReader, DamagedTiffIsNamedWithoutLibtiffNoise) {
+  const fs::path d = test::ScratchDir("damaged_tiff");
+  const cv::Mat im = FrameLike(320, 240, CV_8U, 5);
+  ASSERT_TRUE(cv::imwrite((d / "lzw.tif").string(), im));
+  const Bytes lzw = ReadBytes(d / "lzw.tif");
+  // cv::imwrite puts the directory after the pixels: keep the header and directory, drop the
+  // second half of the strips.
+  Bytes cut = lzw;
+  const uint32_t ifd = cut[4] | cut[5] << 8 | cut[6] << 16 | static_cast<uint32_t>(cut[7]) << 24;
+  ASSERT_GT(ifd, lzw.size() / 2);
+  std::fill(cut.begin() + static_cast<long>(ifd / 2), cut.begin() + static_cast<long>(ifd), 0);
+  WriteBytes(d / "cut.tif", cut);
+  // Uncompressed little-endian, one row per strip, the rows written backwards (scattered),
+  // strip 7's offset beyond the file.
+  {
+    Bytes b;
+    const uint32_t w = 16, h = 12;
+    const uint16_t n = 9;
+    const size_t ifd_at = 8, offsets_at = ifd_at + 2 + 12 * n + 4, counts_at = offsets_at + 4 * h,
+                 pixels_at = counts_at + 4 * h;
+    const auto put16 = [&](uint16_t v) {
+      b.push_back(static_cast<unsigned char>(v));
+      b.push_back(static_cast<unsigned char>(v >> 8));
+    };
+    const auto put32 = [&](uint32_t v) { for (int k = 0; k < 4; ++k) b.push_back(static_cast<unsigned char>(v >> (8 * k))); };
+    put16(0x4949), put16(42), put32(8);  // "II", 42, the directory at byte 8
+    const auto tag = [&](uint16_t t, uint16_t type, uint32_t count, uint32_t value) {
+      put16(t), put16(type), put32(count);
+      if (type == 3 && count == 1) put16(static_cast<uint16_t>(value)), put16(0);
+      else put32(value);
+    };
+    put16(n);
+    tag(256, 3, 1, w), tag(257, 3, 1, h), tag(258, 3, 1, 8), tag(259, 3, 1, 1), tag(262, 3, 1, 1);
+    tag(273, 4, h, static_cast<uint32_t>(offsets_at)), tag(277, 3, 1, 1), tag(278, 3, 1, 1);
+    tag(279, 4, h, static_cast<uint32_t>(counts_at));
+    put32(0);
+    ASSERT_EQ(b.size(), offsets_at);
+    for (uint32_t y = 0; y < h; ++y) put32(y == 7 ? 100000 : static_cast<uint32_t>(pixels_at + (h - 1 - y) * w));
+    for (uint32_t y = 0; y < h; ++y) put32(w);
+    for (uint32_t k = 0; k < w * h; ++k) b.push_back(static_cast<unsigned char>(k));
+    WriteBytes(d / "scattered.tif", b);
+  }
+  for (const std::string name : {"cut.tif", "scattered.tif"}) {
+    SCOPED_TRACE(name);
+    testing::internal::CaptureStderr();
+    const Read r = ReadIt(d / name);
+    const std::string err = testing::internal::GetCapturedStderr();
+    EXPECT_TRUE(r.image.empty());
+    EXPECT_NE(r.problem.find("cannot decode " + (d / name).string() + ": row "), std::string::npos) << r.problem;
+    EXPECT_EQ(err, "");
+  }
+  // The same scattered file with strip 7 in place reads, by libtiff, as written.
+  {
+    Bytes b = ReadBytes(d / "scattered.tif");
+    const size_t offsets_at = 8 + 2 + 12 * 9 + 4, pixels_at = offsets_at + 8 * 12;
+    const uint32_t at = static_cast<uint32_t>(pixels_at + (12 - 1 - 7) * 16);
+    for (int k = 0; k < 4; ++k) b[offsets_at + 4 * 7 + k] = static_cast<unsigned char>(at >> (8 * k));
+    WriteBytes(d / "scattered_ok.tif", b);
+    ExpectSameAsOpenCv(d / "scattered_ok.tif", ImageFileReader::kLibtiff);
   }
 }
 

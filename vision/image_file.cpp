@@ -10,6 +10,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdarg>
+#include <cstdio>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -19,6 +21,7 @@
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
+#include <tiffio.h>
 #include <zlib.h>
 
 #include "core/error.h"
@@ -904,12 +907,76 @@ const char* ToString(ImageFileReader r) {
     case ImageFileReader::kPng: return "png";
     case ImageFileReader::kMapped: return "mapped";
     case ImageFileReader::kCopied: return "copied";
+    case ImageFileReader::kLibtiff: return "libtiff";
     case ImageFileReader::kOpenCv: return "opencv";
   }
   return "?";
 }
 
 namespace {
+
+// Any TIFF the mapper does not take (compressed, scattered strips, tiles): read by libtiff
+// with its messages kept per file (OpenCV's TIFF decoder prints a damaged file's details
+// to stderr itself: "failed TIFFReadRGBAStrip", "imread_(...): can't read data"). A grey
+// 8- or 16-bit image is decoded here; any other layout only checked (every strip or tile
+// read), then decoded by OpenCV, which now cannot fail on it. Returns false with *problem
+// naming the file and libtiff's first error.
+bool ReadTiffWithLibtiff(const fs::path& p, cv::Mat* image, std::string* problem) {
+  struct Messages {
+    std::string first_error;
+  } messages;
+  const auto on_error = [](TIFF*, void* user, const char* module, const char* fmt, va_list ap) -> int {
+    auto* m = static_cast<Messages*>(user);
+    if (m->first_error.empty()) {
+      char buf[512];
+      std::vsnprintf(buf, sizeof buf, fmt, ap);
+      m->first_error = (module && *module ? std::string(module) + ": " : std::string()) + buf;
+    }
+    return 1;
+  };
+  const auto on_warning = [](TIFF*, void*, const char*, const char*, va_list) -> int { return 1; };
+  TIFFOpenOptions* opts = TIFFOpenOptionsAlloc();
+  TIFFOpenOptionsSetErrorHandlerExtR(opts, on_error, &messages);
+  TIFFOpenOptionsSetWarningHandlerExtR(opts, on_warning, &messages);
+  TIFF* t = TIFFOpenExt(p.c_str(), "r", opts);
+  TIFFOpenOptionsFree(opts);
+  const auto fail = [&](const std::string& what) {
+    *problem = "cannot decode " + p.string() + ": " + what +
+               (messages.first_error.empty() ? std::string() : " (" + messages.first_error + ")");
+    return false;
+  };
+  if (!t) return fail("not a readable TIFF");
+  std::unique_ptr<TIFF, void (*)(TIFF*)> close(t, TIFFClose);
+  uint32_t w = 0, h = 0;
+  uint16_t bits = 1, samples = 1, format = SAMPLEFORMAT_UINT;
+  TIFFGetField(t, TIFFTAG_IMAGEWIDTH, &w);
+  TIFFGetField(t, TIFFTAG_IMAGELENGTH, &h);
+  TIFFGetFieldDefaulted(t, TIFFTAG_BITSPERSAMPLE, &bits);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLESPERPIXEL, &samples);
+  TIFFGetFieldDefaulted(t, TIFFTAG_SAMPLEFORMAT, &format);
+  if (w == 0 || h == 0) return fail("its TIFF directory gives no image size");
+  if (samples == 1 && (bits == 8 || bits == 16) && format == SAMPLEFORMAT_UINT && !TIFFIsTiled(t)) {
+    cv::Mat im(static_cast<int>(h), static_cast<int>(w), bits == 8 ? CV_8UC1 : CV_16UC1);
+    if (TIFFScanlineSize64(t) != static_cast<uint64_t>(im.step[0]))
+      return fail("its rows are not packed as " + std::to_string(bits) + "-bit grey samples");
+    for (uint32_t y = 0; y < h; ++y)
+      if (TIFFReadScanline(t, im.ptr(static_cast<int>(y)), y, 0) < 0)
+        return fail("row " + std::to_string(y) + " of " + std::to_string(h) + " cannot be read");
+    *image = im;
+    return true;
+  }
+  const bool tiled = TIFFIsTiled(t);
+  const uint32_t pieces = tiled ? TIFFNumberOfTiles(t) : TIFFNumberOfStrips(t);
+  std::vector<unsigned char> buf(static_cast<size_t>(tiled ? TIFFTileSize64(t) : TIFFStripSize64(t)));
+  for (uint32_t k = 0; k < pieces; ++k) {
+    const tmsize_t got = tiled ? TIFFReadEncodedTile(t, k, buf.data(), static_cast<tmsize_t>(buf.size()))
+                               : TIFFReadEncodedStrip(t, k, buf.data(), static_cast<tmsize_t>(buf.size()));
+    if (got < 0)
+      return fail(std::string(tiled ? "tile " : "strip ").append(std::to_string(k)).append(" of ").append(
+          std::to_string(pieces)).append(" cannot be read"));
+  }
+  return true;  // readable; OpenCV decodes its layout
+}
 
 // ReadImageFile, and ImageFileRows::Read when `rows` is given: then a PNG our decoder
 // handles is inflated into *rows, and the image returned is rows->image(), not yet
@@ -965,6 +1032,10 @@ cv::Mat ReadFrame(const fs::path& p, const ImageFileOptions& options, std::strin
     if (got != Mapped::kImage || copied) ::munmap(m.base, m.length);  // otherwise the image owns the mapping
     if (got == Mapped::kFailed) return {};
     if (got == Mapped::kImage && reader) *reader = copied ? ImageFileReader::kCopied : ImageFileReader::kMapped;
+  }
+  if (im.empty() && !options.opencv_only && header->format == "TIFF") {
+    if (!ReadTiffWithLibtiff(p, &im, problem)) return {};
+    if (!im.empty() && reader) *reader = ImageFileReader::kLibtiff;
   }
   if (im.empty()) {
     try {

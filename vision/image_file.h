@@ -51,6 +51,7 @@ enum class ImageFileReader {
   kPng,     // our PNG decoder
   kMapped,  // PGM/TIFF pixels mapped from the file, no copy
   kCopied,  // PGM/TIFF read without the general reader, one copy (16-bit big-endian samples)
+  kLibtiff, // a TIFF the mapper does not take (compressed, scattered strips), grey 8/16-bit
   kOpenCv,  // cv::imread
 };
 const char* ToString(ImageFileReader r);
