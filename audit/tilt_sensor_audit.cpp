@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 #include <optional>
 
@@ -14,6 +15,7 @@
 #include "audit/model_selection.h"
 #include "core/error.h"
 #include "core/io.h"
+#include "core/statistics.h"
 #include "model/urdf.h"
 
 namespace mcms {
@@ -39,6 +41,7 @@ struct Row {
   Mat3 R_base_link = Mat3::Identity();   // the upper sensor's link, nominal
   Vec3 moment = Vec3::Zero();            // carried by the upper sensor's frame, base frame (N m)
   double length = 0.0;                   // from the lower frame to the upper (m)
+  double travel_left = 0.0;              // the bending joint's travel to its upper limit (m; prismatic)
   Vec2d z = Vec2d::Zero();               // measured tilts of the upper sensor (rad)
   double time_s = 0.0;
 };
@@ -62,6 +65,8 @@ struct Model {
 };
 
 bool Bounded(Effect e) { return e == Effect::kLinkCompliance || e == Effect::kSegmentPlay; }
+// Telescopic play's overlap at full extension is searched in [kOverlapLo, kOverlapHi] m.
+constexpr double kOverlapLo = 0.01, kOverlapHi = 3.0;
 // Acts on the link (named by its joint), not on the sensor.
 bool OnLink(Effect e) { return Bounded(e) || e == Effect::kAxisTilt; }
 
@@ -86,7 +91,7 @@ class Auditor {
         mis = e.variant == 1 ? Vec3(R_link_sensor_.col(2) * m.p[k][0]) : Vec3(m.p[k][0], m.p[k][1], m.p[k][2]);
         misaligned = true;
       } else {
-        beta += LinkBendingT<double>(e, m.p[k].data(), r.moment, r.length, r.R_base_link);
+        beta += LinkBendingT<double>(e, m.p[k].data(), r.moment, r.length, r.R_base_link, r.travel_left);
       }
     }
     const Mat3 R = r.R_world_base * ExpSO3(beta) * r.R_base_link;
@@ -111,9 +116,73 @@ class Auditor {
     return J;
   }
 
+  // The model's fit. Telescopic play's overlap (segment_play variant 1's p2, which enters
+  // as 1 / (p2 + travel)^2) is profiled: the rest fitted by FitGaussNewton at overlaps on a
+  // log grid over [kOverlapLo, kOverlapHi] m, then golden section around the best; an
+  // overlap that ends at the grid's edge is held there (at its bound: the data do not place
+  // it). The others' Gauss-Newton alone would run it to 0 or past it.
+  Model Fit(Model m, const std::vector<char>& mask, const Mat2d* fixed, Mat2d* S_out) const {
+    int kp = -1;
+    for (size_t k = 0; k < m.ext.size(); ++k)
+      if (m.ext[k].effect == Effect::kSegmentPlay && m.ext[k].variant == 1 && !m.held[k][2]) kp = static_cast<int>(k);
+    if (kp < 0) return FitGaussNewton(std::move(m), mask, fixed, S_out);
+    struct Trial {
+      Model m;
+      Mat2d S;
+      double ll = -std::numeric_limits<double>::infinity();
+    };
+    const auto at = [&](double overlap) {
+      Trial t;
+      t.m = m;
+      t.m.p[kp][2] = overlap;
+      t.m.held[kp][2] = true;
+      t.m = FitGaussNewton(std::move(t.m), mask, fixed, &t.S);
+      t.ll = LogLik(t.m, t.S, mask, nullptr);
+      return t;
+    };
+    const double lo = std::log(kOverlapLo), hi = std::log(kOverlapHi);
+    constexpr int kGrid = 12;
+    std::vector<Trial> grid;
+    int best = 0;
+    for (int g = 0; g <= kGrid; ++g) {
+      grid.push_back(at(std::exp(lo + (hi - lo) * g / kGrid)));
+      if (grid.back().ll > grid[best].ll) best = g;
+    }
+    Trial top = grid[best];
+    if (best > 0 && best < kGrid) {
+      double a = lo + (hi - lo) * (best - 1) / kGrid, b = lo + (hi - lo) * (best + 1) / kGrid;
+      const double r = (std::sqrt(5.0) - 1) / 2;
+      double c = b - r * (b - a), d = a + r * (b - a);
+      Trial tc = at(std::exp(c)), td = at(std::exp(d));
+      for (int it = 0; it < 16; ++it) {
+        if (tc.ll >= td.ll) {
+          b = d, d = c, td = std::move(tc);
+          c = b - r * (b - a);
+          tc = at(std::exp(c));
+        } else {
+          a = c, c = d, tc = std::move(td);
+          d = a + r * (b - a);
+          td = at(std::exp(d));
+        }
+      }
+      for (Trial* t : {&tc, &td})
+        if (t->ll > top.ll) top = *t;
+    }
+    // Where it started, when it is better (a model never fits worse than its start).
+    const double start_overlap = m.p[kp][2];
+    if (start_overlap >= kOverlapLo && start_overlap <= kOverlapHi) {
+      Trial here = at(start_overlap);
+      if (here.ll > top.ll) top = std::move(here);
+    }
+    const double o = top.m.p[kp][2];
+    top.m.held[kp][2] = !(o > kOverlapLo * 1.0001 && o < kOverlapHi * 0.9999);
+    if (S_out) *S_out = top.S;
+    return top.m;
+  }
+
   // Gauss-Newton with the noise covariance profiled, on the rows with mask[i] (all when
   // empty); S fixed when `fixed` is given. Bounded parameters that end below 0 are held at 0.
-  Model Fit(Model m, const std::vector<char>& mask, const Mat2d* fixed, Mat2d* S_out) const {
+  Model FitGaussNewton(Model m, const std::vector<char>& mask, const Mat2d* fixed, Mat2d* S_out) const {
     const Model start = m;
     for (int pass = 0; pass < 3; ++pass) {
       Mat2d S = fixed ? *fixed : Covariance(m, mask);
@@ -283,6 +352,11 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
   const std::string where = sensor.link;
   std::vector<Row> rows;
   const double t0 = log.rows.front().time_s;
+  // Telescopic play (segment_play variant 1) where the sensor's link rides a prismatic joint
+  // with an upper limit: its travel left is the segments' overlap less what stays at full
+  // extension.
+  const Joint* bending = res.bending_joint >= 0 ? &robot.Joints()[res.bending_joint] : nullptr;
+  const bool telescopic = bending && bending->type == JointType::kPrismatic && std::isfinite(bending->upper);
   for (const RobotMeasurement& lr : log.rows) {
     const std::vector<Pose> frames = robot.LinkFrames(lr.q);
     Row r;
@@ -291,6 +365,7 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     r.R_base_link = frames[sensor.frame].R;
     r.moment = CarriedMoment(robot, lr.q, sensor.frame, log.has_payload ? lr.payload_kg : 0.0);
     r.length = (frames[sensor.frame].t - frames[ref.frame].t).norm();
+    if (telescopic) r.travel_left = std::max(0.0, bending->upper - lr.q[res.bending_joint]);  // q: chain values
     r.z = TiltsOf(lr.accel[sensor_k].second);
     r.time_s = lr.time_s - t0;
     rows.push_back(r);
@@ -325,13 +400,15 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
   double cur_ll = a.LogLik(cur, S_cur, all, nullptr);
   std::optional<double> cur_cv;
   std::vector<double> cur_cv_rows;
-  const std::vector<Extension> catalog = {{Effect::kInclinometerBias, -1, 0},
-                                          {Effect::kInclinometerMisalignment, -1, 1},
-                                          {Effect::kLinkCompliance, res.bending_joint, 0},
-                                          {Effect::kSegmentPlay, res.bending_joint, 0},
-                                          {Effect::kAxisTilt, res.bending_joint, 0}};
+  std::vector<Extension> catalog = {{Effect::kInclinometerBias, -1, 0},
+                                    {Effect::kInclinometerMisalignment, -1, 1},
+                                    {Effect::kLinkCompliance, res.bending_joint, 0},
+                                    {Effect::kSegmentPlay, res.bending_joint, 0},
+                                    {Effect::kAxisTilt, res.bending_joint, 0}};
+  if (telescopic) catalog.push_back({Effect::kSegmentPlay, res.bending_joint, 1});
   const auto Label = [&](const Extension& e) {
-    return std::string(Name(e.effect)) + " at " + (OnLink(e.effect) ? e.Where(robot) : where);
+    return std::string(Name(e.effect)) + (e.effect == Effect::kSegmentPlay && e.variant == 1 ? " (telescopic)" : "") +
+           " at " + (OnLink(e.effect) ? e.Where(robot) : where);
   };
   for (int step = 0; step < o.max_effects; ++step) {
     struct Tried {
@@ -384,22 +461,71 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
                           "named");
       break;
     }
+    const auto Effect_ = [&](const Extension& e, const Model& after, double heldout_gain, double bic_gain) {
+      AuditEffect ef;
+      ef.name = Name(e.effect);
+      ef.where = OnLink(e.effect) ? e.Where(robot) : where;
+      if (e.effect == Effect::kSegmentPlay && e.variant == 1)
+        ef.labels = {{"variant", "telescopic: (play_x s_x, play_y s_y) / (overlap_at_full_extension + travel left)^2"}};
+      ef.rms_unit = "rad";
+      ef.heldout_rms_before = TiltRms(a, cur);
+      ef.heldout_rms_after = TiltRms(a, after);
+      ef.heldout_loglik_gain = heldout_gain;
+      ef.bic_gain = bic_gain;
+      return ef;
+    };
     if (dec.outcome == StepOutcome::kUndecided) {
+      // Two causes that explain the same residual equally well may both be present: fitted
+      // together, they are named together when each adds to the other (its likelihood
+      // ratio over the other alone passes the selection's test for its parameters), no
+      // parameter ends at a bound, and the pair gains held-out log-likelihood over the
+      // better one alone. Otherwise the tie is reported.
+      bool named = false;
+      if (dec.group.size() == 2 && tried[dec.group[0]].e.effect != tried[dec.group[1]].e.effect) {
+        const Tried& t0 = tried[dec.group[0]];
+        const Tried& t1 = tried[dec.group[1]];
+        Model both = t0.m;
+        both.ext.push_back(t1.e);
+        both.p.push_back(t1.m.p.back());
+        both.held.push_back(t1.m.held.back());
+        Mat2d S_both;
+        both = a.Fit(both, all, nullptr, &S_both);
+        bool bound = false;
+        for (size_t k = cur.ext.size(); k < both.ext.size(); ++k)
+          for (bool h : both.held[k]) bound |= h;
+        const double ll = a.LogLik(both, S_both, all, nullptr);
+        rep.nested.Record(2 * (ll - t0.ll), t0.ll);
+        rep.nested.Record(2 * (ll - t1.ll), t1.ll);
+        const bool adds0 = 2 * (ll - t1.ll) > ChiSquareThreshold(t0.e.NumParameters(), rule.alpha);
+        const bool adds1 = 2 * (ll - t0.ll) > ChiSquareThreshold(t1.e.NumParameters(), rule.alpha);
+        if (!bound && adds0 && adds1) {
+          std::vector<double> rows_cv;
+          const double cv = a.HeldOut(both, o.folds, S_cur, &rows_cv);
+          const double best_single = std::max(t0.cv, t1.cv);
+          if (cv > best_single) {
+            const double k = t0.e.NumParameters() + t1.e.NumParameters();
+            const double bic = 2 * (ll - cur_ll) - k * rule.ln_n;
+            rep.effects.push_back(Effect_(t0.e, both, cv - *cur_cv, bic));
+            rep.effects.push_back(Effect_(t1.e, both, cv - *cur_cv, bic));
+            rep.notes.push_back(Label(t0.e) + " and " + Label(t1.e) +
+                                " explain the same residual equally well alone; fitted together each adds to the "
+                                "other and the pair predicts held-out rows better: both named");
+            cur = std::move(both);
+            S_cur = S_both;
+            cur_ll = ll;
+            cur_cv.reset();
+            named = true;
+          }
+        }
+      }
+      if (named) continue;
       std::vector<std::string> g;
       for (int i : dec.group) g.push_back(Label(tried[i].e));
       rep.undecided.push_back(g);
       break;
     }
     Tried& best = tried[dec.best];
-    AuditEffect ef;
-    ef.name = Name(best.e.effect);
-    ef.where = OnLink(best.e.effect) ? best.e.Where(robot) : where;
-    ef.rms_unit = "rad";
-    ef.heldout_rms_before = TiltRms(a, cur);
-    ef.heldout_rms_after = TiltRms(a, best.m);
-    ef.heldout_loglik_gain = best.cv - *cur_cv;
-    ef.bic_gain = sel[dec.best].bic_gain;
-    rep.effects.push_back(ef);
+    rep.effects.push_back(Effect_(best.e, best.m, best.cv - *cur_cv, sel[dec.best].bic_gain));
     cur = best.m;
     S_cur = best.S;
     cur_ll = best.ll;
@@ -417,8 +543,11 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     for (size_t j = 0; j < names.size(); ++j) {
       ef.parameters.push_back({names[j], cur.p[k][j]});
       ef.sigma.push_back({names[j], sig[k][j]});
-      ef.units.push_back(cur.ext[k].effect == Effect::kLinkCompliance || cur.ext[k].effect == Effect::kAxisTilt ? ""
-                                                                                                              : "rad");
+      const bool telescopic_play = cur.ext[k].effect == Effect::kSegmentPlay && cur.ext[k].variant == 1;
+      ef.units.push_back(cur.ext[k].effect == Effect::kLinkCompliance || cur.ext[k].effect == Effect::kAxisTilt ||
+                                 telescopic_play
+                             ? ""
+                             : "rad");
     }
   }
   res.noise = S_cur;

@@ -1,5 +1,6 @@
 #include "model/extensions.h"
 
+#include <cmath>
 #include <sstream>
 
 #include "core/error.h"
@@ -26,7 +27,9 @@ const std::vector<EffectInfo>& EffectCatalog() {
        "a link bends under the moment it carries: its frame tilts by c L M about each principal axis of its section "
        "(compliances >= 0, rad per N m^2; seen by a tilt sensor above it)"},
       {Effect::kSegmentPlay, "segment_play", SensorKind::kRobot,
-       "play between telescopic segments: a tilt step with the sign of the moment the link carries (>= 0, rad)"},
+       "play between telescopic segments: a tilt step with the sign of the moment the link carries (>= 0, rad); "
+       "variant 1: the step grows as 1 / overlap^2 as the segments extend (>= 0, rad m^2 about x and y, and the "
+       "overlap left at full extension, m)"},
       {Effect::kAxisTilt, "axis_tilt", SensorKind::kRobot,
        "a linear axis leans in proportion to its travel (angular error motion, rad per m in x and y; seen by a tilt "
        "sensor above it)"},
@@ -75,6 +78,7 @@ int Extension::NumParameters() const {
     case Effect::kLinkCompliance:
     case Effect::kClockDrift: return 2;
     case Effect::kInclinometerMisalignment: return variant == 1 ? 1 : 3;
+    case Effect::kSegmentPlay: return variant == 1 ? 3 : 1;
     case Effect::kTargetGeometry: return 3;
     default: return 1;
   }
@@ -110,7 +114,9 @@ std::vector<std::string> Extension::ParameterNames() const {
                           : std::vector<std::string>{"growth_per_K"};
     case Effect::kBacklash: return {"backlash_rad"};
     case Effect::kLinkCompliance: return {"compliance_x_rad_per_Nm2", "compliance_y_rad_per_Nm2"};
-    case Effect::kSegmentPlay: return {"play_rad"};
+    case Effect::kSegmentPlay:
+      return variant == 1 ? std::vector<std::string>{"play_x_rad_m2", "play_y_rad_m2", "overlap_at_full_extension_m"}
+                          : std::vector<std::string>{"play_rad"};
     case Effect::kAxisTilt: return {"tilt_x_rad_per_m", "tilt_y_rad_per_m"};
     case Effect::kErrorMotion: {
       std::vector<std::string> names;
@@ -140,6 +146,7 @@ std::vector<double> Extension::InitialParameters() const {
   std::vector<double> p(NumParameters(), 0.0);
   if (effect == Effect::kThermalDrift && variant == 0) p[1] = 1800.0;
   if (effect == Effect::kPixelNoiseScale) p[0] = 1.0;
+  if (effect == Effect::kSegmentPlay && variant == 1) p[2] = 0.2;  // a fifth of a metre of overlap left, to start
   return p;
 }
 
@@ -202,6 +209,9 @@ void Extension::Check(const RobotModel* robot, int num_cameras, int num_balls) c
         bad("is a DH term; a URDF joint's lengths and twists are in its placement (geometry)");
       if (effect == Effect::kErrorMotion && robot->Joints()[index].type != JointType::kRevolute)
         bad("error motion is for revolute joints");
+      if (effect == Effect::kSegmentPlay && variant == 1 &&
+          !(robot->Joints()[index].type == JointType::kPrismatic && std::isfinite(robot->Joints()[index].upper)))
+        bad("telescopic play is for a prismatic joint with an upper limit");
       if (effect == Effect::kGravityCompliance && variant != 0 && variant != 2 * robot->NumJoints() + 1)
         bad("variant must be 0 (the robot's masses) or 2 n + 1 (lumped masses)");
       break;

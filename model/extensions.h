@@ -242,6 +242,9 @@ PoseT<T> ExtendedFlangeT(const RobotModel& robot, const std::vector<Extension>& 
 }
 
 // ---- bending links (issue 52) -------------------------------------------------------
+// The least overlap telescopic segments keep (m): segment_play variant 1 never divides by
+// less.
+inline constexpr double kMinSegmentOverlapM = 1e-3;
 // The moment (N m, base frame, gravity along -z) of the weight of everything link frame
 // `frame` (0 = base, k = after joint k) carries, about that frame's origin: the links beyond
 // it at their centres of mass, the tool's mass and a payload at the tool point. It bends
@@ -254,12 +257,16 @@ Vec3 CarriedMoment(const RobotModel& robot, const Eigen::VectorXd& q, int frame,
 // link frame's x and y axes (>= 0, rad per N m^2: a cantilever's L / (E I) per metre for
 // each principal axis of its section; the tilt grows with the extension), segment_play
 // p0 M_h / |M_h| (p0 >= 0, rad: the clearance between telescopic segments taken up with
-// the sign of the moment), axis_tilt (p0, p1) L (rad per m, base frame x and y: a linear
-// axis's angular error motion, its moving part leaning in proportion to its travel, ISO
-// 230-1's pitch and yaw; the constant part is the sensor's bias). Other effects: zero.
+// the sign of the moment; variant 1, telescopic play: the clearance's tilt grows as the
+// segments' overlap shrinks, (p0 s_x, p1 s_y) / (p2 + t)^2 about the link frame's x and y,
+// s the unit horizontal moment in that frame, t the travel left to the joint's upper limit
+// (m) and p2 the overlap left at full extension (m): p0, p1 >= 0 rad m^2, p2 >= 0),
+// axis_tilt (p0, p1) L (rad per m, base frame x and y: a linear axis's angular error
+// motion, its moving part leaning in proportion to its travel, ISO 230-1's pitch and yaw;
+// the constant part is the sensor's bias). Other effects: zero.
 template <typename T>
 Eigen::Matrix<T, 3, 1> LinkBendingT(const Extension& e, const T* p, const Vec3& moment, double length_m,
-                                    const Mat3& R_base_link) {
+                                    const Mat3& R_base_link, double travel_left_m = 0.0) {
   const Vec3 mh(moment.x(), moment.y(), 0.0);
   Eigen::Matrix<T, 3, 1> b = Eigen::Matrix<T, 3, 1>::Zero();
   if (e.effect == Effect::kLinkCompliance) {
@@ -268,6 +275,16 @@ Eigen::Matrix<T, 3, 1> LinkBendingT(const Extension& e, const T* p, const Vec3& 
     b = R_base_link.cast<T>() * bl;
   } else if (e.effect == Effect::kAxisTilt) {
     for (int k = 0; k < 2; ++k) b[k] = p[k] * length_m;
+  } else if (e.effect == Effect::kSegmentPlay && e.variant == 1) {
+    const Vec3 ml = R_base_link.transpose() * moment;
+    const double n = std::hypot(ml.x(), ml.y());
+    if (n > 1e-9) {
+      T overlap = p[2] + travel_left_m;
+      if (overlap < T(kMinSegmentOverlapM)) overlap = T(kMinSegmentOverlapM);
+      const T inv2 = 1.0 / (overlap * overlap);
+      const Eigen::Matrix<T, 3, 1> bl(p[0] * (ml.x() / n) * inv2, p[1] * (ml.y() / n) * inv2, T(0));
+      b = R_base_link.cast<T>() * bl;
+    }
   } else if (e.effect == Effect::kSegmentPlay) {
     const double n = mh.norm();
     if (n > 1e-9)
