@@ -365,7 +365,7 @@ void Apply(const std::vector<std::string>& effects, const std::vector<double>& t
       f->outlier_probability = 1.0 / (1.0 + std::exp(-th[k++]));
       f->outlier_sigma = std::exp(th[k++]);
     } else {
-      throw std::invalid_argument("unknown noise effect '" + e + "'");
+      Throw<InternalError>("unknown noise effect '", e, "'");
     }
   }
 }
@@ -579,14 +579,11 @@ NoiseModelFit Finish(const VarianceData& d, const std::vector<std::string>& effe
 }
 
 void CheckData(const VarianceData& d) {
-  if (d.nominal.size() != d.size() || d.repeats.size() != d.size())
-    throw std::invalid_argument("VarianceData: sizes differ");
+  MCMS_CHECK(d.nominal.size() == d.size() && d.repeats.size() == d.size(), "VarianceData: sizes differ");
   for (size_t i = 0; i < d.size(); ++i) {
-    if (!(d.nominal[i].minCoeff() > 0 && d.nominal[i].allFinite()))
-      throw std::invalid_argument("VarianceData: nominal variances must be positive");
-    if (!(d.measured[i].minCoeff() > 0 && d.measured[i].allFinite()))
-      throw std::invalid_argument("VarianceData: measured variances must be positive");
-    if (d.repeats[i] < 2) throw std::invalid_argument("VarianceData: at least 2 repeats per point");
+    MCMS_CHECK(d.nominal[i].minCoeff() > 0 && d.nominal[i].allFinite(), "VarianceData: nominal variances must be positive");
+    MCMS_CHECK(d.measured[i].minCoeff() > 0 && d.measured[i].allFinite(), "VarianceData: measured variances must be positive");
+    MCMS_CHECK(d.repeats[i] >= 2, "VarianceData: at least 2 repeats per point");
   }
 }
 

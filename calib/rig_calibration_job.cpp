@@ -256,6 +256,9 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
       outputs.push_back({a.output / file, "calib-rig -o"});
   RequireOutputsSpareInputs(outputs, inputs);
   RequireWritableFolder(a.output, "calib-rig -o");
+  // The folder is written as a whole: an earlier calib-rig output is replaced, a folder
+  // holding anything else (the user's own rig.yaml, notes) is refused before the solve.
+  RequireReplaceableFolder(a.output, {"rig.yaml", "summary.txt"}, "calib-rig", "calib-rig -o");
 
   const Detected d = DetectBoards(a, board);
   const CameraCalibrationResult r = CalibrateCameras(d.input, options);
@@ -269,25 +272,25 @@ void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(c
     no_inputs_why = "the models carry no optimization_inputs: mrcal describes a board as a regular grid of points, "
                     "and an AprilTag grid's corners are not one (mrcal's uncertainty tools need a chessboard)";
 
-  // Everything is computed; only now write the outputs (each atomically): plots first,
-  // then the models, rig.yaml last, so a failure part-way leaves no rig.yaml.
-  const fs::path out = a.output;
-  CreateOutputFolder(out, "calib-rig -o");
-  for (size_t c = 0; c < r.rig.size(); ++c)
-    WriteResidualPlot(r, static_cast<int>(c), out / ("residuals-" + r.rig.names[c] + ".svg"));
-  for (size_t c = 0; c < r.rig.size(); ++c) {
-    const std::string& name = r.rig.names[c];
-    if (optimization_inputs.empty())
-      r.rig.cameras[c].WriteCameramodel(out / (name + ".cameramodel"));
-    else
-      WriteCameramodelWithOptimizationInputs(r, static_cast<int>(c), optimization_inputs, out / (name + ".cameramodel"));
-    r.rig.cameras[c].WriteOpenCvYaml(out / (name + ".yml"));
-  }
-  // The summary is printed and kept beside the models (mcms report's first screen reads it).
+  // Everything is computed; only now write the outputs, the folder as a whole (renamed into
+  // place when complete, so a failure part-way leaves nothing). The summary is printed and kept beside the models (mcms report's first screen reads it).
   std::string summary;
   ReportSolution(a, r, grids, [&](const std::string& s) { summary += s; });
-  WriteFileAtomically(out / "summary.txt", [&](std::ostream& o) { o << summary; });
-  r.rig.Write(out / "rig.yaml");
+  const fs::path out = a.output;
+  WriteFolderAtomically(out, {"rig.yaml", "summary.txt"}, "calib-rig", "calib-rig -o", [&](const fs::path& dir) {
+    for (size_t c = 0; c < r.rig.size(); ++c)
+      WriteResidualPlot(r, static_cast<int>(c), dir / ("residuals-" + r.rig.names[c] + ".svg"));
+    for (size_t c = 0; c < r.rig.size(); ++c) {
+      const std::string& name = r.rig.names[c];
+      if (optimization_inputs.empty())
+        r.rig.cameras[c].WriteCameramodel(dir / (name + ".cameramodel"));
+      else
+        WriteCameramodelWithOptimizationInputs(r, static_cast<int>(c), optimization_inputs, dir / (name + ".cameramodel"));
+      r.rig.cameras[c].WriteOpenCvYaml(dir / (name + ".yml"));
+    }
+    WriteFileAtomically(dir / "summary.txt", [&](std::ostream& o) { o << summary; });
+    r.rig.Write(dir / "rig.yaml");
+  });
 
   print(summary);
   print(Format("wrote %zu camera models (.cameramodel%s, .yml), residual plots, summary.txt and rig.yaml to %s\n", r.rig.size(),

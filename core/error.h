@@ -2,10 +2,11 @@
 //  - InputError: bad user or file input; the message names the input and what was
 //    expected. The CLI prints it as one line and exits non-zero.
 //  - Options::IsValid(std::string* why): options structs validate themselves.
-//  - MCMS_DCHECK: internal invariants on hot paths, debug builds only.
+//  - MCMS_CHECK(cond, message): a programmer's error (a caller broke a function's
+//    contract, an internal table is inconsistent), checked in every build: throws
+//    InternalError naming the file and line. The CLI prints it as "internal error" and exits 3.
 #pragma once
 
-#include <cassert>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -15,6 +16,11 @@ namespace mcms {
 class InputError : public std::runtime_error {
  public:
   explicit InputError(const std::string& what) : std::runtime_error(what) {}
+};
+
+class InternalError : public std::logic_error {
+ public:
+  explicit InternalError(const std::string& what) : std::logic_error(what) {}
 };
 
 // Builds a message from streamable parts: Throw<InputError>("file ", path, ": expected ...").
@@ -27,4 +33,7 @@ template <typename E = InputError, typename... Parts>
 
 }  // namespace mcms
 
-#define MCMS_DCHECK(cond) assert(cond)
+#define MCMS_CHECK(cond, message)                                                                 \
+  do {                                                                                             \
+    if (!(cond)) ::mcms::Throw<::mcms::InternalError>(__FILE__, ":", __LINE__, ": ", message);    \
+  } while (false)

@@ -89,6 +89,21 @@ std::pair<std::string, std::map<std::string, std::string>> ReadManifest(const st
 
 }  // namespace
 
+void RequireOwnEarlierOutput(const std::filesystem::path& file, const std::function<bool(const std::string&)>& ours,
+                             const std::string& what, const std::string& described, const std::string& advice) {
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec)) return;
+  std::string head;
+  if (std::filesystem::is_regular_file(file, ec)) {
+    std::ifstream in(file, std::ios::binary);
+    head.assign(4096, '\0');
+    in.read(head.data(), static_cast<std::streamsize>(head.size()));
+    head.resize(static_cast<size_t>(std::max<std::streamsize>(in.gcount(), 0)));
+    if (ours(head)) return;
+  }
+  Throw(what, " ", file.string(), " exists and is not ", described, "; it was not replaced: ", advice);
+}
+
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what) {
   namespace fs = std::filesystem;

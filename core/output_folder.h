@@ -33,6 +33,13 @@ void RecordOutputFolder(const std::filesystem::path& folder, const std::string& 
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what);
 
+// A file a command writes by default beside the user's data (track's DIR/poses.csv,
+// report's report.html) is replaced only when an earlier run wrote it: `ours` tests the
+// file's first 4 KiB. Otherwise InputError: "<what> <file> exists and is not <described>;
+// it was not replaced: <advice>". Nothing to check when the file does not exist.
+void RequireOwnEarlierOutput(const std::filesystem::path& file, const std::function<bool(const std::string&)>& ours,
+                             const std::string& what, const std::string& described, const std::string& advice);
+
 // Creates an output folder (and its parents). InputError naming `what` (e.g. "demo -o")
 // and the folder, with the system's reason, instead of a filesystem_error, when it cannot
 // be created (a path in /proc, a read-only file system, a file in the way).

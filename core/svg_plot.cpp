@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "core/error.h"
 #include "core/io.h"
 
 namespace mcms {
@@ -270,8 +271,7 @@ void Plot::WriteSvg(const std::filesystem::path& path, int W, int H) const {
 }
 
 std::string PlotGridSvg(const std::vector<Plot>& plots, int columns, int cell_w, int cell_h) {
-  if (plots.empty() || columns < 1 || cell_w < 100 || cell_h < 100)
-    throw std::invalid_argument("PlotGridSvg: expected at least one plot, columns >= 1 and cells of >= 100 px");
+  MCMS_CHECK(!plots.empty() && columns >= 1 && cell_w >= 100 && cell_h >= 100, "PlotGridSvg: expected at least one plot, columns >= 1 and cells of >= 100 px");
   const int n = static_cast<int>(plots.size());
   const int cols = std::min(columns, n), rows = (n + cols - 1) / cols;
   std::ostringstream o;
@@ -281,7 +281,7 @@ std::string PlotGridSvg(const std::vector<Plot>& plots, int columns, int cell_w,
     // Each plot is its own nested <svg> placed at its cell (nested viewports are plain SVG).
     std::string cell = plots[i].ToSvg(cell_w, cell_h);
     const std::string head = "<svg xmlns='http://www.w3.org/2000/svg'";
-    if (cell.compare(0, head.size(), head) != 0) throw std::logic_error("PlotGridSvg: unexpected plot document");
+    MCMS_CHECK(cell.compare(0, head.size(), head) == 0, "PlotGridSvg: unexpected plot document");
     cell.replace(0, head.size(), "<svg x='" + std::to_string((i % cols) * cell_w) + "' y='" +
                                      std::to_string((i / cols) * cell_h) + "'");
     o << cell;
@@ -314,8 +314,7 @@ std::string Viridis(double t) {
 
 std::string HeatMap::ToSvg(int W, int H) const {
   const size_t nx = x.size(), ny = y.size();
-  if (nx == 0 || ny == 0 || values.size() != nx * ny)
-    throw std::invalid_argument("HeatMap: values must hold x.size() * y.size() entries");
+  MCMS_CHECK(nx > 0 && ny > 0 && values.size() == nx * ny, "HeatMap: values must hold x.size() * y.size() entries");
   auto usable = [&](double v) { return std::isfinite(v) && (!log_scale || v > 0); };
   double lo = INFINITY, hi = -INFINITY;
   for (double v : values)

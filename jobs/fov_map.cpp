@@ -55,8 +55,7 @@ CentroidCovarianceTable BuildCentroidCovarianceTable(const FovNoiseModel& noise,
                                                      double ratio_max, int threads) {
   std::string why;
   if (!noise.IsValid(&why)) Throw("noise model: ", why);
-  if (!(b_min_px > 0 && b_max_px >= b_min_px && ratio_max >= 1))
-    throw std::invalid_argument("BuildCentroidCovarianceTable: bad size range");
+  MCMS_CHECK(b_min_px > 0 && b_max_px >= b_min_px && ratio_max >= 1, "BuildCentroidCovarianceTable: bad size range");
   std::vector<double> bs;
   const double lo = b_min_px / 1.1, hi = b_max_px * 1.1, step = 1.15;
   for (double b = lo; b < hi * step; b *= step) bs.push_back(b);
@@ -341,7 +340,7 @@ std::vector<FovSimulatedPoint> SimulateFovPoints(const FovMap& map, const std::v
                                                  const std::function<void(size_t, size_t)>& progress) {
   if (options.repeats < 2) Throw("--repeats: the Monte Carlo needs at least 2 repeats per point, got ", options.repeats);
   for (size_t i : grid_indices)
-    if (i >= map.points.size()) throw std::invalid_argument("SimulateFovPoints: grid index out of range");
+    MCMS_CHECK(i < map.points.size(), "SimulateFovPoints: grid index out of range");
   std::vector<FovSimulatedPoint> out(grid_indices.size());
   if (grid_indices.empty()) return out;
   Scenario sc;

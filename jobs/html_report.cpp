@@ -1465,21 +1465,15 @@ HtmlReportContents WriteHtmlReport(const HtmlReportOptions& options, const fs::p
     Throw("mcms report -o ", output.string(), " lies inside the reported folder ", options.dir.string(),
           " and is not an .html page: it would replace or join the run's files; give a .html name or a path outside");
   RequireWritableFile(output, "mcms report -o");
-  {
-    // An existing page is replaced only when mcms report wrote it (its generator line, or
-    // the content policy every page has had): not the user's own report.html.
-    std::error_code ec;
-    if (fs::is_regular_file(output, ec)) {
-      std::ifstream in(output, std::ios::binary);
-      std::string head(4096, '\0');
-      in.read(head.data(), static_cast<std::streamsize>(head.size()));
-      head.resize(static_cast<size_t>(in.gcount()));
-      if (head.find("<meta name=\"generator\" content=\"mcms report\">") == std::string::npos &&
-          head.find("content=\"default-src 'none'; img-src data:;") == std::string::npos)
-        Throw("mcms report -o ", output.string(),
-              " exists and is not a page mcms report wrote; it was not replaced: choose another name (-o) or move it");
-    }
-  }
+  // An existing page is replaced only when mcms report wrote it (its generator line, or
+  // the content policy every page has had): not the user's own report.html.
+  RequireOwnEarlierOutput(
+      output,
+      [](const std::string& head) {
+        return head.find("<meta name=\"generator\" content=\"mcms report\">") != std::string::npos ||
+               head.find("content=\"default-src 'none'; img-src data:;") != std::string::npos;
+      },
+      "mcms report -o", "a page mcms report wrote", "choose another name (-o) or move it");
   HtmlReportContents c;
   const std::string page = BuildHtmlReport(options, &c);
   WriteFileAtomically(output, [&](std::ostream& out) { out << page; });

@@ -116,6 +116,19 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
   RequireOutputsSpareInputs({{res.output, in.output_what}},
                             {res.images, rig_file, target_file, frames, fs::path(res.truth)});
   RequireWritableFile(res.output, in.output_what);  // before the sequence, not after it
+  // The default DIR/poses.csv sits among the user's files: replaced only when an earlier
+  // track wrote it (its column header), never the user's own poses.csv. An explicit -o is
+  // the user's choice of file.
+  if (in.output.empty())
+    RequireOwnEarlierOutput(
+        res.output,
+        [](const std::string& head) {
+          std::istringstream lines(head);
+          for (std::string line; std::getline(lines, line);)
+            if (line.empty() || line[0] != '#') return line.rfind("frame,time_s,status,reason,", 0) == 0;
+          return false;
+        },
+        "track", "poses an earlier mcms track wrote", "give the output file with -o, or move it");
 
   const bool assumed_rate = in.rate_hz == 0 && (frames.empty() || !fs::exists(frames));
   const ImageSequence seq = ScanImageSequence({res.images, frames, in.rate_hz > 0 ? in.rate_hz : 10.0}, rig);

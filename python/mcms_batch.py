@@ -237,6 +237,47 @@ def refuse_overwriting_inputs(a, recordings):
         raise BatchInputError(str(e)) from None
 
 
+def refuse_foreign_files(out):
+    """BatchInputError when OUT holds anything an earlier batch did not write: a batch replaces
+    only its own summary.csv (its column header) and its recordings' folders (each holding
+    only the tracker's poses.csv and the task's start marker), never the user's own files
+    (what a command may replace, as every mcms command's output folder)."""
+    if not os.path.isdir(out):
+        return
+    def tracker_poses(path):
+        try:
+            with open(path, encoding="utf-8", errors="replace") as f:
+                for line in f:
+                    if not line.startswith("#"):
+                        return line.startswith("frame,time_s,status,reason,")
+        except OSError:
+            return False
+        return False
+    summary = os.path.join(out, "summary.csv")
+    ours = False
+    if os.path.isfile(summary):
+        with open(summary, encoding="utf-8", errors="replace") as f:
+            ours = f.readline().rstrip("\r\n") == ",".join(COLUMNS)
+    foreign = []
+    for entry in sorted(os.listdir(out)):
+        p = os.path.join(out, entry)
+        if entry == "summary.csv" and ours:
+            continue
+        if ours and os.path.isdir(p) and not os.path.islink(p):
+            files = os.listdir(p)
+            if all(f in ("poses.csv", ".mcms_batch_started") for f in files) and \
+                    ("poses.csv" not in files or tracker_poses(os.path.join(p, "poses.csv"))):
+                continue
+            foreign += [os.path.join(entry, f) for f in sorted(files)
+                        if f not in ("poses.csv", ".mcms_batch_started") or not tracker_poses(os.path.join(p, f))]
+            continue
+        foreign.append(entry)
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise BatchInputError(f"-o {out} holds files an earlier mcms batch did not write ({shown}); nothing was "
+                              "replaced: give a new or empty folder, or move them")
+
+
 def run(a):
     skipped = []
     recordings = find_recordings(a.source, skipped)
@@ -246,6 +287,7 @@ def run(a):
     if os.path.exists(a.output) and not os.path.isdir(a.output):
         raise BatchInputError(f"-o {a.output} exists and is not a folder; give a folder for the outputs")
     refuse_overwriting_inputs(a, recordings)
+    refuse_foreign_files(a.output)
     try:
         import dask
         from distributed import Client, KilledWorker, LocalCluster, wait

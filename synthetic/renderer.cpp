@@ -55,8 +55,7 @@ bool RenderOptions::IsValid(std::string* why) const {
 // RayTable
 
 RayTable::RayTable(const CameraModel& cam, double pad_px, double tolerance_px) : cam_(cam), pad_(pad_px) {
-  if (!(pad_px >= 0 && pad_px < 1e4) || !(tolerance_px > 0))
-    throw std::invalid_argument("RayTable: pad must be in [0, 1e4) px and the tolerance positive");
+  MCMS_CHECK(pad_px >= 0 && pad_px < 1e4 && tolerance_px > 0, "RayTable: pad must be in [0, 1e4) px and the tolerance positive");
   // Bilinear error falls with the square of the step: measure it on an 8 px grid,
   // go to the power-of-two step that this predicts meets the tolerance, and halve
   // further if it does not. 1 px is the finest grid kept (about 21 MB for
@@ -286,14 +285,13 @@ cv::Mat RenderSpheres(const CameraModel& cam, const std::vector<Vec3>& centres_c
 cv::Mat RenderSpheres(const RayTable& table, const std::vector<Vec3>& centres_cam, double radius,
                       const RenderOptions& options, Rng* noise, const std::vector<ImageDisc>& discs) {
   std::string why;
-  if (!options.IsValid(&why)) throw std::invalid_argument("RenderSpheres: bad options: " + why);
-  if (!(radius > 0)) throw std::invalid_argument("RenderSpheres: the sphere radius must be positive");
+  MCMS_CHECK(options.IsValid(&why), "RenderSpheres: bad options: " + why);
+  MCMS_CHECK(radius > 0, "RenderSpheres: the sphere radius must be positive");
   const CameraModel& cam = table.Camera();
   const int w = cam.Width(), h = cam.Height(), pad = RenderPadPx(options);
-  if (table.PadPx() < pad + 0.5)
-    throw std::invalid_argument("RenderSpheres: the ray table's pad is smaller than the blur needs");
+  MCMS_CHECK(table.PadPx() >= pad + 0.5, "RenderSpheres: the ray table's pad is smaller than the blur needs");
   const bool noisy = !options.noise_free && (options.gain_e_per_dn > 0 || options.read_noise_dn > 0);
-  if (noisy && !noise) throw std::invalid_argument("RenderSpheres: noisy options need a random stream");
+  MCMS_CHECK(!noisy || noise, "RenderSpheres: noisy options need a random stream");
   const int cw = w + 2 * pad, ch = h + 2 * pad;
 
   cv::Mat balls = cv::Mat::zeros(ch, cw, CV_64F);

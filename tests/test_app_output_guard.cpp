@@ -233,6 +233,45 @@ TEST_P(OutputGuard, AnOutputThatIsAnInputIsRefused) {
 INSTANTIATE_TEST_SUITE_P(EveryWritingCommand, OutputGuard, ::testing::ValuesIn(Cases()),
                          [](const ::testing::TestParamInfo<Case>& i) { return i.param.name; });
 
+// What a command may replace (issue 53): track's default DIR/poses.csv only when an earlier
+// track wrote it, calib-rig's -o folder only when it holds an earlier calib-rig output. The
+// user's own poses.csv, rig.yaml and notes are refused before any work and kept.
+TEST(OutputGuardCheck, TheUsersOwnFilesAreNeverReplaced) {
+  const fs::path d = test::ScratchDir("output_guard_own_files");
+  CopyRecording(d);
+  test::WriteText(d / "rec" / "poses.csv", "frame,my,own,hand,tracked,poses\n");
+  auto before = Snapshot(d);
+  CliRun r = test::Mcms(d, "track rec --quiet");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("track rec/poses.csv exists and is not poses an earlier mcms track wrote; it was not replaced"),
+            std::string::npos)
+      << r.err;
+  EXPECT_EQ(Snapshot(d), before);
+  // Without it the default is written, and an earlier track's poses are replaced.
+  fs::remove(d / "rec" / "poses.csv");
+  for (int run = 0; run < 2; ++run) {
+    r = test::Mcms(d, "track rec --quiet");
+    EXPECT_EQ(r.code, 0) << r.err;
+  }
+  // calib-rig into a folder with the user's own rig.yaml and notes: refused before the
+  // images are read (these are not images).
+  fs::create_directories(d / "cal");
+  fs::create_directories(d / "left");
+  test::WriteText(d / "cal" / "board.yaml",
+                  "target_type: checkerboard\ntargetCols: 9\ntargetRows: 6\nrowSpacingMeters: 0.025\n"
+                  "colSpacingMeters: 0.025\n");
+  test::WriteText(d / "left" / "000.png", "not decoded: refused before the images are read");
+  fs::create_directories(d / "mine");
+  test::WriteText(d / "mine" / "rig.yaml", "my hand-made rig\n");
+  test::WriteText(d / "mine" / "summary.txt", "my notes\n");
+  before = Snapshot(d);
+  r = test::Mcms(d, "calib-rig cal/board.yaml left -o mine -q");
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("calib-rig -o: folder mine exists and does not hold an earlier calib-rig"), std::string::npos)
+      << r.err;
+  EXPECT_EQ(Snapshot(d), before);
+}
+
 // The check itself on what the commands cannot easily be made to meet: an output folder
 // inside an input folder that exists (replacing it would change what the run reads), an
 // output file inside an input folder (a new file there is allowed, an existing one not),

@@ -592,8 +592,8 @@ TEST(SvgPlot, GridPlacesEachPlotInItsCell) {
   EXPECT_EQ(Count(svg, "<svg"), 6u);
   EXPECT_EQ(Count(svg, "</svg>"), 6u);
   for (int i = 0; i < 5; ++i) EXPECT_EQ(Count(svg, ">panel " + std::to_string(i) + "<"), 1u) << i;
-  EXPECT_THROW(PlotGridSvg({}, 3), std::invalid_argument);
-  EXPECT_THROW(PlotGridSvg(plots, 0), std::invalid_argument);
+  EXPECT_THROW(PlotGridSvg({}, 3), InternalError);
+  EXPECT_THROW(PlotGridSvg(plots, 0), InternalError);
 }
 
 }  // namespace

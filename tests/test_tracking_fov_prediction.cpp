@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "core/error.h"
 #include "tests/test_util.h"
 #include "tracking/fov_prediction.h"
 
@@ -60,7 +61,7 @@ TEST(CentroidCovarianceTable, InterpolatesAndRotates) {
   EXPECT_NEAR(C(1, 1), 2 * 0.01 / 16, 1e-12);
   EXPECT_NEAR(C(0, 0), 0.01 / 16, 1e-12);
   EXPECT_NEAR(C(0, 1), 0.0, 1e-15);
-  EXPECT_THROW(CentroidCovarianceTable({2, 1}, {1}, {1, 1}, {1, 1}), std::invalid_argument);
+  EXPECT_THROW(CentroidCovarianceTable({2, 1}, {1}, {1, 1}, {1, 1}), InternalError);
 }
 
 // The ball covariance equals (sum J^T Sigma^-1 J)^-1 with J the numeric derivative of the

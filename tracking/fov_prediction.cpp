@@ -5,6 +5,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/error.h"
+
 #include "vision/triangulation.h"
 
 namespace mcms {
@@ -12,18 +14,14 @@ namespace mcms {
 CentroidCovarianceTable::CentroidCovarianceTable(std::vector<double> b_px, std::vector<double> ratios,
                                                  std::vector<double> var_major, std::vector<double> var_minor)
     : b_(std::move(b_px)), r_(std::move(ratios)), vmaj_(std::move(var_major)), vmin_(std::move(var_minor)) {
-  if (b_.empty() || r_.empty()) throw std::invalid_argument("CentroidCovarianceTable: empty axis");
-  if (vmaj_.size() != b_.size() * r_.size() || vmin_.size() != vmaj_.size())
-    throw std::invalid_argument("CentroidCovarianceTable: values do not match the axes");
+  MCMS_CHECK(!b_.empty() && !r_.empty(), "CentroidCovarianceTable: empty axis");
+  MCMS_CHECK(vmaj_.size() == b_.size() * r_.size() && vmin_.size() == vmaj_.size(), "CentroidCovarianceTable: values do not match the axes");
   for (size_t i = 0; i < b_.size(); ++i)
-    if (!(b_[i] > 0) || (i > 0 && !(b_[i] > b_[i - 1])))
-      throw std::invalid_argument("CentroidCovarianceTable: b must be positive and increasing");
+    MCMS_CHECK(b_[i] > 0 && (i == 0 || b_[i] > b_[i - 1]), "CentroidCovarianceTable: b must be positive and increasing");
   for (size_t i = 0; i < r_.size(); ++i)
-    if (!(r_[i] >= 1) || (i > 0 && !(r_[i] > r_[i - 1])))
-      throw std::invalid_argument("CentroidCovarianceTable: ratios must be >= 1 and increasing");
+    MCMS_CHECK(r_[i] >= 1 && (i == 0 || r_[i] > r_[i - 1]), "CentroidCovarianceTable: ratios must be >= 1 and increasing");
   for (size_t i = 0; i < vmaj_.size(); ++i)
-    if (!(vmaj_[i] > 0 && vmin_[i] > 0 && std::isfinite(vmaj_[i]) && std::isfinite(vmin_[i])))
-      throw std::invalid_argument("CentroidCovarianceTable: variances must be positive and finite");
+    MCMS_CHECK(vmaj_[i] > 0 && vmin_[i] > 0 && std::isfinite(vmaj_[i]) && std::isfinite(vmin_[i]), "CentroidCovarianceTable: variances must be positive and finite");
 }
 
 namespace {
@@ -38,7 +36,7 @@ void Locate(const std::vector<double>& axis, double x, bool log_axis, size_t* i,
 }  // namespace
 
 Vec2 CentroidCovarianceTable::Variances(double b_px, double ratio) const {
-  if (empty()) throw std::invalid_argument("CentroidCovarianceTable: empty table");
+  MCMS_CHECK(!empty(), "CentroidCovarianceTable: empty table");
   size_t ib = 0, ir = 0;
   double wb = 0, wr = 0;
   Locate(b_, b_px, true, &ib, &wb);
@@ -109,8 +107,8 @@ BallImage PredictBallImage(const CameraModel& cam, const Vec3& centre_rig, doubl
 FovPointPrediction PredictFovPoint(const CameraRig& rig, const Target& target, const Pose& T_rig_target,
                                    const CentroidCovarianceFn& centre_cov, const FovPredictionOptions& options) {
   std::string why;
-  if (!options.IsValid(&why)) throw std::invalid_argument("FovPredictionOptions: " + why);
-  if (!centre_cov) throw std::invalid_argument("PredictFovPoint: no centre covariance model");
+  MCMS_CHECK(options.IsValid(&why), "FovPredictionOptions: " + why);
+  MCMS_CHECK(centre_cov, "PredictFovPoint: no centre covariance model");
   const size_t nc = rig.size(), nb = target.balls_target.size();
   FovPointPrediction out;
   out.T_rig_target = T_rig_target;

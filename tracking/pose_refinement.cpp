@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/error.h"
 #include "vision/sphere_projection.h"
 #include "vision/triangulation.h"
 
@@ -96,8 +97,7 @@ PoseRefinement RefinePose(const CameraRig& rig, const Target& target, const Pose
                           const std::vector<BallObservation>& observations, const PoseRefinementOptions& options) {
   std::set<int> balls;
   for (const auto& o : observations) balls.insert(o.ball);
-  if (observations.size() < 3 || balls.size() < 3)
-    throw std::invalid_argument("RefinePose needs observations of at least 3 distinct balls");
+  MCMS_CHECK(observations.size() >= 3 && balls.size() >= 3, "RefinePose needs observations of at least 3 distinct balls");
 
   PoseRefinement out;
   out.T_rig_target = initial;

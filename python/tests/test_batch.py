@@ -265,6 +265,23 @@ class Batch(unittest.TestCase):
             self.assertEqual(r.returncode, 3, r.stderr)
             rows = read_summary(os.path.join(d, "o3", "summary.csv"))
             self.assertEqual(rows["rec_broken_rig"]["status"], "failed")
+            # An earlier batch's output is replaced (the same run again)...
+            r = self.batch(listing, "-o", os.path.join(d, "o3"), "--workers", "1")
+            self.assertEqual(r.returncode, 3, r.stderr)
+            # ... a folder holding the user's own summary.csv and a recording's poses.csv is
+            # refused before any work, both kept (issue 53).
+            mine = os.path.join(d, "mine")
+            os.makedirs(os.path.join(mine, "rec_a"))
+            for name, text in (("summary.csv", "my own summary\n"), (os.path.join("rec_a", "poses.csv"), "my notes\n")):
+                with open(os.path.join(mine, name), "w") as f:
+                    f.write(text)
+            r = self.batch(listing, "-o", mine, "--workers", "1")
+            self.assertEqual(r.returncode, 2, r.stderr)
+            self.assertIn("holds files an earlier mcms batch did not write (rec_a, summary.csv)", r.stderr)
+            with open(os.path.join(mine, "summary.csv")) as f:
+                self.assertEqual(f.read(), "my own summary\n")
+            with open(os.path.join(mine, "rec_a", "poses.csv")) as f:
+                self.assertEqual(f.read(), "my notes\n")
 
 
 if __name__ == "__main__":
