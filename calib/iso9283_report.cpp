@@ -9,6 +9,7 @@
 
 #include "calib/iso9283.h"
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/io.h"
 #include "core/statistics.h"
 
@@ -71,6 +72,24 @@ Iso9283Report EvaluateIso9283Files(const std::filesystem::path& poses_file, cons
     // commanded pose by mm, not by 100 times the size of its workspace).
     Vec3 centre = Vec3::Zero();
     for (const auto& id : order) centre += poses.at(id).commanded.t / order.size();
+    // Both in another unit (every position column in mm): the commanded poses span more
+    // than any robot's working volume; and positions far beyond any measuring range lose
+    // the micrometres ISO 9283 reports in double precision.
+    double span = 0;
+    for (const auto& id : order) {
+      const PoseRows& p = poses.at(id);
+      span = std::max(span, (p.commanded.t - centre).norm());
+      for (const auto& [cycle, a] : p.by_cycle)
+        for (const Vec3& x : {p.commanded.t, a.t})
+          if (!(x.cwiseAbs().maxCoeff() <= kMaxRigRangeM * 1000))
+            Throw(poses_file.string(), ": pose '", id, "' cycle '", cycle, "' has a position ", Num4(x.norm()),
+                  " m from the origin, beyond ", Num4(kMaxRigRangeM * 1000),
+                  " m; expected metres in the robot's or the instrument's frame");
+    }
+    if (span > kMaxRigRangeM)
+      Throw(poses_file.string(), ": the commanded positions lie up to ", Num4(span),
+            " m from their centre, more than any robot reaches (", Num4(kMaxRigRangeM),
+            " m): positions in mm under metre headers? expected metres");
     double cmd = 0, att = 0;
     for (const auto& id : order) {
       const PoseRows& p = poses.at(id);

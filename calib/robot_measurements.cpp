@@ -431,6 +431,32 @@ void CheckRobotLog(const RobotLog& log, const RobotModel& robot, int min_rows) {
     if (log.has_payload && !(std::isfinite(r.payload_kg) && r.payload_kg >= 0 && r.payload_kg <= kMaxMassKg))
       Throw(log.Where(i), ": payload_kg is ", r.payload_kg, "; expected a finite mass from 0 to ", kMaxMassKg, " kg");
   }
+  // Each accelerometer against its mount in the URDF: with the robot standing within 45 deg
+  // of level (a construction site's slope is a few degrees), a sensor reads up within 45 deg
+  // of the up its mount predicts. A median beyond that is a sensor mounted other than the
+  // URDF says, or columns swapped or of the other sign: its tilts would be read as a bias
+  // of tens of degrees.
+  if (!log.rows.front().accel.empty() && robot.Urdf()) {
+    const auto& first = log.rows.front().accel;
+    for (size_t k = 0; k < first.size(); ++k) {
+      const LinkMount mount = MountOnChain(robot, first[k].first);
+      std::vector<double> angle;
+      for (const RobotMeasurement& r : log.rows) {
+        if (k >= r.accel.size() || r.accel[k].first != first[k].first) break;
+        const Mat3 R_base_sensor = robot.LinkFrames(r.q)[mount.frame].R * mount.R_frame_link;
+        const Vec3 up = R_base_sensor.transpose() * Vec3::UnitZ();
+        angle.push_back(std::acos(std::clamp(up.dot(r.accel[k].second.normalized()), -1.0, 1.0)));
+      }
+      if (angle.empty()) continue;
+      std::nth_element(angle.begin(), angle.begin() + angle.size() / 2, angle.end());
+      const double median = angle[angle.size() / 2];
+      if (median > kPi / 4)
+        Throw(src, ": the accelerometer on ", first[k].first, " (", first[k].first, "_ax, _ay, _az) reads up ",
+              Num4(median * 180 / kPi), " deg (median over the rows) from where its mount in the URDF puts up with "
+              "the robot level, more than the 45 deg a standing robot tilts: mounted upside down or turned, or its "
+              "columns swapped or of the other sign? expected the specific force, +9.81 m/s^2 along the sensor's up");
+    }
+  }
 }
 
 namespace {

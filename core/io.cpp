@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <set>
@@ -319,6 +320,14 @@ CsvTable ReadCsv(const fs::path& path) {
   }
   if (t.header.empty()) Throw(src, ": empty file, expected a CSV header row");
   return t;
+}
+
+std::string CsvTime(double seconds, int significant) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", significant, seconds);
+  if (std::isfinite(seconds) && !(std::abs(std::strtod(b, nullptr) - seconds) <= 1e-7))
+    std::snprintf(b, sizeof b, "%.6f", seconds);
+  return b;
 }
 
 std::string CsvQuoted(const std::string& text) {

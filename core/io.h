@@ -84,6 +84,9 @@ CsvTable ReadCsv(const std::filesystem::path& path);
 // A CSV cell: the text as is, or in double quotes (inner quotes doubled) when it holds a
 // comma, a quote or a line break.
 std::string CsvQuoted(const std::string& text);
+// A time (s) in a CSV cell: `significant` digits (%g) where they hold it to a microsecond,
+// otherwise to the microsecond (%.6f): Unix-epoch times (1.7e9 s) keep their milliseconds.
+std::string CsvTime(double seconds, int significant);
 
 // Progress on stderr for long runs: "label: 37/120 frames (31%)", throttled to a few
 // updates per second, silent when quiet.

@@ -201,7 +201,7 @@ void WriteFusedPoseCsv(const std::filesystem::path& path, const std::vector<Fuse
     for (const FusedSample& s : samples) {
       const auto q = s.T_base_flange.Quaternion();
       const Vec3& t = s.T_base_flange.t;
-      o << s.frame << "," << num(s.time_s) << "," << ToString(s.method) << "," << num(t.x()) << "," << num(t.y()) << ","
+      o << s.frame << "," << CsvTime(s.time_s, 12) << "," << ToString(s.method) << "," << num(t.x()) << "," << num(t.y()) << ","
         << num(t.z()) << "," << num(q.w()) << "," << num(q.x()) << "," << num(q.y()) << "," << num(q.z()) << ","
         << Joined(s.sensors) << "," << s.dof << "," << num(s.p_value) << "," << Joined(s.flagged) << ","
         << Joined(s.excluded) << "," << Quoted(s.fault);

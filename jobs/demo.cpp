@@ -4,6 +4,7 @@
 #include <numbers>
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <cstdarg>
 #include <cstdio>
 
@@ -111,6 +112,18 @@ std::string FormatPaperComparison(const LabResult& r, const std::vector<double>&
       "  three-sigma position error, mm: camera %.3f (paper %.3f), robot %.3f (paper %.3f)\n",
       model.name.c_str(), r.summary[cam].points, 1e3 * c3, 1e3 * PaperLabResult::camera_3sigma_m,
       1e3 * r.summary[rob].position_3sigma_m, 1e3 * PaperLabResult::robot_3sigma_m);
+  // A bootstrap sd over a handful of points is no sd: below kMinComparisonPoints the
+  // reductions are shown without a verdict.
+  constexpr int kMinComparisonPoints = 10;
+  if (r.summary[cam].points < kMinComparisonPoints) {
+    for (const auto& [name, m, paper] : {std::tuple<const char*, int, double>{"MOIFA", moifa, PaperLabResult::moifa_reduction},
+                                         {"KF", kf, PaperLabResult::kf_reduction}})
+      out += Format("  %-5s reduction %5.1f %% (paper %.1f %%): no verdict from %d points (the comparison needs %d or "
+                    "more; the paper measured 76)\n",
+                    name, 100 * (1 - r.summary[m].position_3sigma_m / c3), 100 * paper, r.summary[cam].points,
+                    kMinComparisonPoints);
+    return out;
+  }
   const auto line = [&](const char* name, int m, double paper) {
     const double red = 1 - r.summary[m].position_3sigma_m / c3;
     const bool within = std::abs(red - paper) <= 2 * sd[m];

@@ -423,6 +423,14 @@ void ParseLissajous(const Reader& r, const YAML::Node& n, Scenario* s) {
   const double start = n["start_s"] ? r.Number(n["start_s"], "motion.start_s") : 0.0;
   const Vec3 centre = r.Vector3(r.Require(n, "centre_m", "motion", "centre of the path"), "motion.centre_m");
   const Vec3 amp = r.Vector3(r.Require(n, "amplitude_m", "motion", "half extent of the path"), "motion.amplitude_m");
+  // A path beyond any rig's range is a unit mistake (mm as m) and would print truth
+  // coordinates no camera sees.
+  if (!(centre.cwiseAbs().maxCoeff() <= kMaxRigRangeM))
+    r.Bad(n["centre_m"], "motion.centre_m", "expected a centre within " + std::to_string(int(kMaxRigRangeM)) +
+                                                " m of the rig (metres, not mm)");
+  if (!(amp.cwiseAbs().maxCoeff() <= kMaxRigRangeM))
+    r.Bad(n["amplitude_m"], "motion.amplitude_m", "expected half extents within " +
+                                                      std::to_string(int(kMaxRigRangeM)) + " m (metres, not mm)");
   const YAML::Node period_node = r.Require(n, "period_s", "motion", "periods of x, y, z in seconds");
   const Vec3 period = r.Vector3(period_node, "motion.period_s");
   if (!(period.minCoeff() > 0)) r.Bad(period_node, "motion.period_s", "expected three periods > 0");

@@ -658,6 +658,46 @@ namespace {
 // Issue 53: a disk that fills up (here a file-size limit, which fails the writes as a full
 // disk does) is named by the system's reason at the file it was writing, never through a
 // temporary name, and nothing is left behind.
+// The sixth attack's findings (issue 53): answers from garbage, each now refused or right.
+TEST(AttackLimits, SixthAttackFindings) {
+  const auto d = test::ScratchDir("attack_limits_sixth");
+  const auto times1000 = [](const std::vector<std::string>& h, std::vector<std::string>& c,
+                            const std::vector<std::string>& cols) {
+    for (const auto& name : cols) c[Col(h, name)] = std::to_string(1000.0 * std::stod(c[Col(h, name)]));
+  };
+  // ISO 9283 with every position column in mm (commanded and attained): AP 890 mm before.
+  test::WriteText(d / "all_mm.csv", ChangedCsv(kSource / "examples" / "iso9283" / "poses.csv", [&](const auto& h, auto& c, int) {
+                    times1000(h, c, {"x_m", "y_m", "z_m", "cmd_x_m", "cmd_y_m", "cmd_z_m"});
+                  }));
+  ExpectRefused(d, "iso9283 all_mm.csv", {"all_mm.csv: the commanded positions lie up to", "in mm under metre headers?"});
+  test::WriteText(d / "far.csv", ChangedCsv(kSource / "examples" / "iso9283" / "poses.csv", [&](const auto& h, auto& c, int) {
+                    for (const char* n : {"x_m", "cmd_x_m"}) c[Col(h, n)] = std::to_string(1e30 + std::stod(c[Col(h, n)]));
+                  }));
+  ExpectRefused(d, "iso9283 far.csv", {"far.csv: pose", "from the origin, beyond 1e+05 m"});
+  // A scenario whose path reaches 1e300 m: truth files of NaN before.
+  std::string scenario = test::Mcms(d, "render --print-default").out;
+  const size_t at = scenario.find("amplitude_m: [0.3, 0.2, 0.3]");
+  ASSERT_NE(at, std::string::npos);
+  scenario.replace(at, 28, "amplitude_m: [1e300, 0.2, 0.3]");
+  test::WriteText(d / "huge.yaml", scenario);
+  ExpectRefused(d, "render huge.yaml -o rec --frames 2 -q", {"huge.yaml", "motion.amplitude_m", "within 100 m"});
+  // A demo of one point: reductions shown, no verdict from a bootstrap of one.
+  const CliRun one = test::Mcms(d, "demo -o one --points 1 --no-iso9283 --no-html -q");
+  EXPECT_EQ(one.code, 0) << one.err;
+  EXPECT_NE(one.out.find("no verdict from 1 points"), std::string::npos) << one.out;
+  EXPECT_EQ(one.out.find("within 2 sd"), std::string::npos) << one.out;
+  // Unix-epoch frame times keep their milliseconds in the tracker's output (all 1700000000
+  // before, which fuse then refused as not increasing).
+  ASSERT_EQ(test::Mcms(d, "render --frames 4 --quiet --threads 2 -o rec").code, 0);
+  test::WriteText(d / "rec" / "frames.csv",
+                  "frame,time_s\n0,1700000000.004\n1,1700000000.104\n2,1700000000.204\n3,1700000000.304\n");
+  const CliRun tr = test::Mcms(d, "track rec -q -o poses.csv");
+  ASSERT_EQ(tr.code, 0) << tr.err;
+  const std::string poses = test::ReadAll(d / "poses.csv");
+  for (const char* t : {"\n0,1700000000.004000,", "\n3,1700000000.304000,"})
+    EXPECT_NE(poses.find(t), std::string::npos) << t << "\n" << poses.substr(0, 600);
+}
+
 TEST(AttackLimits, AWriteThatFailsSaysWhy) {
   const auto d = test::ScratchDir("attack_write_fails");
   const CliRun r = test::Shell(d, std::string("bash -c 'trap \"\" XFSZ; ulimit -f 20; exec ") + MCMS_CLI +

@@ -389,6 +389,26 @@ TEST(TiltSensors, ReadFromCsvColumns) {
   std::string g_row;
   for (size_t k = 0; k < cells.size(); ++k) g_row += (k ? "," : "") + cells[k];
   Refused("in_g.csv", header + "\n" + g_row + "\n" + rest, "(in g?)");
+  // The column sensor upside down (its z read with the other sign), and its x and z columns
+  // swapped: the norm is g in both, the direction is not where the URDF mounts the sensor.
+  std::string flipped = header, swapped = header;
+  for (const char* c : {"tilt_sensor_column_tip_ax", "tilt_sensor_column_tip_az"})
+    ASSERT_NE(header.find(c), std::string::npos);
+  swapped.replace(swapped.find("tilt_sensor_column_tip_ax"), 25, "tilt_sensor_column_tip_QQ");
+  swapped.replace(swapped.find("tilt_sensor_column_tip_az"), 25, "tilt_sensor_column_tip_ax");
+  swapped.replace(swapped.find("tilt_sensor_column_tip_QQ"), 25, "tilt_sensor_column_tip_az");
+  {
+    std::istringstream rows(first + "\n" + rest);
+    std::string body;
+    for (std::string l; std::getline(rows, l);) {
+      const size_t last = l.rfind(',');
+      body += l.substr(0, last + 1) + std::to_string(-std::stod(l.substr(last + 1))) + "\n";
+    }
+    flipped += "\n" + body;
+  }
+  Refused("upside_down.csv", flipped,
+          "the accelerometer on tilt_sensor_column_tip (tilt_sensor_column_tip_ax, _ay, _az) reads up 1");
+  Refused("swapped.csv", swapped + "\n" + first + "\n" + rest, "mounted upside down or turned, or its columns swapped");
   // A sensor on the arm's link l2 is on the chain; one on a link the chain does not reach is not.
   std::string branch = ColumnRobotUrdf();
   branch.insert(branch.rfind("</robot>"),

@@ -453,7 +453,7 @@ void PoseCsvWriter::Add(const FrameResult& f, const std::vector<double>& extra) 
   std::string reason = f.reason;
   std::replace(reason.begin(), reason.end(), ',', ';');
   std::replace(reason.begin(), reason.end(), '"', '\'');
-  o << f.frame << "," << num(f.time_s) << "," << ToString(f.status) << ",\"" << reason << "\"";
+  o << f.frame << "," << CsvTime(f.time_s, 10) << "," << ToString(f.status) << ",\"" << reason << "\"";
   if (f.T_rig_target) {
     const auto q = f.T_rig_target->Quaternion();
     const Vec3& t = f.T_rig_target->t;
