@@ -9,7 +9,9 @@
 //   u       = R_base_ref u_ref            the lower sensor's measured up, base frame
 //   R_wb    = the least rotation taking u to +z (the world is gravity-aligned)
 //   beta    = sum of LinkBendingT          link_compliance c L M_h, segment_play p M_h/|M_h|
-//             (M = CarriedMoment about the upper sensor's frame, L = the frames' distance)
+//             or, telescopic (variant 1), (p_x s_x, p_y s_y) / (o + t)^2
+//             (M = CarriedMoment about the upper sensor's frame, L = the frames' distance,
+//             s = M_h's direction in the link frame, t = the prismatic joint's travel left)
 //   reading = InclinometerReadingOfT(R_wb Exp(beta) R_base_link, R_link_sensor,
 //                                    misalignment, bias)      two tilts, rad
 // and the upper sensor's measured tilts are asin of its measured up's x and y. Residual =
@@ -18,9 +20,12 @@
 //
 // Candidates (audit/model_selection.h, one rule for every mode): inclinometer_bias (2) and
 // inclinometer_misalignment (variant 1: the sensor turned about its own vertical, 1) of
-// the upper sensor, link_compliance and segment_play (1 each, >= 0: a link bends with its
-// load, never against it) of the link carrying it. A mount tilted about the sensor's x or y
-// reads as a bias to first order and is named as one. Folds for held-out gains: contiguous blocks of rows. Residual
+// the upper sensor, link_compliance (2), segment_play (1; telescopic: 3, its overlap o
+// profiled over 0.01-3 m and held, not named, at either end) and axis_tilt (2) of the link
+// carrying it (compliance and play >= 0: a link bends with its load, never against it). A
+// mount tilted about the sensor's x or y reads as a bias to first order and is named as
+// one. Two candidates tied in a step are named together when, fitted together, each adds
+// to the other and the pair gains held-out. Folds for held-out gains: contiguous blocks of rows. Residual
 // tests (lag-1 autocorrelation in row order, trends against the carried moment's two
 // horizontal components, the bending length and time) at half the designed false-alarm
 // rate, the selection at the other half.
