@@ -207,6 +207,17 @@ def parse_args(argv):
     for name in ("workers", "threads_per_worker", "threads"):
         if getattr(a, name) < 1:
             p.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(a, name)}")
+    # The numbers every recording's tracking takes, before the cluster starts (as `mcms track`
+    # refuses them): a NaN or a level beyond any image is bad input, not a failed recording.
+    import math
+    for name, lo, hi, zero_ok in (("rate", 0.0, 1e6, True), ("read_noise", 0.0, 65535.0, True),
+                                  ("threshold", 0.0, 65535.0, True), ("gain", 0.0, 1e6, False),
+                                  ("connect_timeout", 0.0, 86400.0, False)):
+        v = getattr(a, name)
+        if v is None:
+            continue
+        if not (math.isfinite(v) and (lo < v <= hi or (zero_ok and v == 0))):
+            p.error(f"--{name.replace('_', '-')} must be a number in {'[' if zero_ok else '('}{lo:g}, {hi:g}], got {v}")
     return a
 
 

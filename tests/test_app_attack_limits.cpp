@@ -696,6 +696,16 @@ TEST(AttackLimits, SixthAttackFindings) {
   const std::string poses = test::ReadAll(d / "poses.csv");
   for (const char* t : {"\n0,1700000000.004000,", "\n3,1700000000.304000,"})
     EXPECT_NE(poses.find(t), std::string::npos) << t << "\n" << poses.substr(0, 600);
+  // An image that is a link to itself degrades its frame, named with the system's reason
+  // (it aborted the whole run as an internal error).
+  const fs::path loop = d / "rec" / "images" / "cam2" / "000001.png";
+  fs::remove(loop);
+  fs::create_symlink("000001.png", loop);
+  const CliRun lr = test::Mcms(d, "track rec -q -o looped.csv");
+  EXPECT_EQ(lr.code, 0) << lr.err;
+  const std::string looped = test::ReadAll(d / "looped.csv");
+  EXPECT_NE(looped.find("cannot read rec/images/cam2/000001.png: Too many levels of symbolic links"), std::string::npos)
+      << looped.substr(0, 800);
 }
 
 TEST(AttackLimits, AWriteThatFailsSaysWhy) {

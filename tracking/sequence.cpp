@@ -131,9 +131,17 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   // names: a long recording's listing stays small.
   ImageSequence seq;
   for (size_t c = 0; c < ncam; ++c) seq.camera_dirs.push_back(in.images_dir / rig.names[c]);
+  // An image's entry: a file, or a link named like one that does not resolve (a loop, a
+  // dangling target), kept so that the frame reader names it and degrades that frame only.
+  const auto is_image = [](const fs::directory_entry& e) {
+    std::error_code ec;
+    if (!IsImageFile(e.path())) return false;
+    if (e.is_regular_file(ec)) return true;
+    return e.is_symlink(ec) && !fs::exists(e.path(), ec);
+  };
   for (size_t c = 0; c < ncam; ++c)
     for (const auto& e : fs::directory_iterator(seq.camera_dirs[c])) {
-      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
+      if (!is_image(e)) continue;
       if (const auto f = FrameNumber(e.path())) seq.frames.push_back(*f);
     }
   std::sort(seq.frames.begin(), seq.frames.end());
@@ -143,7 +151,7 @@ ImageSequence ScanImageSequence(const SequenceInput& in, const CameraRig& rig) {
   seq.image_names.resize(seq.frames.size() * ncam);
   for (size_t c = 0; c < ncam; ++c)
     for (const auto& e : fs::directory_iterator(seq.camera_dirs[c])) {
-      if (!e.is_regular_file() || !IsImageFile(e.path())) continue;
+      if (!is_image(e)) continue;
       const auto f = FrameNumber(e.path());
       if (!f) continue;
       const auto it = std::lower_bound(seq.frames.begin(), seq.frames.end(), *f);

@@ -984,6 +984,14 @@ bool ReadTiffWithLibtiff(const fs::path& p, cv::Mat* image, std::string* problem
 cv::Mat ReadFrame(const fs::path& p, const ImageFileOptions& options, std::string* problem, ImageFileReader* reader,
                   ImageFileRows* rows) {
   problem->clear();
+  {
+    // A link that does not resolve (a loop, a missing target): named with the system's reason.
+    std::error_code ec;
+    if (!fs::exists(p, ec)) {
+      *problem = "cannot read " + p.string() + ": " + (ec ? ec.message() : std::string("no such file"));
+      return {};
+    }
+  }
   const auto header = SniffHeader(p);
   if (!header) {
     *problem = "cannot decode " + p.string() + ": not a PNG/PGM/TIFF/JPEG/BMP file by its first bytes";

@@ -252,6 +252,8 @@ class Batch(unittest.TestCase):
                 ([self.root, "-o", os.path.join(d, "o"), "--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "2"],
                  "--scheduler tcp://127.0.0.1:9: cannot connect"),
             ]
+            cases.append(([self.root, "-o", os.path.join(d, "o"), "--rate", "nan"], "--rate must be a number in"))
+            cases.append(([self.root, "-o", os.path.join(d, "o"), "--read-noise", "1e300"], "--read-noise must be"))
             for args, needle in cases:
                 r = self.batch(*args)
                 self.assertEqual(r.returncode, 2, (args, r.stderr))
