@@ -94,10 +94,17 @@ PerSensorKalmanFusion::Result PerSensorKalmanFusion::Step(const std::vector<Vec3
 // ---------------------------------------------------------------------------------------
 // (b) The multi-sensor pose filter.
 
+namespace {
+constexpr double kMaxKalmanPsd = 1e6;  // rad^2/s^3 or m^2/s^3, and (rad or m)/s for the sigmas
+}  // namespace
+
 bool PoseKalmanOptions::IsValid(std::string* why) const {
   std::ostringstream s;
+  // Positive, and below what any pose process holds: the state covariance grows as the PSD
+  // times dt^3, and beyond this it overflows the filter's arithmetic (kMaxKalmanPsd).
   const auto positive = [&](double v, const char* name) {
-    if (!(v > 0) || !std::isfinite(v)) s << (s.tellp() ? "; " : "") << name << " must be positive and finite, is " << v;
+    if (!(v > 0) || !(v <= kMaxKalmanPsd))
+      s << (s.tellp() ? "; " : "") << name << " must be positive and at most " << kMaxKalmanPsd << ", is " << v;
   };
   positive(angular_acceleration_psd, "angular_acceleration_psd");
   positive(linear_acceleration_psd, "linear_acceleration_psd");

@@ -14,6 +14,7 @@
 #include "core/random.h"
 #include "core/svg_plot.h"
 #include "core/output_folder.h"
+#include "fusion/kalman.h"
 #include "fusion/log_fusion.h"
 #include "jobs/evaluation.h"
 #include "synthetic/lab_scenario.h"
@@ -153,8 +154,13 @@ bool DemoOptions::IsValid(std::string* why) const {
     return fail("threads must be 0 (the hardware's) to " + std::to_string(kMaxThreads) + ", got " + std::to_string(threads));
   std::string model_why;
   if (!camera_model.IsValid(&model_why)) return fail("camera model " + camera_model.name + ": " + model_why);
-  if (!(experiment.kf_angular_psd > 0) || !(experiment.kf_linear_psd > 0))
-    return fail("the KF's process noise densities must be positive");
+  // The KF's own check (fusion/kalman.h), named by the demo's options.
+  PoseKalmanOptions kalman;
+  kalman.angular_acceleration_psd = experiment.kf_angular_psd;
+  kalman.linear_acceleration_psd = experiment.kf_linear_psd;
+  if (std::string kf_why; !kalman.IsValid(&kf_why))
+    return fail("--kf-angular-psd " + Format("%g", experiment.kf_angular_psd) + ", --kf-linear-psd " +
+                Format("%g", experiment.kf_linear_psd) + ": " + kf_why);
   return true;
 }
 

@@ -696,6 +696,20 @@ TEST(AttackLimits, SixthAttackFindings) {
   const std::string poses = test::ReadAll(d / "poses.csv");
   for (const char* t : {"\n0,1700000000.004000,", "\n3,1700000000.304000,"})
     EXPECT_NE(poses.find(t), std::string::npos) << t << "\n" << poses.substr(0, 600);
+  // A Kalman process noise beyond what the filter's arithmetic holds: named at the option or
+  // the setup's field before any work ("innovation covariance is not positive definite"
+  // after the rendering before).
+  ExpectRefused(d, "demo -o psd --points 2 --no-iso9283 --no-html --kf-angular-psd 1e300 -q",
+                {"--kf-angular-psd 1e+300", "angular_acceleration_psd must be positive and at most 1e+06"});
+  for (const char* f : {"tracker_poses.csv", "robot_joints.csv", "fusion_setup.yaml"})
+    fs::copy_file(kSource / "examples" / "fusion" / f, d / f, fs::copy_options::overwrite_existing);
+  std::string setup = test::ReadAll(d / "fusion_setup.yaml");
+  const size_t psd = setup.find("angular_acceleration_psd: 9.9999999999999998e-17");
+  ASSERT_NE(psd, std::string::npos);
+  setup.replace(psd, 48, "angular_acceleration_psd: 1e300");
+  test::WriteText(d / "psd_setup.yaml", setup);
+  ExpectRefused(d, "fuse --tracker tracker_poses.csv --robot robot_joints.csv --setup psd_setup.yaml -o fused.csv",
+                {"psd_setup.yaml", "angular_acceleration_psd must be positive and at most 1e+06"});
   // An image that is a link to itself degrades its frame, named with the system's reason
   // (it aborted the whole run as an internal error).
   const fs::path loop = d / "rec" / "images" / "cam2" / "000001.png";
