@@ -229,14 +229,20 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
         if (!jn[key]) in.Fail(jn, label, ": missing key '", key, "'");
       j.a = in.Number(jn["a_m"], label + " a_m");
       j.d = in.Number(jn["d_m"], label + " d_m");
-      if (auto n = in.OneOf(jn, "alpha", kAngleUnits, &scale, label))
-        j.alpha = in.Number(*n, label + " alpha") * scale;
-      else
-        in.Fail(jn, label, ": missing key 'alpha_rad' (or 'alpha_deg')");
-      if (auto n = in.OneOf(jn, "theta_offset", kAngleUnits, &scale, label))
-        j.theta_offset = in.Number(*n, label + " theta_offset") * scale;
-      else
-        in.Fail(jn, label, ": missing key 'theta_offset_rad' (or 'theta_offset_deg')");
+      // A DH angle beyond a turn under a radian key is degrees (90 for pi/2).
+      const auto angle = [&](const char* key) {
+        double v = 0.0;
+        if (auto n = in.OneOf(jn, key, kAngleUnits, &scale, label)) {
+          v = in.Number(*n, label + " " + key) * scale;
+          if (scale == 1.0 && std::abs(v) > 2 * std::numbers::pi + 1e-9)
+            in.Fail(*n, label, " ", key, "_rad is ", v, ", more than a turn: degrees? give ", key, "_deg");
+        } else {
+          in.Fail(jn, label, ": missing key '", key, "_rad' (or '", key, "_deg')");
+        }
+        return v;
+      };
+      j.alpha = angle("alpha");
+      j.theta_offset = angle("theta_offset");
     }
 
     const auto& value_units = revolute ? kAngleUnits : kLengthUnits;
@@ -343,6 +349,14 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
     CheckMagnitude(j.encoder_sigma, kMaxEncoderSigma, at + " encoder_sigma",
                    j.type == JointType::kRevolute ? "rad" : "m");
     if (!std::isnan(j.mass_kg)) CheckMagnitude(j.mass_kg, kMaxMassKg, at + " mass_kg", "kg");
+  }
+  {
+    // The whole chain stretched out: no robot reaches farther than a rig measures.
+    double reach = T_flange_tool_.t.norm();
+    for (const Joint& j : joints_) reach += std::abs(j.a) + std::abs(j.d) + j.origin.t.norm();
+    if (reach > kMaxRigRangeM)
+      Throw(who, ": its link lengths add up to ", reach, " m, more than any robot reaches (", kMaxRigRangeM,
+            " m): millimetres read as metres? expected metres");
   }
   for (int i = 0; i < NumJoints(); ++i)
     for (int k = 0; k < i; ++k)

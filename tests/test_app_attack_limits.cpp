@@ -710,6 +710,18 @@ TEST(AttackLimits, SixthAttackFindings) {
   test::WriteText(d / "psd_setup.yaml", setup);
   ExpectRefused(d, "fuse --tracker tracker_poses.csv --robot robot_joints.csv --setup psd_setup.yaml -o fused.csv",
                 {"psd_setup.yaml", "angular_acceleration_psd must be positive and at most 1e+06"});
+  // A DH table in degrees under radian keys, or in millimetres under metre keys: converted
+  // silently before (612 m links).
+  std::string deg = Kr5Yaml(), mm = Kr5Yaml();
+  deg.replace(deg.find("alpha_rad: 1.5707963267948966, theta_offset_rad: 0.0, limits_deg: [-15"), 29,
+              "alpha_rad: 90.0");
+  for (const auto& [from, to] : {std::pair<std::string, std::string>{"d_m: 0.400, a_m: 0.180", "d_m: 400, a_m: 180"},
+                                 {"a_m: 0.600", "a_m: 600"}, {"d_m: -0.620", "d_m: -620"}})
+    mm.replace(mm.find(from), from.size(), to);
+  test::WriteText(d / "kr5_deg.yaml", deg);
+  test::WriteText(d / "kr5_mm.yaml", mm);
+  ExpectRefused(d, "convert-robot kr5_deg.yaml -o deg.urdf", {"kr5_deg.yaml", "alpha_rad is 90", "degrees? give alpha_deg"});
+  ExpectRefused(d, "convert-robot kr5_mm.yaml -o mm.urdf", {"link lengths add up to", "millimetres read as metres?"});
   // An image that is a link to itself degrades its frame, named with the system's reason
   // (it aborted the whole run as an internal error).
   const fs::path loop = d / "rec" / "images" / "cam2" / "000001.png";
