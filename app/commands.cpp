@@ -68,7 +68,7 @@ Pose PoseFromArgs(const std::vector<double>& v, const std::string& who, const st
       Throw(who, ": ", option, " ", kNames[i], " is ", v[i], "; expected 7 finite numbers x y z qw qx qy qz");
   for (int i = 0; i < 3; ++i) CheckMagnitude(v[i], kMaxRobotLengthM, who + ": " + option + " " + kNames[i], "m");
   const Eigen::Quaterniond q(v[3], v[4], v[5], v[6]);
-  if (std::abs(q.norm() - 1.0) > 1e-3) Throw(who, ": ", option, " quaternion has norm ", q.norm(), ", expected 1");
+  if (!IsUnitQuaternion(q)) Throw(who, ": ", option, " quaternion has norm ", q.norm(), ", expected 1");
   return Pose::FromQuaternion(q.normalized(), Vec3(v[0], v[1], v[2]));
 }
 CLI::Validator NonNegativeNumber() { return NumberAtLeast(false); }

@@ -17,6 +17,7 @@
 #include <Eigen/LU>
 
 #include "core/error.h"
+#include "core/limits.h"
 #include "core/io.h"
 #include "core/statistics.h"
 #include "core/svg_plot.h"
@@ -1068,8 +1069,25 @@ CameraErrorModel CameraErrorModelFromFit(const NoiseModelFit& fit, const std::st
   return m;
 }
 
+bool MeasuredAnalysisOptions::IsValid(std::string* why) const {
+  std::string w;
+  const auto positive = [&](double v, const char* name, double hi) {
+    if (w.empty() && !(v > 0 && v <= hi)) w = std::string(name) + " must be positive and at most " + std::to_string(hi) + ", is " + std::to_string(v);
+  };
+  positive(plane_first_distance_m, "plane_first_distance_m", kMaxRigRangeM);
+  positive(plane_last_distance_m, "plane_last_distance_m", kMaxRigRangeM);
+  positive(paper_isotropic_sigma_m, "paper_isotropic_sigma_m", 1.0);
+  positive(laser_sigma_m, "laser_sigma_m", 1.0);
+  if (w.empty() && (repeats_per_line_end < 1 || repeats_per_line_end > 1000))
+    w = "repeats_per_line_end must be 1 to 1000, is " + std::to_string(repeats_per_line_end);
+  if (w.empty() && (lab_seeds < 0 || lab_seeds > 1000)) w = "lab_seeds must be 0 to 1000, is " + std::to_string(lab_seeds);
+  if (why && !w.empty()) *why = w;
+  return w.empty();
+}
+
 MeasuredReport AnalyseMeasured(const MeasuredPoints& measured, const MeasuredLines* lines, const CameraRig& rig,
                                const PredictPoints& predict, const PredictLab& lab, const MeasuredAnalysisOptions& opt) {
+  if (std::string why; !opt.IsValid(&why)) Throw("measured analysis options: ", why);
   MeasuredReport R;
   R.measured = measured;
   const bool have_positions =

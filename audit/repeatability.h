@@ -147,6 +147,7 @@ struct MeasuredAnalysisOptions {
   int repeats_per_line_end = 5;              // a line's measured length uses the mean of its ends' repeats
   bool sensitivity = true;                   // refit under layout variants
   int lab_seeds = 5;                         // the lab experiment with the fitted camera (0 = skip)
+  bool IsValid(std::string* why) const;
 };
 
 struct LayoutResult {

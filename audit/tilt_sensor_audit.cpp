@@ -430,11 +430,15 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
       t.m.p.push_back(e.InitialParameters());
       t.m.held.push_back(std::vector<bool>(e.NumParameters(), false));
       t.m = a.Fit(t.m, all, nullptr, &t.S);
-      bool at_bound = false;
-      for (bool h : t.m.held.back()) at_bound |= h;
-      if (at_bound) {
-        rep.notes.push_back(Label(e) + ": the data ask for a negative value (a link bending against its load): held "
-                                       "at 0 and not named");
+      const std::vector<bool>& held = t.m.held.back();
+      if (std::find(held.begin(), held.end(), true) != held.end()) {
+        // Telescopic play's overlap (its third parameter) held at an end of its search.
+        const bool overlap = e.effect == Effect::kSegmentPlay && e.variant == 1 && held[2] &&
+                             std::count(held.begin(), held.end(), true) == 1;
+        rep.notes.push_back(Label(e) + (overlap ? ": the overlap the data ask for lies outside 0.01-3 m: held at the "
+                                                  "end and not named"
+                                                : ": the data ask for a negative value (a link bending against its "
+                                                  "load): held at 0 and not named"));
         continue;
       }
       t.ll = a.LogLik(t.m, t.S, all, &t.rows_ll);

@@ -35,7 +35,7 @@ Pose RowPose(const CsvTable& t, size_t row, const std::string& prefix) {
   const double qw = t.Number(row, t.Column(prefix + "qw")), qx = t.Number(row, t.Column(prefix + "qx")),
                qy = t.Number(row, t.Column(prefix + "qy")), qz = t.Number(row, t.Column(prefix + "qz"));
   const Eigen::Quaterniond q(qw, qx, qy, qz);
-  if (std::abs(q.norm() - 1.0) > 1e-3)
+  if (!IsUnitQuaternion(q))
     Throw(t.source.string(), " line ", t.line_of_row[row], ": quaternion ", prefix, "qw..qz has norm ", q.norm(),
           ", expected 1");
   return Pose::FromQuaternion(q.normalized(), Vec3(t.Number(row, t.Column(prefix + "x_m")),

@@ -51,7 +51,7 @@ Pose ParsePoseNode(const YAML::Node& n, const std::string& where) {
   for (const char* k : {"x", "y", "z", "qw", "qx", "qy", "qz"})
     if (!n[k]) Throw(where, ": pose is missing '", k, "'");
   const Eigen::Quaterniond q(n["qw"].as<double>(), n["qx"].as<double>(), n["qy"].as<double>(), n["qz"].as<double>());
-  if (std::abs(q.norm() - 1.0) > 1e-3) Throw(where, ": pose quaternion has norm ", q.norm(), ", expected 1");
+  if (!IsUnitQuaternion(q)) Throw(where, ": pose quaternion has norm ", q.norm(), ", expected 1");
   return Pose::FromQuaternion(q.normalized(), Vec3(n["x"].as<double>(), n["y"].as<double>(), n["z"].as<double>()));
 }
 
@@ -293,7 +293,7 @@ RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) 
     }
     if (has_q) {
       const Eigen::Quaterniond qq(t.Number(i, cqw), t.Number(i, cqx), t.Number(i, cqy), t.Number(i, cqz));
-      if (std::abs(qq.norm() - 1.0) > 1e-3)
+      if (!IsUnitQuaternion(qq))
         Throw(src, " line ", r.line, ": quaternion (qw, qx, qy, qz) has norm ", qq.norm(), "; expected 1");
       r.R_meas_tool = qq.normalized().toRotationMatrix();
     }
@@ -1099,7 +1099,7 @@ std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path&
           const auto v = ReadList(e["quaternion_wxyz"], where + " quaternion_wxyz");
           if (v.size() != 4) Throw(where, ": quaternion_wxyz must have 4 numbers");
           const Eigen::Quaterniond qq(v[0], v[1], v[2], v[3]);
-          if (std::abs(qq.norm() - 1.0) > 1e-3) Throw(where, ": quaternion_wxyz has norm ", qq.norm(), ", expected 1");
+          if (!IsUnitQuaternion(qq)) Throw(where, ": quaternion_wxyz has norm ", qq.norm(), ", expected 1");
           m.R_meas_tool = qq.normalized().toRotationMatrix();
         }
         m.line = e.Mark().line + 1;

@@ -2,6 +2,8 @@
 //   R = Exp(dtheta) * R_hat,  p = p_hat + dp,  tangent vector [dtheta; dp].
 #pragma once
 
+#include <cmath>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -48,6 +50,14 @@ Mat6 TransformPoseCovariance(const Mat6& cov, const Pose& A, const Pose& T, cons
 
 // Angle of the relative rotation R_a^T R_b, radians.
 double RotationAngle(const Mat3& R_a, const Mat3& R_b);
+
+// A quaternion read from a file is a rotation when its norm is 1 within 1e-3: four digits
+// typed by hand (0.7071, 0.7071, 0, 0: 0.99999) pass, a wrong order or a missing sign's
+// worth of error does not. Every reader uses this one tolerance, then normalises.
+inline constexpr double kQuaternionNormTolerance = 1e-3;
+inline bool IsUnitQuaternion(const Eigen::Quaterniond& q) {
+  return std::abs(q.norm() - 1.0) <= kQuaternionNormTolerance;
+}
 
 // The rigid transform T minimising sum |T src_i - dst_i|^2 (Kabsch / Umeyama, no scale;
 // columns are points). `spread`, when not null, receives the second singular value of the

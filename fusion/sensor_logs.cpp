@@ -133,7 +133,7 @@ class Yaml {
     if (!n) Fail(map, where, ": missing 'quaternion_wxyz: [w, x, y, z]'");
     const auto q = Numbers(n, 4, where + ".quaternion_wxyz");
     const Eigen::Quaterniond quat(q[0], q[1], q[2], q[3]);
-    if (std::abs(quat.norm() - 1.0) > 1e-6)
+    if (!IsUnitQuaternion(quat))
       Fail(n, where, ".quaternion_wxyz must have unit norm, has norm ", quat.norm());
     return quat.normalized().toRotationMatrix();
   }
@@ -348,7 +348,7 @@ TrackerLog ReadTrackerLog(const fs::path& path) {
             t.rows[i][frame], "'");
     s.frame = static_cast<int>(f);
     const Eigen::Quaterniond q(t.Number(i, qw), t.Number(i, qx), t.Number(i, qy), t.Number(i, qz));
-    if (std::abs(q.norm() - 1.0) > 1e-6)
+    if (!IsUnitQuaternion(q))
       Throw(path.string(), " line ", line, ": quaternion (qw, qx, qy, qz) must have unit norm, has norm ", q.norm());
     s.T_rig_target = Pose::FromQuaternion(q.normalized(), Vec3(t.Number(i, x), t.Number(i, yc), t.Number(i, z)));
     if (const double r = s.T_rig_target.t.norm(); !(r <= kMaxRigRangeM)) {

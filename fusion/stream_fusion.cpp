@@ -709,8 +709,15 @@ std::vector<FusedSample> FuseKalman(const SensorLogs& logs, const FusionSetup& s
   return out;
 }
 
+bool StreamFusionOptions::IsValid(std::string* why) const {
+  if (moifa || kalman) return true;
+  if (why) *why = "no fusion method asked for (MOIFA, the KF or both)";
+  return false;
+}
+
 std::vector<FusedSample> FuseStream(const SensorLogs& logs, const FusionSetup& setup,
                                     const StreamFusionOptions& options) {
+  if (std::string why; !options.IsValid(&why)) Throw("fusion options: ", why);
   std::vector<FusedSample> rows;
   if (options.moifa) rows = FuseMoifa(logs, setup, options.windows);
   if (options.kalman) {

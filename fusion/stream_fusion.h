@@ -186,6 +186,8 @@ void CheckWindows(const std::vector<FusionWindow>& windows);
 struct StreamFusionOptions {
   bool moifa = true, kalman = true;
   std::vector<FusionWindow> windows;  // empty: one sample per camera frame
+  // At least one method; the windows' own check is CheckWindows (against the logs).
+  bool IsValid(std::string* why) const;
 };
 
 // CheckTimeOverlap and CheckWindows first; InputError on inconsistent inputs.

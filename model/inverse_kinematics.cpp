@@ -5,6 +5,8 @@
 #include <cmath>
 #include <sstream>
 
+#include "core/error.h"
+
 namespace mcms {
 
 namespace {
@@ -19,8 +21,21 @@ Eigen::VectorXd Clamped(const RobotModel& robot, Eigen::VectorXd q) {
 }
 }  // namespace
 
+bool IkOptions::IsValid(std::string* why) const {
+  std::string w;
+  if (max_iterations < 1 || max_iterations > 1000000)
+    w = "max_iterations must be 1 to 1000000, is " + std::to_string(max_iterations);
+  else if (!(damping >= 0 && damping <= 1e3))
+    w = "damping must be 0 to 1000, is " + std::to_string(damping);
+  else if (!(tolerance > 0 && tolerance <= 1))
+    w = "tolerance must be positive and at most 1 (rad, m), is " + std::to_string(tolerance);
+  if (why && !w.empty()) *why = w;
+  return w.empty();
+}
+
 std::optional<Eigen::VectorXd> SolveIk(const RobotModel& robot, const Pose& T_goal, const Eigen::VectorXd& seed,
                                        std::string* why, const IkOptions& o) {
+  if (std::string w; !o.IsValid(&w)) Throw("inverse kinematics options: ", w);
   const int n = robot.NumJoints();
   if (seed.size() != n || !seed.allFinite()) {
     if (why) *why = "the seed has " + std::to_string(seed.size()) + " values (finite ones expected, one per joint: " +

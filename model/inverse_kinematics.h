@@ -18,6 +18,7 @@ struct IkOptions {
   int max_iterations = 200;
   double damping = 1e-3;        // lambda of (J J^T + lambda^2 I)
   double tolerance = 1e-9;      // |BoxMinus(goal, reached)| accepted as a solution (rad, m)
+  bool IsValid(std::string* why) const;
 };
 
 // Joint values q with T_base_flange(q) = T_base_flange_goal, starting from `seed` (clamped

@@ -167,7 +167,7 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
     if (t["quaternion_wxyz"]) {
       const auto v = in.Numbers(t["quaternion_wxyz"], 4, "tool quaternion_wxyz");
       const Eigen::Quaterniond q(v[0], v[1], v[2], v[3]);
-      if (std::abs(q.norm() - 1.0) > 1e-6)
+      if (!IsUnitQuaternion(q))
         in.Fail(t["quaternion_wxyz"], "tool quaternion_wxyz must have unit norm, has ", q.norm());
       tool.R = q.normalized().toRotationMatrix();
     }

@@ -195,7 +195,7 @@ class Reader {
     const Eigen::Quaterniond q(v[0], v[1], v[2], v[3]);
     // Hand-written quaternions carry 4-5 digits; anything further from unit length is
     // a mistake rather than rounding.
-    if (std::abs(q.norm() - 1.0) > 1e-3) Bad(n, field, "expected a unit quaternion [w, x, y, z]");
+    if (!IsUnitQuaternion(q)) Bad(n, field, "expected a unit quaternion [w, x, y, z]");
     return q.normalized();
   }
   fs::path Path(const YAML::Node& n, const std::string& field) const {

@@ -710,6 +710,22 @@ TEST(AttackLimits, SixthAttackFindings) {
   test::WriteText(d / "psd_setup.yaml", setup);
   ExpectRefused(d, "fuse --tracker tracker_poses.csv --robot robot_joints.csv --setup psd_setup.yaml -o fused.csv",
                 {"psd_setup.yaml", "angular_acceleration_psd must be positive and at most 1e+06"});
+  // A quaternion typed to five digits (norm 0.99999) is a rotation; 0.9 is not.
+  for (const auto& [q, ok] : {std::pair<const char*, bool>{"[0.99999, 0, 0, 0]", true}, {"[0.9, 0, 0, 0]", false}}) {
+    std::string typed = test::ReadAll(d / "fusion_setup.yaml");
+    const size_t at = typed.find("quaternion_wxyz: [1, 0, 0, 0]\n  bias_rad");
+    ASSERT_NE(at, std::string::npos);
+    typed.replace(at, 29, std::string("quaternion_wxyz: ") + q);
+    test::WriteText(d / "typed_setup.yaml", typed);
+    const std::string cmd = "fuse --tracker tracker_poses.csv --robot robot_joints.csv --setup typed_setup.yaml -q -o typed.csv";
+    if (ok) {
+      const CliRun r = test::Mcms(d, cmd);
+      EXPECT_EQ(r.code, 0) << r.err;
+      fs::remove(d / "typed.csv");
+    } else {
+      ExpectRefused(d, cmd, {"typed_setup.yaml line 9", "inclinometer.quaternion_wxyz must have unit norm, has norm 0.9"});
+    }
+  }
   // A DH table in degrees under radian keys, or in millimetres under metre keys: converted
   // silently before (612 m links).
   std::string deg = Kr5Yaml(), mm = Kr5Yaml();

@@ -325,5 +325,15 @@ TEST(FusionFaults, UnionRangeAndEpochExclusion) {
   EXPECT_LT(err.dot(two.fused.covariance.ldlt().solve(err)), 2.0);
 }
 
+// Options that ask for no fusion at all are named, not answered with an empty table.
+TEST(FusionOptions, AskingForNoMethodIsNamed) {
+  StreamFusionOptions o;
+  std::string why;
+  EXPECT_TRUE(o.IsValid(&why));
+  o.moifa = o.kalman = false;
+  EXPECT_FALSE(o.IsValid(&why));
+  EXPECT_NE(why.find("no fusion method"), std::string::npos) << why;
+}
+
 }  // namespace
 }  // namespace mcms

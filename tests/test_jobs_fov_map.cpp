@@ -155,6 +155,20 @@ TEST(FovNoiseFit, MisidentifiedPointsFlagged) {
 // The paper's Tables 1 and 2 against the default rig: the extended model beats the
 // nominal model and the paper's own isotropic 0.15 mm held out; the three gross points of
 // plane 5 are flagged; Table 2 is predicted and its error stated.
+// The measured analysis's options each checked and named.
+TEST(FovNoiseFit, OptionsOutsideTheirRangeAreNamed) {
+  MeasuredAnalysisOptions o;
+  std::string why;
+  EXPECT_TRUE(o.IsValid(&why));
+  o.laser_sigma_m = -1e-5;
+  EXPECT_FALSE(o.IsValid(&why));
+  EXPECT_NE(why.find("laser_sigma_m must be positive"), std::string::npos) << why;
+  o = MeasuredAnalysisOptions{};
+  o.repeats_per_line_end = 0;
+  EXPECT_FALSE(o.IsValid(&why));
+  EXPECT_NE(why.find("repeats_per_line_end"), std::string::npos) << why;
+}
+
 TEST(FovNoiseFit, PaperTables) {
   MCMS_REQUIRE_DATA(paper, "paper");
   const Scenario sc = Scenario::Default();

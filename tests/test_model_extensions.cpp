@@ -16,6 +16,7 @@
 #include "model/kinematics.h"
 #include "model/robot_model.h"
 #include "tests/gradient_check.h"
+#include "tests/test_util.h"
 
 namespace mcms {
 namespace {
@@ -371,6 +372,15 @@ TEST(ModelInverseKinematics, SolvesReachablePosesAndExplainsUnreachableOnes) {
   EXPECT_NE(why.find("mm"), std::string::npos) << why;
   EXPECT_FALSE(SolveIk(robot, goal, Eigen::VectorXd::Zero(3), &why));
   EXPECT_NE(why.find("seed"), std::string::npos) << why;
+  // Options that no solve can use are named (the Python binding passes them through).
+  IkOptions o;
+  o.tolerance = 0.0;
+  EXPECT_NE(test::ErrorOf([&] { SolveIk(robot, goal, seed, &why, o); }).find("tolerance must be positive"),
+            std::string::npos);
+  o = IkOptions{};
+  o.max_iterations = 0;
+  EXPECT_NE(test::ErrorOf([&] { SolveIk(robot, goal, seed, &why, o); }).find("max_iterations must be 1 to"),
+            std::string::npos);
 }
 
 TEST(ModelFlangePose, CameraAndRobotConversionsPropagateCovariance) {
