@@ -503,6 +503,10 @@ MrcalOptimizationInputsData ReadMrcalOptimizationInputs(const std::filesystem::p
   CameraModel::CheckCameramodelText(text, path);
   MrcalOptimizationInputsData d;
   try {
+    // A model cut short (a copy interrupted, a disk full): its dict never closes.
+    const size_t last = text.find_last_not_of(" \t\r\n");
+    if (last == std::string::npos || text[last] != '}')
+      Throw("the file ends before the model's closing '}' (", text.size(), " bytes): cut short? write it again");
     const size_t key = text.find("'optimization_inputs'");
     if (key == std::string::npos)
       Throw("no 'optimization_inputs' (the model was written without its calibration problem; the lens audit needs "

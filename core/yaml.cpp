@@ -1,5 +1,7 @@
 #include "core/yaml.h"
 
+#include <yaml-cpp/depthguard.h>
+
 #include <map>
 
 #include "core/error.h"
@@ -38,7 +40,14 @@ void CheckUniqueKeys(const YAML::Node& n, const std::string& source, int depth, 
 }  // namespace
 
 YAML::Node LoadYaml(const std::string& text, const std::string& source) {
-  YAML::Node root = YAML::Load(text);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::DeepRecursion& e) {
+    // yaml-cpp's own guard says only "bad file".
+    Throw(source, " line ", e.mark.line + 1, ": nested more than ", e.depth(), " levels deep (no robot, rig or "
+          "scenario file nests beyond a few)");
+  }
   long nodes = 0;
   CheckUniqueKeys(root, source, 0, &nodes);
   return root;

@@ -35,6 +35,14 @@ FramePoseError PoseErrorAccumulator::Add(const FrameResult& f, const Pose& truth
   pr_ += f.cov.topLeftCorner<3, 3>().trace();
   dt_ += truth.t.norm();
   de_ += f.T_rig_target->t.norm();
+  constexpr double kFar = 30 * std::numbers::pi / 180, kClose = 2 * std::numbers::pi / 180;
+  if (fe.rotation_rad > kFar) {
+    ++s_.rotation_far;
+    const Eigen::Quaterniond q(truth.R);  // the file's numbers (w, x, y, z) ...
+    const Eigen::Quaterniond scalar_last(q.z(), q.w(), q.x(), q.y());  // ... read as (x, y, z, w)
+    if (RotationAngle(f.T_rig_target->R, scalar_last.normalized().toRotationMatrix()) < kClose)
+      ++s_.rotation_far_but_scalar_last_close;
+  }
   return fe;
 }
 
@@ -62,6 +70,13 @@ void CheckTruthDistances(const PoseErrorSummary& s, const std::string& truth_fil
   Throw("truth file ", truth_file, ": its positions are on average ", r, " times as far from the rig as the tracked ",
         "ones over ", s.evaluated, " frames", mm ? " (millimetres under metre headers?)" : "",
         "; give the truth of this recording in metres (columns x_m, y_m, z_m)");
+}
+
+void CheckTruthRotations(const PoseErrorSummary& s, const std::string& truth_file) {
+  if (s.evaluated < 3 || s.rotation_far_but_scalar_last_close * 5 < s.evaluated * 4) return;
+  Throw("truth file ", truth_file, ": on ", s.rotation_far, " of ", s.evaluated, " frames its rotations are more than ",
+        "30 deg from the tracked ones, but its quaternions read as x, y, z, w (scalar last) agree within 2 deg on ",
+        s.rotation_far_but_scalar_last_close, ": quaternions in x, y, z, w order? expected qw, qx, qy, qz");
 }
 
 PoseErrorSummary EvaluatePoses(const std::vector<FrameResult>& results, const std::vector<Pose>& truth) {

@@ -29,6 +29,10 @@ struct PoseErrorSummary {
   // Mean distance of the true positions from the rig origin over that of the estimated
   // ones (the evaluated frames): about 1 for a truth of this recording in the same unit.
   double truth_to_estimate_distance = 1;
+  // Frames whose rotation is more than 30 deg off the truth's, and of those, how many agree
+  // within 2 deg when the truth's four quaternion numbers are read scalar-last (x, y, z, w
+  // under qw..qz): a truth file in the other quaternion order.
+  int rotation_far = 0, rotation_far_but_scalar_last_close = 0;
   bool NeesInBand() const { return evaluated > 0 && mean_nees >= nees_band_lo && mean_nees <= nees_band_hi; }
 };
 
@@ -56,6 +60,9 @@ class PoseErrorAccumulator {
 // of this recording: the true positions on average more than 5 times as far from the rig
 // as the tracked ones, or less than a fifth (millimetres under metre headers give 1000).
 void CheckTruthDistances(const PoseErrorSummary& s, const std::string& truth_file);
+// InputError when most evaluated frames' rotations are far from the truth's but agree with
+// its quaternions read scalar-last: the truth file's quaternions are in x, y, z, w order.
+void CheckTruthRotations(const PoseErrorSummary& s, const std::string& truth_file);
 
 // truth[i] is the true T_rig_target of results[i].
 PoseErrorSummary EvaluatePoses(const std::vector<FrameResult>& results, const std::vector<Pose>& truth);

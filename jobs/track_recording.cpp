@@ -184,6 +184,7 @@ TrackRecordingResult TrackRecording(const TrackRecordingInput& in,
   if (with_truth) {
     res.errors = errors.Summary();
     CheckTruthDistances(*res.errors, res.truth);  // before the output is committed
+    CheckTruthRotations(*res.errors, res.truth);
     for (const std::string& line : DescribeTruthErrors(*res.errors, res.truth)) note(line);
   }
   writer.Finish(res.notes);

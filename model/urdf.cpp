@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <locale>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -108,6 +109,33 @@ struct Leaf {
   int movable = 0;
   std::string name, last_movable;
 };
+// Joints whose parents close on themselves never reach the root: named, since no
+// --base-link opens them. Each link is walked up once (links known to reach the root end a
+// walk), so a deep tree costs its size.
+void RequireNoLoop(const urdf::ModelInterface& m, const std::string& source) {
+  std::map<std::string, int> state;  // 1: on the current walk, 2: reaches the root
+  for (const auto& [name, start] : m.links_) {
+    std::vector<urdf::LinkConstSharedPtr> walk;
+    urdf::LinkConstSharedPtr l = start;
+    while (l && state[l->name] == 0) {
+      state[l->name] = 1;
+      walk.push_back(l);
+      l = l->getParent();
+    }
+    if (l && state[l->name] == 1) {
+      std::vector<std::string> joints;
+      bool in_loop = false;
+      for (const auto& w : walk) {
+        in_loop = in_loop || w->name == l->name;
+        if (in_loop && w->parent_joint) joints.push_back(w->parent_joint->name);
+      }
+      Throw(source, ": joints ", NameList(joints), " form a closed loop (link '", l->name,
+            "' is its own ancestor); a URDF is a tree: give each link one parent, none of them below it");
+    }
+    for (const auto& w : walk) state[w->name] = 2;
+  }
+}
+
 std::vector<Leaf> Leaves(const urdf::ModelInterface& m, const urdf::LinkConstSharedPtr& base) {
   std::vector<Leaf> out;
   std::vector<std::pair<urdf::LinkConstSharedPtr, Leaf>> stack{{base, Leaf{0, base->name, ""}}};
@@ -468,6 +496,7 @@ RobotModel ParseUrdf(const std::string& xml, const std::string& source, const Ch
   const urdf::ModelInterface& m = *model;
   const auto root = m.getRoot();
   if (!root) Throw(source, ": the URDF has no root link");
+  RequireNoLoop(m, source);
   const std::string base = chain.base_link.empty() ? root->name : chain.base_link;
   const auto base_link = m.getLink(base);
   if (!base_link)

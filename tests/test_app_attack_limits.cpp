@@ -738,6 +738,38 @@ TEST(AttackLimits, SixthAttackFindings) {
   test::WriteText(d / "kr5_mm.yaml", mm);
   ExpectRefused(d, "convert-robot kr5_deg.yaml -o deg.urdf", {"kr5_deg.yaml", "alpha_rad is 90", "degrees? give alpha_deg"});
   ExpectRefused(d, "convert-robot kr5_mm.yaml -o mm.urdf", {"link lengths add up to", "millimetres read as metres?"});
+  // A gain no camera has, a threshold at the 8-bit images' top, a read noise spanning their
+  // range: named at the option before the sequence ("target never found" after it before).
+  ExpectRefused(d, "track rec -q -o g.csv --gain 1e-300", {"--gain (gain_e_per_dn) 1e-300", "0.001 to 10000 e-/DN"});
+  ExpectRefused(d, "track rec -q -o g.csv --threshold 255",
+                {"--threshold 255 DN is at or beyond the largest level of the images (255: 8-bit", "rec/images/cam"});
+  ExpectRefused(d, "track rec -q -o g.csv --read-noise 100", {"--read-noise 100 DN: three times it spans", "8-bit"});
+  // A truth file whose quaternions are x, y, z, w under qw..qz: named, not "the covariance is
+  // optimistic" with 154 deg of rotation error.
+  ASSERT_EQ(test::Mcms(d, "render --frames 4 --quiet --threads 2 -o rec2").code, 0);
+  test::WriteText(d / "rec2" / "truth" / "poses.csv",
+                  ChangedCsv(d / "rec2" / "truth" / "poses.csv", [](const auto& h, auto& c, int) {
+                    const std::string w = c[Col(h, "qw")];
+                    c[Col(h, "qw")] = c[Col(h, "qx")], c[Col(h, "qx")] = c[Col(h, "qy")], c[Col(h, "qy")] = c[Col(h, "qz")];
+                    c[Col(h, "qz")] = w;
+                  }));
+  ExpectRefused(d, "track rec2 -q -o tq.csv --truth auto",
+                {"truth file rec2/truth/poses.csv", "quaternions in x, y, z, w order? expected qw, qx, qy, qz"});
+  // A grid of 8e6 points (8 GB and 30 min of prediction): refused with its size and memory.
+  ExpectRefused(d, "fov-map -o v --quiet --grid=-0.5:0.5:200,-0.4:0.4:200,0:1:200",
+                {"8000000 grid points, more than 2000000", "GB"});
+  // A scenario nested 100000 lists deep: named as nesting, not yaml-cpp's "bad file".
+  test::WriteText(d / "deep.yaml", std::string(100000, '[') + std::string(100000, ']') + "\n");
+  ExpectRefused(d, "render deep.yaml -o deep -q", {"deep.yaml", "levels deep"});
+  // A URDF whose joints close a loop: named as a loop, not "give --base-link".
+  const auto rev = [](const std::string& name, const std::string& parent, const std::string& child) {
+    return "<joint name='" + name + "' type='revolute'><parent link='" + parent + "'/><child link='" + child +
+           "'/><axis xyz='0 0 1'/><limit lower='-1' upper='1' effort='1' velocity='1'/></joint>";
+  };
+  test::WriteText(d / "loop.urdf", "<robot name='loop'><link name='base_link'/><link name='l1'/><link name='l2'/>"
+                                   "<link name='l3'/><link name='l4'/>" + rev("j1", "base_link", "l1") +
+                                       rev("j2", "l4", "l2") + rev("j3", "l2", "l3") + rev("j4", "l3", "l4") + "</robot>");
+  ExpectRefused(d, "convert-robot loop.urdf -o loop.yaml", {"loop.urdf", "form a closed loop", "j2", "j3", "j4"});
   // An image that is a link to itself degrades its frame, named with the system's reason
   // (it aborted the whole run as an internal error).
   const fs::path loop = d / "rec" / "images" / "cam2" / "000001.png";

@@ -188,6 +188,11 @@ TEST(LensAudit, BadInputNamesTheFileAndWritesNothing) {
   opt.threads = -1;
   const std::string e4 = test::ErrorOf([&] { AuditLens(ReadMrcalOptimizationInputs(path), opt); });
   EXPECT_NE(e4.find("--threads"), std::string::npos) << e4;
+  // A model cut short (its dict never closed): named as cut short, not as a model written
+  // without its problem.
+  test::WriteText(d / "cut.cameramodel", test::ReadAll(path).substr(0, 2000));
+  const std::string e6 = test::ErrorOf([&] { ReadMrcalOptimizationInputs(d / "cut.cameramodel"); });
+  EXPECT_NE(e6.find("cut.cameramodel: the file ends before the model's closing '}'"), std::string::npos) << e6;
   // Every corner marked an outlier in the file (weight < 0): named, not handed to the solver
   // (whose singular system would print CHOLMOD's own lines).
   opt.threads = 1;

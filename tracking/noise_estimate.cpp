@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/parallel.h"
+#include "vision/image_file.h"
 
 namespace mcms {
 
@@ -140,8 +141,9 @@ std::string PoseResidualCheck::Describe() const {
 namespace mcms {
 
 void RecordingTrackerSettings::Check() const {
-  if (gain_e_per_dn && !(*gain_e_per_dn >= 0 && std::isfinite(*gain_e_per_dn)))
-    Throw("gain_e_per_dn: expected a number >= 0, got ", *gain_e_per_dn);
+  if (gain_e_per_dn && !(*gain_e_per_dn == 0 || (*gain_e_per_dn >= kMinGainEPerDn && *gain_e_per_dn <= kMaxGainEPerDn)))
+    Throw("--gain (gain_e_per_dn) ", *gain_e_per_dn, " e-/DN: expected 0 (no photon noise) or a camera's gain, ",
+          kMinGainEPerDn, " to ", kMaxGainEPerDn, " e-/DN");
   if (!(read_noise_dn >= 0 && std::isfinite(read_noise_dn)))
     Throw("read_noise_dn: expected a number >= 0, got ", read_noise_dn);
   if (!(threshold_dn >= 0 && std::isfinite(threshold_dn)))
@@ -153,6 +155,28 @@ void RecordingTrackerSettings::Check() const {
 TrackerOptions RecordingTrackerSettings::Options(const ImageSequence& seq, const CameraRig& rig,
                                                  std::vector<std::string>* notes) const {
   Check();
+  // The levels the images hold (the first image found): a threshold at or beyond the
+  // largest, or a read noise whose 3 sigma spans it, leaves no blob to detect.
+  for (size_t i = 0; i < seq.frames.size(); ++i) {
+    bool found = false;
+    for (size_t c = 0; c < seq.cameras() && !found; ++c) {
+      const std::filesystem::path p = seq.ImagePath(i, c);
+      if (p.empty()) continue;
+      std::string problem;
+      const cv::Mat im = ReadImageFile(p, {}, &problem);
+      if (im.empty()) continue;
+      found = true;
+      const double top = im.depth() == CV_8U ? 255.0 : 65535.0;
+      const char* bits = im.depth() == CV_8U ? "8-bit" : "16-bit";
+      if (threshold_dn >= top)
+        Throw("--threshold ", threshold_dn, " DN is at or beyond the largest level of the images (", top, ": ", bits,
+              ", e.g. ", p.string(), "): no blob can pass it");
+      if (3 * read_noise_dn >= top)
+        Throw("--read-noise ", read_noise_dn, " DN: three times it spans the images' whole range (0 to ", top, ": ",
+              bits, ", e.g. ", p.string(), "): no blob could be told from the background");
+    }
+    if (found) break;
+  }
   TrackerOptions o;
   o.detector.read_noise_dn = read_noise_dn;
   o.detector.polarity = polarity;

@@ -57,6 +57,9 @@ SequenceNoiseModel EstimateSequenceNoise(const ImageSequence& seq,
 // The tracker's settings as `mcms track` and `mcms audit cameras` take them (and
 // mcms.track_recording): what is given, and what is measured from the recording when it is
 // not (the gain).
+// A camera's gain (e-/DN): from high-gain 16-bit sensors to wells of 1e5 e- in 8 bits.
+inline constexpr double kMinGainEPerDn = 1e-3, kMaxGainEPerDn = 1e4;
+
 struct RecordingTrackerSettings {
   std::optional<double> gain_e_per_dn;  // absent: measured per camera from the recording's images
   double read_noise_dn = 0;             // 0: measured around each blob
