@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "calib/iso9283.h"
+#include "core/pose_math.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/io.h"
@@ -112,10 +113,9 @@ Iso9283Report EvaluateIso9283Files(const std::filesystem::path& poses_file, cons
     for (const auto& id : order) {
       const PoseRows& p = poses.at(id);
       for (const auto& [cycle, a] : p.by_cycle) {
-        const Eigen::Quaterniond q(a.R);
-        const Eigen::Quaterniond alt(q.z(), q.w(), q.x(), q.y());  // the same four numbers, scalar last
         angle.push_back(Eigen::AngleAxisd(p.commanded.R.transpose() * a.R).angle());
-        angle_xyzw.push_back(Eigen::AngleAxisd(p.commanded.R.transpose() * alt.toRotationMatrix()).angle());
+        angle_xyzw.push_back(
+            Eigen::AngleAxisd(p.commanded.R.transpose() * RotationReadScalarLast(Eigen::Quaterniond(a.R))).angle());
       }
     }
     const double deg = 180 / std::numbers::pi;

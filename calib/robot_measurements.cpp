@@ -757,7 +757,7 @@ void CheckScale(const RobotModel& robot, const RobotLog& log) {
       for (int i = 0; i < N && inside; ++i) {
         Eigen::VectorXd q = log.rows[i].q;
         q[j] *= u.factor;
-        inside = robot.WithinLimits(q, nullptr, RobotModel::kLimitSlack);
+        inside = robot.WithinLimits(q, nullptr);  // the forward kinematics' own (strict) test
         if (inside) s2.col(i) = robot.T_base_tool(q).t;
       }
       if (!inside) continue;
@@ -898,10 +898,8 @@ void CheckOrientationsFitTheRobot(const RobotModel& robot, const RobotLog& log, 
   for (size_t i = 0; i < log.rows.size(); ++i) {
     if (!log.rows[i].R_meas_tool) return;
     const Mat3 to_flange = (T.R * flange[i].R).transpose();
-    const Eigen::Quaterniond q(*log.rows[i].R_meas_tool);
-    const Eigen::Quaterniond alt(q.z(), q.w(), q.x(), q.y());  // the same four numbers, scalar last
     tool.push_back(to_flange * *log.rows[i].R_meas_tool);
-    tool_xyzw.push_back(to_flange * alt.normalized().toRotationMatrix());
+    tool_xyzw.push_back(to_flange * RotationReadScalarLast(Eigen::Quaterniond(*log.rows[i].R_meas_tool)));
   }
   if (tool.size() < 4) return;
   const double spread = MedianSpreadDeg(tool);

@@ -59,6 +59,13 @@ inline bool IsUnitQuaternion(const Eigen::Quaterniond& q) {
   return std::abs(q.norm() - 1.0) <= kQuaternionNormTolerance;
 }
 
+// The rotation a file meant when it wrote a quaternion's four numbers as x, y, z, w under
+// qw, qx, qy, qz headers and they were read as `q` (scalar first): the same four numbers
+// read scalar last. One helper for every reader's quaternion-order check.
+inline Mat3 RotationReadScalarLast(const Eigen::Quaterniond& q) {
+  return Eigen::Quaterniond(q.z(), q.w(), q.x(), q.y()).normalized().toRotationMatrix();
+}
+
 // The rigid transform T minimising sum |T src_i - dst_i|^2 (Kabsch / Umeyama, no scale;
 // columns are points). `spread`, when not null, receives the second singular value of the
 // centred cross-covariance over the first (0: the points lie on a line or at one place,

@@ -1,4 +1,5 @@
 #include "fusion/log_fusion.h"
+#include "fusion/log_checks.h"
 
 #include <cmath>
 #include <cstdio>
@@ -170,6 +171,8 @@ FuseFilesResult FuseLogFiles(const FuseFilesRequest& r) {
   }
   if (!r.windows.empty()) out.windows = ReadFusionWindows(r.windows);
   CheckTimeOverlap(out.logs);
+  if (out.logs.robot) CheckTrackerAgainstJoints(out.setup, out.logs.tracker, *out.logs.robot);
+  if (out.logs.inclinometer) CheckInclinometerAgainstTracker(out.setup, out.logs.tracker, *out.logs.inclinometer);
   StreamFusionOptions so;
   so.moifa = r.moifa;
   so.kalman = r.kalman;

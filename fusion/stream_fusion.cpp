@@ -50,6 +50,18 @@ struct RangeRejects {
   static constexpr double kPi = std::numbers::pi;
 };
 
+// Readings left out because the other sensors' orientation tilts the inclinometer beyond its
+// range (by up to `worst_rad`), where it cannot read and its model cannot be linearized.
+std::string OutOfViewText(int count, double worst_rad, const Inclinometer& model) {
+  constexpr double kPi = std::numbers::pi;
+  char b[256];
+  std::snprintf(b, sizeof b,
+                "inclinometer: %d reading%s not used: the other sensors' orientation tilts it %.2f deg, beyond its "
+                "range %.2f deg (is the setup's inclinometer mount right?)",
+                count, count == 1 ? "" : "s", worst_rad * 180.0 / kPi, model.range * 180.0 / kPi);
+  return b;
+}
+
 // The mean of the inclinometer readings in [lo, hi] (or [lo, hi)) that are not beyond the
 // sensor's range, and the model with the noise of that mean (sigma / sqrt(n)). nullopt when
 // there is none.
@@ -162,7 +174,13 @@ class KalmanRun {
         return;
       }
       // Needs an orientation to linearize at, and one the sensor can read.
-      if (!kf_.Initialized() || !setup_.inclinometer.InRange(kf_.Predict(e.t).T.R)) return;
+      if (!kf_.Initialized()) return;
+      const Mat3 R = kf_.Predict(e.t).T.R;
+      if (!setup_.inclinometer.InRange(R)) {
+        ++out_of_view_.count;
+        out_of_view_.worst_rad = std::max(out_of_view_.worst_rad, setup_.inclinometer.Tilt(R).cwiseAbs().maxCoeff());
+        return;
+      }
       Note(k, kf_.UpdateInclinometer(e.t, reading, setup_.inclinometer));
       return;
     }
@@ -275,6 +293,11 @@ class KalmanRun {
         r.excluded.push_back("inclinometer");
       r.fault = Joined(r.fault, range_.Text(setup_.inclinometer));
     }
+    if (out_of_view_.count > 0) {
+      if (std::find(r.excluded.begin(), r.excluded.end(), "inclinometer") == r.excluded.end())
+        r.excluded.push_back("inclinometer");
+      r.fault = Joined(r.fault, OutOfViewText(out_of_view_.count, out_of_view_.worst_rad, setup_.inclinometer));
+    }
     for (const std::string& name : restart_culprits_)
       if (std::find(r.excluded.begin(), r.excluded.end(), name) == r.excluded.end()) r.excluded.push_back(name);
     r.fault = Joined(r.fault, restart_text_);
@@ -285,6 +308,7 @@ class KalmanRun {
       rejected_[k] = Rejected{};
     }
     range_ = RangeRejects{};
+    out_of_view_ = RangeRejects{};
     restart_text_.clear();
     restart_culprits_.clear();
     return r;
@@ -342,6 +366,7 @@ class KalmanRun {
   int agreed_while_contradicted_[3] = {0, 0, 0};  // accepted while another's streak ran
   bool left_out_[3] = {false, false, false};       // named at a restart, not accepted since
   RangeRejects range_;
+  RangeRejects out_of_view_;  // readings at orientations that tilt the sensor beyond its range
   struct Start {
     int kind = 0;
     double t = 0.0;
@@ -516,9 +541,10 @@ bool BeyondRange(const Vec2& reading, const Inclinometer& model) {
   return !(std::abs(d.x()) <= limit && std::abs(d.y()) <= limit);  // NaN is beyond too
 }
 
-EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
-                      const ConsistencyOptions& options, bool exclude_faults) {
-  if (poses.empty()) Throw("FuseEpoch: expected at least one full-pose measurement (camera or robot), got none");
+namespace {
+
+EpochFusion FuseEpochAll(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
+                         const ConsistencyOptions& options, bool exclude_faults) {
   EpochFusion e = FusePlain(poses, tilt, options);
   if (e.consistency.consistent || !exclude_faults) return e;
 
@@ -583,6 +609,25 @@ EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::opti
   const double scale = e.consistency.chi2 / std::max(1, e.consistency.dof);
   e.fused.covariance *= std::max(1.0, scale);
   e.fault = failed + ": no single sensor explains it; covariance scaled by chi2/dof " + Num(scale);
+  return e;
+}
+
+}  // namespace
+
+EpochFusion FuseEpoch(const std::vector<PoseMeasurement>& poses, const std::optional<TiltReading>& tilt,
+                      const ConsistencyOptions& options, bool exclude_faults) {
+  if (poses.empty()) Throw("FuseEpoch: expected at least one full-pose measurement (camera or robot), got none");
+  EpochFusion e = FuseEpochAll(poses, tilt, options, exclude_faults);
+  const auto named = [](const std::vector<std::string>& v) {
+    return std::find(v.begin(), v.end(), "inclinometer") != v.end();
+  };
+  std::vector<std::string> used;
+  for (const PoseMeasurement& m : e.measurements) used.push_back(m.name);
+  if (tilt && !named(used) && !named(e.excluded)) {
+    // Never a sensor silently gone: the others put it where it cannot read.
+    e.excluded.push_back("inclinometer");
+    e.fault = Joined(OutOfViewText(1, tilt->model.Tilt(e.fused.T.R).cwiseAbs().maxCoeff(), tilt->model), e.fault);
+  }
   return e;
 }
 

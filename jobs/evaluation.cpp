@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <tuple>
 
+#include "core/pose_math.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/statistics.h"
@@ -38,9 +39,7 @@ FramePoseError PoseErrorAccumulator::Add(const FrameResult& f, const Pose& truth
   constexpr double kFar = 30 * std::numbers::pi / 180, kClose = 2 * std::numbers::pi / 180;
   if (fe.rotation_rad > kFar) {
     ++s_.rotation_far;
-    const Eigen::Quaterniond q(truth.R);  // the file's numbers (w, x, y, z) ...
-    const Eigen::Quaterniond scalar_last(q.z(), q.w(), q.x(), q.y());  // ... read as (x, y, z, w)
-    if (RotationAngle(f.T_rig_target->R, scalar_last.normalized().toRotationMatrix()) < kClose)
+    if (RotationAngle(f.T_rig_target->R, RotationReadScalarLast(Eigen::Quaterniond(truth.R))) < kClose)
       ++s_.rotation_far_but_scalar_last_close;
   }
   return fe;

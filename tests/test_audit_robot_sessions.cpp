@@ -337,6 +337,36 @@ TEST(Sessions, GarbageInRobotLogsIsNamed) {
     e = ErrorOf([&] { CheckRobotLogPlausible(six, kr5); });
     EXPECT_NE(e.find("quaternions x, y, z, w under qw, qx, qy, qz?"), std::string::npos) << e;
   }
+  // Positions in mm from a robot whose telescopic segment mimics its column (the Trailblazer's
+  // column_top_joint = 0.5 q - 0.736): named as millimetres, where the unit search's trial of
+  // the segment in mm (within the readings' slack, beyond the kinematics' strict limits)
+  // answered with a joint-limit message naming neither file nor columns (issue 53, a09_mm).
+  {
+    const auto up = Scratch("column.urdf");
+    std::ofstream(up) << R"(<robot name="col"><link name="b"/>
+      <joint name="motor" type="prismatic"><parent link="b"/><child link="ml"/><axis xyz="0 0 1"/>
+        <limit lower="1.5" upper="4" effort="1" velocity="1"/></joint><link name="ml"/>
+      <joint name="seg" type="prismatic"><parent link="ml"/><child link="s"/><axis xyz="0 0 1"/>
+        <limit lower="0.004" upper="1.25" effort="1" velocity="1"/><mimic joint="motor" multiplier="0.5" offset="-0.736"/></joint>
+      <link name="s"/>
+      <joint name="j1" type="revolute"><parent link="s"/><child link="a"/><origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+        <limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="a"/>
+      <joint name="j2" type="revolute"><parent link="a"/><child link="t"/><origin xyz="0.6 0 0"/><axis xyz="0 1 0"/>
+        <limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="t"/></robot>)";
+    const RobotModel col = RobotModel::Read(up);
+    const auto lp = Scratch("column_mm.csv");
+    {
+      std::ofstream o(lp);
+      o << "time_s,motor,j1,j2,x_m,y_m,z_m\n";
+      for (int i = 0; i < 20; ++i)
+        o << i << "," << 1.6 + 0.11 * i << "," << std::sin(1.3 * i) << "," << 0.8 * std::cos(2.1 * i) << ",0,0,0\n";
+    }
+    RobotLog mm = ReadRobotLog(lp, col);
+    for (auto& r : mm.rows) r.p_meas = 1000.0 * col.T_base_tool(r.q).t;
+    e = ErrorOf([&] { CheckRobotLogPlausible(mm, col); });
+    EXPECT_NE(e.find("column_mm.csv: the measured positions are 1000 times as far apart"), std::string::npos) << e;
+    EXPECT_EQ(e.find("limit"), std::string::npos) << e;
+  }
   // A chain beyond any robot's.
   std::vector<Joint> many(kMaxRobotJoints + 1);
   e = ErrorOf([&] { RobotModel("many", ChainConvention::kStandard, many); });

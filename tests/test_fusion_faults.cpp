@@ -323,6 +323,15 @@ TEST(FusionFaults, UnionRangeAndEpochExclusion) {
   EXPECT_NE(two.fault.find("camera or robot"), std::string::npos) << two.fault;
   const Vec6 err = BoxMinus(two.fused.T, truth);
   EXPECT_LT(err.dot(two.fused.covariance.ldlt().solve(err)), 2.0);
+  // An inclinometer the others put beyond its range (a mount 90 deg off): left out and said,
+  // never silently gone from the row (issue 53, f33).
+  TiltReading turned = tilt;
+  turned.model.R_flange_incl = ExpSO3(Vec3(kPi / 2, 0, 0)) * turned.model.R_flange_incl;
+  const EpochFusion off = FuseEpoch({poses[0]}, turned, ConsistencyOptions{});
+  EXPECT_EQ(off.excluded, std::vector<std::string>{"inclinometer"});
+  EXPECT_NE(off.fault.find("inclinometer: 1 reading not used: the other sensors' orientation tilts it"),
+            std::string::npos) << off.fault;
+  EXPECT_EQ(off.measurements.size(), 1u);
 }
 
 // Options that ask for no fusion at all are named, not answered with an empty table.

@@ -2,6 +2,7 @@
 
 #include "core/statistics.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <mutex>
@@ -156,8 +157,11 @@ TrackerOptions RecordingTrackerSettings::Options(const ImageSequence& seq, const
                                                  std::vector<std::string>* notes) const {
   Check();
   // The levels the images hold (the first image found): a threshold at or beyond the
-  // largest, or a read noise whose 3 sigma spans it, leaves no blob to detect.
-  for (size_t i = 0; i < seq.frames.size(); ++i) {
+  // largest, or a read noise whose 3 sigma spans it, leaves no blob to detect. Looked at
+  // only when either is given, and in the first frames only (no scan of a long sequence
+  // whose images cannot be read: the tracker names those frame by frame).
+  const bool given = threshold_dn > 0 || read_noise_dn > 0;
+  for (size_t i = 0; given && i < std::min<size_t>(seq.frames.size(), 10); ++i) {
     bool found = false;
     for (size_t c = 0; c < seq.cameras() && !found; ++c) {
       const std::filesystem::path p = seq.ImagePath(i, c);
