@@ -8,7 +8,7 @@
 #include "app/audit_modes.h"
 #include "app/commands.h"
 #include "app/tracking_options.h"
-#include "audit/camera_audit_job.h"
+#include "jobs/camera_audit_job.h"
 
 namespace mcms::app {
 namespace {

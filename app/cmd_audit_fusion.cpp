@@ -12,7 +12,7 @@
 #include <memory>
 
 #include "app/audit_modes.h"
-#include "audit/fusion_log_audit.h"
+#include "jobs/fusion_audit_job.h"
 
 namespace mcms::app {
 namespace {

@@ -6,7 +6,7 @@
 #include <memory>
 
 #include "app/audit_modes.h"
-#include "audit/lens_audit.h"
+#include "jobs/lens_audit_job.h"
 #include "core/error.h"
 #include "core/io.h"
 #include "core/limits.h"

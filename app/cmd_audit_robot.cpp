@@ -8,7 +8,7 @@
 
 #include "app/audit_modes.h"
 #include "app/commands.h"
-#include "audit/robot_audit.h"
+#include "jobs/robot_audit_job.h"
 #include "core/error.h"
 
 namespace mcms::app {

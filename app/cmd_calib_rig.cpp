@@ -1,9 +1,9 @@
 // mcms calib-rig: calibrates a camera rig from calibration-board images (the job:
-// calib/rig_calibration_job.h); this file only parses the options and prints.
+// jobs/rig_calibration_job.h); this file only parses the options and prints.
 #include <cstdio>
 
 #include "app/commands.h"
-#include "calib/rig_calibration_job.h"
+#include "jobs/rig_calibration_job.h"
 
 namespace mcms::app {
 namespace {

@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "app/commands.h"
-#include "calib/robot_calibration_job.h"
+#include "jobs/robot_calibration_job.h"
 #include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -117,7 +117,7 @@ const McmsCommand kCalibRobot([](CLI::App& app) {
       "measurement (--plot). Nothing is written when the calibration fails.");
   sub->add_option("MEASUREMENTS", args->measurements,
                   "Measurement file: CSV (time, joint columns q1_rad.. or the robot's joint names, x_m,y_m,z_m or "
-                  "x1,y1,z1..xK,yK,zK of K points of one rigid body; calib/robot_measurements.h) or YAML")
+                  "x1,y1,z1..xK,yK,zK of K points of one rigid body; model/robot_measurements.h) or YAML")
       ->required()
       ->check(CLI::ExistingFile);
   sub->add_option("--robot", args->robot, "Robot description: YAML or URDF (default: built-in KUKA KR 5 arc)")

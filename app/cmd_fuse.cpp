@@ -62,7 +62,7 @@ McmsCommand fuse_command([](CLI::App& app) {
       ->required();
   cmd->add_option("--robot", args->robot,
                   "robot joint log CSV: time_s,q1_rad,...,qN_rad (N = joints of the setup's robot; q<i>_deg "
-                  "accepted, q<i>_m for prismatic joints); readings within the joint limits");
+                  "accepted, q<i>_m for prismatic joints; or the robot's joint names); readings within the joint limits");
   cmd->add_option("--inclinometer", args->inclinometer,
                   "inclinometer log CSV: time_s,tilt_x_rad,tilt_y_rad (or _deg): angle of each sensor axis above "
                   "the horizontal, bias included");

@@ -7,7 +7,7 @@
 //                 "heldout_rms_after", "heldout_loglik_gain", "bic_gain"}],
 //    "undecided": [[name, name], ..], "undecided_effects": [[{effect}, ..], ..],
 //    "tests": [..], "tests_after": [..] (robot, cameras: still failing with the final model),
-//    "notes": [..], "validation": [..] (calib/robot_validation.h; when scored)}
+//    "notes": [..], "validation": [..] (model/robot_validation.h; when scored)}
 //   (an effect may also carry "held": {name: reason})
 // Units: parameters and sigmas in SI (rad, m, s, dimensionless factors); held-out RMS in
 // the unit the mode states in `rms_unit` (m for robot positions, px for cameras).
@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/robot_validation.h"
+#include "model/robot_validation.h"
 
 namespace mcms {
 
@@ -84,7 +84,7 @@ struct AuditReport {
   std::vector<std::vector<AuditEffect>> undecided_effects;
   std::vector<std::string> notes;                   // what the audit could not test, and why
   // Other sessions scored with the fitted models frozen (the robot audit's --validate):
-  // JSON "validation" (calib/robot_validation.h).
+  // JSON "validation" (model/robot_validation.h).
   std::vector<SessionScore> validation;
   NestedFits nested;
 

@@ -843,7 +843,7 @@ ScaleMode UnitScaleMode(bool cam_unit, int u, const std::vector<bool>& noise_nam
 
 // Held-out evaluation of a unit's model (the terms `free` of `terms` fitted): each fold of
 // time fitted on the others and evaluated on it, summed over the folds.
-Eval HeldOut(const Auditor& a, const CameraAuditOptions& options, bool cam_unit, int u,
+Eval CameraHeldOut(const Auditor& a, const CameraAuditOptions& options, bool cam_unit, int u,
              const std::vector<CameraModelTerm>& terms, const std::vector<int>& free, const std::vector<double>& scale,
              ScaleMode mode) {
   const auto& s = cam_unit ? a.CameraSamples(u) : a.BallSamples(u);
@@ -937,7 +937,7 @@ std::vector<Candidate> RoundCandidates(Auditor& a, const CameraRig& rig, int nb,
   // Held-out evaluation of a unit model `t_all` with its free terms `free`: sum over folds.
   auto heldout = [&](bool cam_unit, int u, const std::vector<CameraModelTerm>& t0, const std::vector<int>& free,
                      ScaleMode mode, double* ll, double* sq, long* n) {
-    const Eval e = HeldOut(a, options, cam_unit, u, t0, free, scale, mode);
+    const Eval e = CameraHeldOut(a, options, cam_unit, u, t0, free, scale, mode);
     *ll = e.ll;
     *sq = e.sq;
     *n = e.n;
@@ -1218,8 +1218,8 @@ void SimplifyNamedMoves(Auditor& a, const CameraRig& rig, int nb, const CameraAu
     const std::string move_label = x.Label(rig.names);
     a.Rebuild(without, scale);
     const ScaleMode mode = UnitScaleMode(true, x.index, noise_named);
-    const Eval h0 = HeldOut(a, options, true, x.index, without, UnitTerms(without, true, x.index), scale, mode);
-    const Eval h1 = HeldOut(a, options, true, x.index, best, UnitTerms(best, true, x.index), scale, mode);
+    const Eval h0 = CameraHeldOut(a, options, true, x.index, without, UnitTerms(without, true, x.index), scale, mode);
+    const Eval h1 = CameraHeldOut(a, options, true, x.index, best, UnitTerms(best, true, x.index), scale, mode);
     if (!(h1.ll > h0.ll)) {  // no held-out gain of its own: the move stays
       a.Rebuild(terms, scale);
       continue;
@@ -1370,8 +1370,8 @@ void UndecideSwappableEffects(const Auditor& a, const CameraRig& rig, const Came
       // rule), not only fit the joint likelihood as well.
       if (y.index == x.index) {
         const ScaleMode mode = UnitScaleMode(true, x.index, noise_named);
-        const double named_ll = HeldOut(a, options, true, x.index, terms, UnitTerms(terms, true, x.index), scale, mode).ll;
-        const double stand_ll = HeldOut(a, options, true, x.index, t, UnitTerms(t, true, x.index), scale, mode).ll;
+        const double named_ll = CameraHeldOut(a, options, true, x.index, terms, UnitTerms(terms, true, x.index), scale, mode).ll;
+        const double stand_ll = CameraHeldOut(a, options, true, x.index, t, UnitTerms(t, true, x.index), scale, mode).ll;
         if (stand_ll < named_ll - options.undecided_nats) continue;
       }
       const double ll = a.JointFit(&t, scale);

@@ -105,13 +105,5 @@ LensAuditResult AuditLens(const MrcalOptimizationInputsData& data, const LensAud
 // <camera>.cameramodel (its intrinsics) into dir (a new folder, written atomically).
 void WriteLensAuditFiles(const LensAuditResult& r, const std::filesystem::path& dir);
 
-// The whole `mcms audit lens` job: read the model, audit it, write the output folder and
-// the JSON report when asked (every output checked before the work, which takes minutes
-// with a splined candidate, and against the input). `print` receives the report text.
-struct LensAuditJob {
-  std::filesystem::path model, output, json;  // output, json: empty = not written
-  LensAuditOptions options;
-};
-void RunLensAuditJob(const LensAuditJob& job, const std::function<void(const std::string&)>& print);
 
 }  // namespace mcms

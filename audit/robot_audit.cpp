@@ -12,6 +12,7 @@
 #include "audit/model_selection.h"
 #include "audit/robot_audit_problem.h"
 #include "audit/robot_audit_selection.h"
+#include "core/format.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/statistics.h"
@@ -47,12 +48,6 @@ bool RobotAuditOptions::IsValid(std::string* why) const {
 namespace {
 
 using namespace robot_audit;
-
-std::string Num4(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 
 std::string Fixed(double v, int digits) {
   char b[64];
@@ -371,7 +366,7 @@ RobotModel ExtendedRobot(const Problem& pb, const FitResult& f, std::vector<std:
     if (e.effect != Effect::kErrorMotion && e.effect != Effect::kGeometry && e.effect != Effect::kJointOffset &&
         e.effect != Effect::kLinkLength && e.effect != Effect::kLinkTwist)
       notes->push_back(e.Label(*pb.robot) + " is not a term of the robot description file: robot.yaml holds the rest");
-  if (robot.Convention() == ChainConvention::kUrdf)
+  if (!robot.HasDhTerms())
     for (const Joint& j : joints)
       if (j.Harmonics() > 0) {
         notes->push_back("joint " + j.name + "'s error motion is in robot.yaml; a URDF cannot hold it (robot.urdf "

@@ -64,7 +64,7 @@
 #include <Eigen/Core>
 
 #include "audit/robot_audit_types.h"
-#include "calib/robot_validation.h"
+#include "model/robot_validation.h"
 
 namespace mcms {
 
@@ -78,20 +78,5 @@ void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& r
 RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& options = {},
                             const std::vector<RobotLog>& validate = {});
 
-// The whole `mcms audit robot` job: read, audit, write the output folder (report.txt,
-// report.json, robot.yaml (and robot.urdf for a URDF robot), residuals.csv,
-// plots/effect<k>.svg (each named effect on the fitted log), next_poses.csv when a pair is
-// undecided; with --validate validation.csv and plots/validation<k>.svg (per other session:
-// point 1's error per posture, and per named cause without and with it; atomically)
-// and/or a JSON file.
-struct RobotAuditJob {
-  std::filesystem::path log, robot, output_dir, json;
-  ChainSelection chain;                       // of a URDF robot
-  std::vector<int> points;                    // points of a rigid body to use (1-based; empty: all)
-  std::vector<std::filesystem::path> validate;  // other sessions, scored frozen
-  RobotAuditOptions options;
-};
-// Returns the report text.
-std::string RunRobotAuditJob(const RobotAuditJob& job);
 
 }  // namespace mcms

@@ -11,8 +11,7 @@
 #include <ceres/rotation.h>
 
 #include "audit/model_selection.h"
-#include "calib/robot_calibration.h"
-#include "calib/robot_validation.h"
+#include "model/robot_validation.h"
 #include "core/error.h"
 
 namespace mcms::robot_audit {
@@ -329,7 +328,7 @@ Problem MakeProblem(const RobotModel& robot, const RobotLog& log, const RobotAud
     return Pose{svd.matrixU() * S * svd.matrixV().transpose(), t / static_cast<double>(T.size())};
   };
   // Stations: the rows' placements (a frozen model is scored with the fitted log's first;
-  // calib/robot_validation.h places another session's stations anew).
+  // model/robot_validation.h places another session's stations anew).
   if (!frozen && log.has_stations) {
     pb.station_names = log.Stations();
     pb.S = static_cast<int>(pb.station_names.size());

@@ -18,7 +18,7 @@
 #include <Eigen/Core>
 
 #include "audit/robot_audit_types.h"
-#include "calib/robot_measurements.h"
+#include "model/robot_measurements.h"
 #include "core/pose_math.h"
 #include "model/extensions.h"
 #include "model/robot_model.h"

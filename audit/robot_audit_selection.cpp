@@ -8,7 +8,7 @@
 #include <optional>
 
 #include "audit/model_selection.h"
-#include "calib/robot_calibration.h"
+#include "model/identifiability.h"
 #include "core/error.h"
 #include "core/random.h"
 
@@ -165,8 +165,8 @@ void MakeLayout(Problem* pb, const RobotLog& log, const RobotAuditOptions& o, st
       if (!GeometricKindWanted(o, e.effect)) return;
       geometric->push_back({e.Label(robot), e, {g0 + s * j + term}, 0, true});
     };
-    Add({Effect::kJointOffset, j, 0}, OffsetParameter(robot.Convention(), robot.Joints()[j].type));
-    if (robot.Convention() == ChainConvention::kUrdf) continue;  // its placements: `geometry`
+    Add({Effect::kJointOffset, j, 0}, robot.OffsetParameter(j));
+    if (!robot.HasDhTerms()) continue;  // a URDF chain's placements: `geometry`
     if (rev) Add({Effect::kLinkLength, j, 1}, 1);
     Add({Effect::kLinkLength, j, 0}, 2);
     Add({Effect::kLinkTwist, j, 0}, 3);
@@ -227,8 +227,7 @@ Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& n
         for (int b = 0; b <= a; ++b) v += Li(a, b) * pb.J[b](i, cols[c]);
         Jw(static_cast<Eigen::Index>(i) * pb.m + a, c) = v;
       }
-  std::vector<CalibrationParameter> params(cols.size());
-  for (size_t c = 0; c < cols.size(); ++c) params[c].name = names[c];
+  std::vector<ParameterStatus> params(cols.size());
   // The registrations may be anything; the tool and each geometric parameter no worse
   // determined than a robot's placement could be off (a tool offset the poses fix only to
   // centimetres is held at the robot file's).
@@ -238,11 +237,11 @@ Identifiable GeometryIdentifiability(const Problem& pb, const Eigen::MatrixXd& n
   AnalyzeIdentifiability(Jw, names, tol, &params, largest);
   Identifiable id;
   for (int c = 0; c < nb; ++c)
-    if (params[c].fixed) id.held_base.push_back({cols[c], params[c].name + ": " + params[c].reason});
+    if (params[c].fixed) id.held_base.push_back({cols[c], names[c] + ": " + params[c].reason});
   for (int k = 0; k < ng; ++k) {
-    const CalibrationParameter& p = params[nb + k];
+    const ParameterStatus& p = params[nb + k];
     if (p.fixed)
-      id.held.push_back({p.name, p.reason});
+      id.held.push_back({names[nb + k], p.reason});
     else
       id.params.push_back(g0 + k);
   }

@@ -11,7 +11,7 @@
 #include <Eigen/Core>
 
 #include "audit/audit_report.h"
-#include "calib/robot_measurements.h"
+#include "model/robot_measurements.h"
 #include "core/pose_math.h"
 #include "model/extensions.h"
 #include "model/robot_model.h"
@@ -20,7 +20,7 @@ namespace mcms {
 
 // The audit needs at least this many measurements (the registration alone has 9
 // parameters; repeated poses over time show the noise). Logs are read by
-// calib/robot_measurements.h ReadRobotLog: one point, K >= 3 points of a rigid body (then
+// model/robot_measurements.h ReadRobotLog: one point, K >= 3 points of a rigid body (then
 // each row's measured pose of the body), or a pose per row.
 constexpr int kMinRobotMeasurements = 12;
 // The largest deflection a joint's gravity compliance may give the robot audit (at the

@@ -38,7 +38,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "audit/audit_report.h"
-#include "calib/robot_measurements.h"
+#include "model/robot_measurements.h"
 #include "model/extensions.h"
 #include "model/robot_model.h"
 

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "calib/iso9283.h"
+#include "core/format.h"
 #include "core/pose_math.h"
 #include "core/error.h"
 #include "core/limits.h"
@@ -25,12 +26,6 @@ struct PoseRows {
   std::map<std::string, Pose> by_cycle;
   std::vector<std::string> cycles;  // in file order
 };
-
-std::string Num4(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 
 Pose RowPose(const CsvTable& t, size_t row, const std::string& prefix) {
   const double qw = t.Number(row, t.Column(prefix + "qw")), qx = t.Number(row, t.Column(prefix + "qx")),

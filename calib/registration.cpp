@@ -118,10 +118,9 @@ CircleRegistration RegisterByAxisCircles(const RobotModel& robot, const AxisSwee
 
   // Nominal axis lines in the base frame at the sweeps' joint values.
   auto axis_line = [&](const AxisSweep& s, Vec3* dir, Vec3* point) {
-    const std::vector<Pose> F = robot.LinkFrames(s.q[0]);
-    const Pose& f = robot.Convention() == ChainConvention::kStandard ? F[s.axis] : F[s.axis + 1];
-    *dir = f.R.col(2);
-    *point = f.t;
+    const JointAxis a = robot.AxisOf(robot.LinkFrames(s.q[0]), s.axis);
+    *dir = a.w;
+    *point = a.o;
   };
   Vec3 a1, o1, a2, o2;
   axis_line(sweep1, &a1, &o1);

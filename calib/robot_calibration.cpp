@@ -204,71 +204,6 @@ bool GlobMatch(const std::string& pattern, const std::string& name) {
   return p == pattern.size();
 }
 
-void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
-                            std::vector<CalibrationParameter>* params, const std::vector<double>& largest_sigma) {
-  const int n = static_cast<int>(J.cols());
-  Eigen::MatrixXd Q(J.rows(), 0);
-  std::vector<int> kept;
-  for (int j = 0; j < n; ++j) {
-    CalibrationParameter& p = (*params)[j];
-    if (p.fixed) continue;
-    const double norm = J.col(j).norm();
-    if (!(norm > 1e-12 * std::sqrt(static_cast<double>(J.rows())))) {
-      p.fixed = true;
-      p.reason = "does not affect the measurements at these poses (zero Jacobian column)";
-      continue;
-    }
-    Eigen::VectorXd c = J.col(j) / norm;
-    Eigen::VectorXd res = c;
-    for (int pass = 0; pass < 2 && Q.cols() > 0; ++pass) res -= Q * (Q.transpose() * res);
-    const double dist = res.norm();
-    if (dist < tol) {
-      // Which kept parameters it is a combination of: least squares on the kept columns.
-      Eigen::MatrixXd A(J.rows(), kept.size());
-      for (size_t k = 0; k < kept.size(); ++k) A.col(k) = J.col(kept[k]) / J.col(kept[k]).norm();
-      const Eigen::VectorXd coef = A.colPivHouseholderQr().solve(c);
-      const double big = coef.cwiseAbs().maxCoeff();
-      std::ostringstream s;
-      s << "not identifiable: a combination of";
-      int listed = 0;
-      for (size_t k = 0; k < kept.size(); ++k)
-        if (std::abs(coef[k]) > 0.1 * big) s << (listed++ ? ", " : " ") << names[kept[k]];
-      s << " (distance from their span " << dist << " < " << tol << ")";
-      p.fixed = true;
-      p.reason = s.str();
-      continue;
-    }
-    Q.conservativeResize(Eigen::NoChange, Q.cols() + 1);
-    Q.col(Q.cols() - 1) = res / dist;
-    kept.push_back(j);
-  }
-  if (largest_sigma.empty()) return;
-  // Weakly identifiable: a standard deviation beyond what the parameter could physically be.
-  while (!kept.empty()) {
-    Eigen::MatrixXd A(J.rows(), kept.size());
-    for (size_t k = 0; k < kept.size(); ++k) A.col(k) = J.col(kept[k]);
-    const Eigen::VectorXd d = A.colwise().norm().transpose().cwiseMax(1e-300);
-    const Eigen::MatrixXd An = A * d.cwiseInverse().asDiagonal();
-    const Eigen::MatrixXd C = (An.transpose() * An).completeOrthogonalDecomposition().pseudoInverse();
-    int worst = -1;
-    double ratio = 1.0, sigma = 0.0;
-    for (size_t k = 0; k < kept.size(); ++k) {
-      const double limit = largest_sigma[kept[k]];
-      if (!(limit > 0)) continue;
-      const double s = std::sqrt(std::max(0.0, C(k, k))) / d[k];
-      if (s / limit > ratio) ratio = s / limit, worst = static_cast<int>(k), sigma = s;
-    }
-    if (worst < 0) break;
-    CalibrationParameter& p = (*params)[kept[worst]];
-    std::ostringstream s;
-    s << "weakly identifiable: these poses give it a standard deviation of " << sigma
-      << ", more than a robot's placement could be off (" << largest_sigma[kept[worst]] << ")";
-    p.fixed = true;
-    p.reason = s.str();
-    kept.erase(kept.begin() + worst);
-  }
-}
-
 namespace {
 
 // Whitened residuals and the dense Jacobian (rows: residuals, columns: all parameters).
@@ -314,32 +249,13 @@ void AnalyzeInPriorityOrder(const Layout& L, const Eigen::MatrixXd& J, double to
     names.push_back((*params)[order[k]].name);
     permuted.push_back((*params)[order[k]]);
   }
-  AnalyzeIdentifiability(Jp, names, tol, &permuted);
-  for (size_t k = 0; k < order.size(); ++k) (*params)[order[k]] = permuted[k];
-}
-
-void CheckMeasurements(const RobotModel& robot, const std::vector<RobotMeasurement>& ms, const char* who) {
-  if (ms.empty()) Throw(who, ": no measurements given; give joint values and measured positions");
-  const bool six = ms[0].R_meas_tool.has_value();
-  for (size_t i = 0; i < ms.size(); ++i) {
-    const RobotMeasurement& m = ms[i];
-    // "<who>: measurement 5" plus where it was read from, when known.
-    const std::string at = m.source.empty() ? std::string() : " (" + m.source + ")";
-    if (m.q.size() != robot.NumJoints())
-      Throw(who, ": measurement ", i + 1, at, " has ", m.q.size(), " joint values but robot '", robot.Name(), "' has ",
-            robot.NumJoints(), " joints; give one value per joint");
-    std::string why;
-    if (!robot.WithinLimits(m.q, &why))
-      Throw(who, ": measurement ", i + 1, at, ": ", why, "; remove the measurement or correct the joint limits");
-    if (!m.p_meas.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite position");
-    for (const Vec3& p : m.other_points)
-      if (!p.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite point");
-    if (m.NumPoints() != ms[0].NumPoints())
-      Throw(who, ": measurement ", i + 1, at, " has ", m.NumPoints(), " points but measurement 1 has ",
-            ms[0].NumPoints(), "; every measurement measures the same points");
-    if (m.R_meas_tool.has_value() != six)
-      Throw(who, ": measurement ", i + 1, " is ", m.R_meas_tool ? "6-D" : "3-D", " but measurement 1 is ",
-            six ? "6-D" : "3-D", "; give orientations for all measurements or for none");
+  std::vector<ParameterStatus> status(permuted.size());
+  for (size_t k = 0; k < permuted.size(); ++k) status[k] = {permuted[k].fixed, permuted[k].reason};
+  AnalyzeIdentifiability(Jp, names, tol, &status);
+  for (size_t k = 0; k < order.size(); ++k) {
+    permuted[k].fixed = status[k].fixed;
+    permuted[k].reason = status[k].reason;
+    (*params)[order[k]] = permuted[k];
   }
 }
 
@@ -486,7 +402,7 @@ RobotModel WithErrorMotionErrors(const RobotModel& robot, const std::vector<int>
 std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_meas_base,
                                         const std::vector<RobotMeasurement>& measurements,
                                         const std::vector<Vec3>& points_tool) {
-  CheckMeasurements(robot, measurements, "PredictionErrors");
+  CheckRobotMeasurements(robot, measurements, "PredictionErrors");
   std::vector<PoseError> e;
   for (const auto& m : measurements) {
     const Pose T = T_meas_base * robot.T_base_tool(m.q);
@@ -543,39 +459,13 @@ ErrorStats SummarizePoint(const std::vector<PoseError>& errors, int k, const std
   return Summarize(one);
 }
 
-Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements) {
-  CheckMeasurements(robot, measurements, "robot calibration (starting registration)");
-  const int n = static_cast<int>(measurements.size());
-  if (n < 3) Throw("InitialBaseGuess: ", n, " measurements; at least 3 non-collinear positions are needed");
-  Eigen::Matrix3Xd src(3, n), dst(3, n);
-  for (int i = 0; i < n; ++i) {
-    src.col(i) = robot.T_base_tool(measurements[i].q).t;
-    dst.col(i) = measurements[i].p_meas;
-  }
-  const Vec3 cs = src.rowwise().mean(), cd = dst.rowwise().mean();
-  double spread = 0.0;
-  const Pose T = RigidFit(src, dst, &spread);
-  if (!(spread >= 1e-9)) {
-    const double spread_meas = (dst.colwise() - cd).norm() / std::sqrt(n);
-    const double spread_model = (src.colwise() - cs).norm() / std::sqrt(n);
-    const char* why = spread_meas < 1e-6    ? "every measured position is the same (the same row repeated?)"
-                      : spread_model < 1e-6 ? "the logged joints put the tool at the same place in every row (are "
-                                              "the joint columns filled, in the unit their headers give?)"
-                                            : "the measured positions, or the tool positions of the logged "
-                                              "joints, lie on one line";
-    Throw("the starting registration cannot be found: ", why,
-          "; give measurements spread over the workspace, or a starting base transform");
-  }
-  return T;
-}
-
 RobotCalibrationResult CalibrateRobot(const RobotModel& robot_in, const Pose& T_meas_base_guess,
                                       const std::vector<RobotMeasurement>& measurements,
                                       const RobotCalibrationOptions& options) {
   std::string why;
   if (!options.IsValid(&why)) Throw("robot calibration options: ", why);
   RobotModel robot = robot_in;  // its tool becomes the registered one below
-  CheckMeasurements(robot, measurements, "robot calibration");
+  CheckRobotMeasurements(robot, measurements, "robot calibration");
   if (!options.error_motion_harmonics.empty()) {
     if (static_cast<int>(options.error_motion_harmonics.size()) != robot.NumJoints())
       Throw("robot calibration: error_motion_harmonics (--error-motion) has ", options.error_motion_harmonics.size(),

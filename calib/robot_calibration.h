@@ -11,7 +11,7 @@
 // and a measurement is the measured position p_meas of the tool (target) origin and,
 // for 6-D measurements, its orientation R_meas_tool.
 //
-// A measurement of K >= 3 points of one rigid body (calib/robot_measurements.h) predicts
+// A measurement of K >= 3 points of one rigid body (model/robot_measurements.h) predicts
 // each: point 1 at the tool origin, point k at T_flange_tool * p_k with p_k unknown.
 //
 // Parameter vector (SI: rad and m), in this order; `CalibrationParameterNames` gives the
@@ -52,7 +52,8 @@
 
 #include <Eigen/Core>
 
-#include "calib/robot_measurements.h"
+#include "model/identifiability.h"
+#include "model/robot_measurements.h"
 #include "core/pose_math.h"
 #include "model/robot_model.h"
 
@@ -191,10 +192,6 @@ std::vector<PoseError> PredictionErrors(const RobotModel& robot, const Pose& T_m
                                         const std::vector<RobotMeasurement>& measurements,
                                         const std::vector<Vec3>& points_tool = {});
 
-// A starting registration when none is known: the rigid transform (Umeyama/Kabsch) that
-// best maps the nominal tool positions T_base_tool(q_i).t onto the measured positions.
-// InputError when fewer than 3 measurements or the positions are collinear.
-Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements);
 
 // Identifies the parameters (see the header comment). `robot` holds the nominal DH table
 // and the starting tool; `T_meas_base_guess` the starting registration; the points 2..K of a
@@ -220,19 +217,6 @@ CrossValidation CrossValidateRobot(const RobotModel& robot, const Pose& T_meas_b
                                    const std::vector<RobotMeasurement>& measurements,
                                    const RobotCalibrationOptions& options, int folds);
 
-// The greedy identifiability analysis of the header comment on a Jacobian whose columns
-// are in priority order (the calibration puts base and tool first, then the joints from
-// the base out; the robot audit does the same): a column whose relative distance from the
-// span of the columns kept before it is below `tol`, or that is zero, is marked fixed in
-// `params` (index-aligned with the columns) with the reason, naming the kept parameters it
-// is a combination of. Parameters already fixed (by request) are skipped. With
-// `largest_sigma` (index-aligned; 0 = no limit) and J whitened by the measurements' noise
-// (so that (J^T J)^-1 is the parameters' covariance): then, one at a time, the kept
-// parameter whose standard deviation exceeds its largest_sigma by the most is held, with
-// the reason "weakly identifiable", until none does.
-void AnalyzeIdentifiability(const Eigen::MatrixXd& J, const std::vector<std::string>& names, double tol,
-                            std::vector<CalibrationParameter>* params,
-                            const std::vector<double>& largest_sigma = {});
 
 // Greedy pose selection: picks k of the candidate joint vectors, each step the one that
 // most improves the column-normalized information matrix of the identifiable parameters

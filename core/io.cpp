@@ -284,7 +284,11 @@ CsvTable ReadCsv(const fs::path& path) {
   int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
-    if (line.empty() || line[0] == '#' || line.find_first_not_of(" \t") == std::string::npos) continue;
+    if (!line.empty() && line[0] == '#') {
+      t.comments.push_back(line);
+      continue;
+    }
+    if (line.empty() || line.find_first_not_of(" \t") == std::string::npos) continue;
     // Excel's separator hint on the first line.
     if (t.header.empty() && line.rfind("sep=", 0) == 0) {
       if (line.substr(4, 1) != ",")

@@ -73,6 +73,7 @@ struct CsvTable {
   std::vector<std::string> header;
   std::vector<std::vector<std::string>> rows;
   std::vector<int> line_of_row;  // 1-based line number in the file
+  std::vector<std::string> comments;  // the '#' lines, as written (a report shows them)
 
   // Column index; InputError naming the file and the column when absent.
   int Column(const std::string& name) const;

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/format.h"
 #include "core/error.h"
 #include "core/pose_math.h"
 #include "core/statistics.h"
@@ -17,12 +18,6 @@ namespace mcms {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-
-std::string Num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 
 CellGeometry Cell(const FusionSetup& setup) {
   CellGeometry cell;
@@ -108,9 +103,9 @@ void CheckMount(const FusionSetup& setup, const std::vector<Mat3>& R, const std:
   }
   if (n < 10 || 2 * out <= n) return;
   Throw(setup.source.string(), ": the inclinometer's mount (inclinometer.quaternion_wxyz, the rotation from the "
-        "flange to the sensor) tilts the sensor ", Num(SelectedMedian(predicted) / kDeg),
+        "flange to the sensor) tilts the sensor ", Num4(SelectedMedian(predicted) / kDeg),
         " deg (median) from level at the orientations the tracker measured, beyond its range of ",
-        Num(incl.range / kDeg), " deg on ", out, " of ", n, " readings, while ", log.source.string(),
+        Num4(incl.range / kDeg), " deg on ", out, " of ", n, " readings, while ", log.source.string(),
         " reads within its range: is the mount right? (the sensor's z axis up when the flange is level)");
 }
 
@@ -134,8 +129,8 @@ void CheckTrackerAgainstJoints(const FusionSetup& setup, const TrackerLog& track
   const double median = SelectedMedian(as_read) / kDeg, median_alt = SelectedMedian(scalar_last) / kDeg;
   if (median > 10 && median_alt < 5 && median_alt < 0.25 * median)
     Throw(tracker.source.string(), ": the tracked flange orientations differ from the robot's (", joints.source.string(),
-          " through the setup's T_base_rig and T_flange_target) by ", Num(median), " deg (median), and by ",
-          Num(median_alt), " deg read scalar last: quaternions x, y, z, w under qw, qx, qy, qz? expected qw, qx, "
+          " through the setup's T_base_rig and T_flange_target) by ", Num4(median), " deg (median), and by ",
+          Num4(median_alt), " deg read scalar last: quaternions x, y, z, w under qw, qx, qy, qz? expected qw, qx, "
           "qy, qz (scalar first)");
 }
 

@@ -1,5 +1,7 @@
 #include "fusion/sensor_logs.h"
 
+#include "model/robot_measurements.h"
+
 #include <numbers>
 #include <yaml-cpp/yaml.h>
 
@@ -382,35 +384,17 @@ TrackerLog ReadTrackerLog(const fs::path& path) {
 JointLog ReadJointLog(const fs::path& path, const RobotModel& robot) {
   int header_line = 0;
   const CsvTable t = ReadLog(path, "robot joint", &header_line);
-  const int n = robot.NumJoints();
-  std::ostringstream expected;
-  expected << "time_s";
-  for (int i = 0; i < n; ++i)
-    expected << ",q" << i + 1 << (robot.Joints()[i].type == JointType::kRevolute ? "_rad" : "_m");
-  const auto refuse = [&](const auto&... why) {
-    Throw(path.string(), " line ", header_line, ": ", why..., "; expected the columns ", expected.str(), " (", n,
-          " joints of robot '", robot.Name(), "'; q<i>_deg is also accepted for revolute joints)");
-  };
-  if (!t.HasColumn("time_s")) refuse("missing column 'time_s'");
-  std::vector<std::pair<int, double>> cols;
-  for (int i = 0; i < n; ++i) {
-    std::string base = "q";
-    base += std::to_string(i + 1);
-    std::vector<std::pair<std::string, double>> units;
-    if (robot.Joints()[i].type == JointType::kRevolute)
-      units = kAngle;
-    else
-      units = {{"m", 1.0}};
-    bool any = false;
-    for (const auto& u : units) any = any || t.HasColumn(base + "_" + u.first);
-    if (!any) refuse("missing column for joint ", i + 1, " ('", robot.Joints()[i].name, "')");
-    cols.push_back(UnitColumn(t, header_line, base, units));
-  }
-  // Counted after each joint's column is found (issue 53: q4_rad left out was told "found
-  // 3 joint columns").
-  if (static_cast<int>(t.header.size()) != n + 1)
-    refuse("found ", t.header.size() - 1, " joint columns");
+  if (!t.HasColumn("time_s"))
+    Throw(path.string(), " line ", header_line, ": missing column 'time_s'; expected time_s and one column per joint");
+  // The joints' columns as every robot log names them (model/robot_measurements.h).
+  std::set<int> used{t.Column("time_s")};
+  const JointColumns jc = FindJointColumns(t, robot, &used);
+  for (size_t c = 0; c < t.header.size(); ++c)
+    if (!used.count(static_cast<int>(c)))
+      Throw(path.string(), " line ", header_line, ": column '", t.header[c], "' is not time_s or a joint of robot '",
+            robot.Name(), "' (", robot.NumActuated(), " joints); remove it or give the robot the log was made with");
   const int time = t.Column("time_s");
+  const int n = robot.NumActuated();
   JointLog log;
   log.source = path;
   double previous = 0.0;
@@ -420,8 +404,9 @@ JointLog ReadJointLog(const fs::path& path, const RobotModel& robot) {
     s.time_s = t.Number(i, time);
     CheckIncreasing(t, i, s.time_s, previous);
     previous = s.time_s;
-    s.q.resize(n);
-    for (int j = 0; j < n; ++j) s.q[j] = t.Number(i, cols[j].first) * cols[j].second;
+    Eigen::VectorXd qa(n);
+    for (int j = 0; j < n; ++j) qa[j] = t.Number(i, jc.column[j]) * jc.scale[j];
+    s.q = robot.ChainValues(qa);
     std::string why;
     if (!robot.WithinLimits(s.q, &why)) Throw(path.string(), " line ", s.line, ": ", why);
     log.samples.push_back(std::move(s));

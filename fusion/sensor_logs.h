@@ -15,9 +15,11 @@
 //    over all rows. The quaternion must have unit norm (to 1e-6) and the covariance must be
 //    symmetric (to 1e-9 relative) and positive definite.
 //
-//  Robot joints:  time_s,q1_<unit>,...,qN_<unit>
-//    N is the robot model's joint count; the unit per column is rad or deg for revolute
-//    joints and m for prismatic ones. Every reading must lie within the joint limits.
+//  Robot joints:  time_s,q1_<unit>,...,qN_<unit>, or the robot's joint names
+//    N is the robot's actuated joint count (a mimic joint follows its driver); the unit per
+//    column is rad or deg for revolute joints and m for prismatic ones, read by the one
+//    joint-column reader of every robot log (model/robot_measurements.h FindJointColumns).
+//    Every reading must lie within the joint limits.
 //
 //  Inclinometer:  time_s,tilt_x_<unit>,tilt_y_<unit>   (unit rad or deg)
 //    The two readings of model/inclinometer.h: the angle of the sensor's x (y) axis above

@@ -166,8 +166,8 @@ std::string Bytes(uintmax_t n) {
   return buf;
 }
 
-// A CSV as written by mcms and by spreadsheets: '#' comment lines (kept), a header row,
-// cells separated by commas, double-quoted cells may hold commas and "" quotes.
+// A CSV's cells with the lookups a report needs: a missing column is -1, a cell that is
+// not a finite number nullopt; its '#' comment lines kept.
 struct Table {
   std::vector<std::string> comments, header;
   std::vector<std::vector<std::string>> rows;
@@ -188,64 +188,21 @@ struct Table {
   }
 };
 
-std::vector<std::string> SplitCsv(const std::string& line) {
-  std::vector<std::string> cells;
-  std::string cell;
-  bool quoted = false;
-  for (size_t i = 0; i < line.size(); ++i) {
-    const char c = line[i];
-    if (quoted) {
-      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"')
-        cell += '"', ++i;
-      else if (c == '"')
-        quoted = false;
-      else
-        cell += c;
-    } else if (c == '"') {
-      quoted = true;
-    } else if (c == ',') {
-      cells.push_back(cell);
-      cell.clear();
-    } else if (c != '\r') {
-      cell += c;
-    }
-  }
-  cells.push_back(cell);
-  for (auto& s : cells) {
-    const auto b = s.find_first_not_of(" \t");
-    const auto e = s.find_last_not_of(" \t");
-    s = b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
-  }
-  return cells;
-}
-
-// Parses `text`; on a malformed table returns the problem in *error (file line named).
-Table ParseCsv(std::string text, std::string* error) {
-  if (StartsWith(text, "\xEF\xBB\xBF")) text.erase(0, 3);
+// A CSV read by the one reader (core/io.h ReadCsv); on a malformed table its message in
+// *error, and the page says the table was not shown.
+Table ReadTable(const fs::path& path, std::string* error) {
   Table t;
-  std::istringstream in(text);
-  std::string line;
-  int lineno = 0;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    if (line[0] == '#') {
-      t.comments.push_back(line);
-      continue;
-    }
-    auto cells = SplitCsv(line);
-    if (t.header.empty()) {
-      t.header = std::move(cells);
-      continue;
-    }
-    if (cells.size() != t.header.size()) {
-      *error = "line " + std::to_string(lineno) + " has " + std::to_string(cells.size()) + " cells, the header " +
-               std::to_string(t.header.size());
-      return t;
-    }
-    t.rows.push_back(std::move(cells));
+  try {
+    CsvTable c = ReadCsv(path);
+    t.comments = std::move(c.comments);
+    t.header = std::move(c.header);
+    t.rows = std::move(c.rows);
+  } catch (const InputError& e) {
+    // The page names the file already: the reader's message from its line on.
+    std::string m = e.what();
+    if (m.rfind(path.string(), 0) == 0) m = m.substr(path.string().size());
+    *error = m.substr(std::min(m.size(), m.find_first_not_of(": ")));
   }
-  if (t.header.empty()) *error = "no header row";
   return t;
 }
 
@@ -1265,7 +1222,7 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
       continue;
     }
     std::string err;
-    Table t = ParseCsv(ReadTextFile(f->path), &err);
+    Table t = ReadTable(f->path, &err);
     if (!err.empty())
       table_errors[f->name] = err;
     else
@@ -1279,7 +1236,7 @@ std::string BuildHtmlReport(const HtmlReportOptions& options, HtmlReportContents
   for (auto& [name, t] : tables) {
     if (!IsTrackerPoses(t) || t.Column("nees") >= 0 || !fs::is_regular_file(truth_file, ec)) continue;
     std::string err;
-    const Table truth = ParseCsv(ReadTextFile(truth_file), &err);
+    const Table truth = ReadTable(truth_file, &err);
     truth_notes.push_back(name + " " +
                           (err.empty() ? AddTruthColumns(t, truth) : "not compared with truth/poses.csv: " + err));
   }

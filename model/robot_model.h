@@ -59,7 +59,7 @@ struct JointAxis {
 class RobotModel {
  public:
   // How far (a share of the range) a measured joint reading may pass a limit of the robot
-  // description (calib/robot_measurements.h CoverReadings widens the limits to such
+  // description (model/robot_measurements.h CoverReadings widens the limits to such
   // readings): real readings do, by an overshoot or a joint zero that is itself a little off
   // (a TIAGo's torso reads 5 mm, 1.5 % of its range, below its URDF limit); another unit or
   // another robot passes by far more. The model's own limits are strict.
@@ -113,6 +113,13 @@ class RobotModel {
   // The geometric error model (model/joint.h): parameters per joint and in all.
   int GeometryParamsPerJoint() const { return mcms::GeometryParamsPerJoint(convention_); }
   int NumGeometryParameters() const { return GeometryParamsPerJoint() * NumJoints(); }
+  // Joint i's offset among its geometric parameters (theta for a revolute joint, d for a
+  // prismatic one in a DH table; the placement's term along the axis in a URDF chain).
+  int OffsetParameter(int i) const { return mcms::OffsetParameter(convention_, joints_[i].type); }
+  // Whether the chain's geometric terms are a DH table's (offset, link lengths, twist, each
+  // a catalog term of its own, and error motion in the robot file) rather than a URDF
+  // placement's six, which are fitted and written back only all at once.
+  bool HasDhTerms() const { return convention_ != ChainConvention::kUrdf; }
   // The URDF the robot was read from (null for a DH table).
   const UrdfSource* Urdf() const { return urdf_.get(); }
   void SetUrdf(std::shared_ptr<const UrdfSource> urdf) { urdf_ = std::move(urdf); }

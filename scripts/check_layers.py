@@ -5,7 +5,8 @@ Layers, bottom to top: core, vision, model, tracking, calib, fusion, synthetic, 
 jobs, app. A file of a layer may include the project's headers of its own layer and of
 the layers below it, never above; and no two modules (a header with its source) of one
 layer include each other (a module is a header with its source, and X_internal.h belongs to
-module X). python/, bench/, fuzz/ and tests/ sit on top and may include any layer. Exit status 1, with one line per broken rule (file, line, what it includes and
+module X). Every job (a file named *_job.h/.cpp, or one declaring a `Run...Job(` function) sits
+on the jobs floor, jobs/. python/, bench/, fuzz/ and tests/ sit on top and may include any layer. Exit status 1, with one line per broken rule (file, line, what it includes and
 why that is upward or mutual), when a rule is broken.
 
   scripts/check_layers.py [ROOT]      # the tree at ROOT (default: this checkout)
@@ -21,6 +22,7 @@ import tempfile
 LAYERS = ["core", "vision", "model", "tracking", "calib", "fusion", "synthetic", "audit", "jobs", "app"]
 TOP = ["python", "bench", "fuzz", "tests"]
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([a-z_]+)/([A-Za-z0-9_]+)\.h"')
+JOB = re.compile(r'^[A-Za-z_][\w:<>, ]*\s(Run\w*Job)\s*\(')
 
 
 def check(root):
@@ -40,8 +42,14 @@ def check(root):
                 # A module is a header with its source; X_internal.h (declarations X shares with
                 # the rest of its layer) belongs to module X.
                 module = layer + "/" + re.sub(r"_internal$", "", name.rsplit(".", 1)[0])
+                if layer in rank and layer not in ("jobs", "app") and re.search(r"_job\.(h|cpp)$", name):
+                    problems.append(f"{rel}: a job outside the jobs floor (move it to jobs/)")
                 with open(path, encoding="utf-8", errors="replace") as f:
                     for number, line in enumerate(f, 1):
+                        j = JOB.match(line)
+                        if j and layer in rank and layer not in ("jobs", "app"):
+                            problems.append(f"{rel}:{number}: declares the job {j.group(1)} outside the jobs floor "
+                                            f"(jobs/)")
                         m = INCLUDE.match(line)
                         if not m:
                             continue
@@ -96,6 +104,13 @@ def self_test():
         print("self-test, core/random.h and core/io.cpp including each other:\n  " +
               ("\n  ".join(mutual) or "(nothing found)"))
         ok = ok and any("include each other" in p for p in mutual)
+        # A job on the wrong floor.
+        with open(os.path.join(tmp, "audit", "stray_job.h"), "w") as f:
+            f.write("#pragma once\nvoid RunStrayJob(int);\n")
+        stray = check(tmp)
+        print("self-test, audit/stray_job.h declaring RunStrayJob:\n  " + ("\n  ".join(
+            p for p in stray if "stray" in p) or "(nothing found)"))
+        ok = ok and sum("stray_job.h" in p and "jobs floor" in p for p in stray) == 2
     print("self-test " + ("passed" if ok else "FAILED"))
     return 0 if ok else 1
 
@@ -111,7 +126,7 @@ def main():
         print(f"{len(problems)} include rule(s) broken (docs/architecture.md)")
         return 1
     print("include rules hold: " + " <- ".join(LAYERS) + " (no upward include, no two modules of a layer "
-          "including each other)")
+          "including each other, every job in jobs/)")
     return 0
 
 

@@ -231,13 +231,12 @@ TEST(AppFuse, BadRobotLogsAreRefused) {
     for (auto& s : l.files["joints.csv"]) s = s.substr(0, s.rfind(','));
     // The joint whose column is missing is named (issue 53), not the count.
     ExpectRefused("robot_count", l,
-                  {"joints.csv line 1: missing column for joint 6 ('A6')",
-                   "time_s,q1_rad,q2_rad,q3_rad,q4_rad,q5_rad,q6_rad", "6 joints"});
+                  {"joints.csv: no column for joint 6 ('A6') (q6_rad or q6_deg)", "6 joints", "--robot"});
   }
   {
     Logs l = clean;
     for (auto& s : l.files["joints.csv"]) s += s.rfind("time_s", 0) == 0 ? ",q7_rad" : ",0";
-    ExpectRefused("robot_extra", l, {"joints.csv line 1: found 7 joint columns", "6 joints"});
+    ExpectRefused("robot_extra", l, {"joints.csv: 7 joint columns (q1 .. q7)", "6 joints"});
   }
   {
     Logs l = clean;

@@ -12,8 +12,8 @@
 #include <unistd.h>
 
 #include "audit/robot_audit.h"
-#include "calib/robot_measurements.h"
-#include "calib/robot_validation.h"
+#include "model/robot_measurements.h"
+#include "model/robot_validation.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/random.h"

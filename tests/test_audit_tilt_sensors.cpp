@@ -16,7 +16,7 @@
 #include "audit/tilt_sensor_audit.h"
 #include "core/pose_math.h"
 #include "core/random.h"
-#include "calib/robot_measurements.h"
+#include "model/robot_measurements.h"
 #include "model/robot_model.h"
 #include "model/urdf.h"
 #include "model/tilt_sensor.h"

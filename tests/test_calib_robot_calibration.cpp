@@ -15,6 +15,7 @@
 #include "calib/robot_calibration.h"
 #include "core/error.h"
 #include "core/random.h"
+#include "model/urdf.h"
 #include "test_util.h"
 
 namespace mcms {
@@ -469,6 +470,38 @@ TEST(Registration, CircleMethodAndLeastSquaresBothRecoverTheBase) {
   bad = s1;
   bad.p_meas.pop_back();
   EXPECT_THROW(RegisterByAxisCircles(truth.nominal, bad, s2), InputError);
+}
+
+// A URDF chain's joint turns about its own axis (here y), not its frame's z: the circle
+// registration asks the chain for the axis (it took z for every convention but the
+// standard DH table's, and registered a URDF arm with a y joint 90 deg off).
+TEST(Registration, AxisCirclesOfAUrdfChainFollowItsAxes) {
+  const RobotModel arm = ParseUrdf(R"(<robot name="yarm"><link name="base"/>
+    <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.4"/>
+      <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="l1"/>
+    <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.1 0 0.2" rpy="0.2 0 0"/>
+      <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="l2"/>
+    <joint name="j3" type="revolute"><parent link="l2"/><child link="tool"/><origin xyz="0.5 0 0.05"/>
+      <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint><link name="tool"/>
+    </robot>)", "yarm.urdf", {"base", "tool"});
+  const Pose T_meas_base{ExpSO3(Vec3(0.1, -0.2, 0.7)), Vec3(1.0, 0.5, -0.3)};
+  Rng rng(7);
+  AxisSweep s1, s2;
+  s1.axis = 0;
+  s2.axis = 1;
+  for (int k = 0; k < 12; ++k) {
+    Eigen::VectorXd q(3);
+    q << (-60 + 10 * k) * kDeg, 0.3, -0.5;
+    s1.q.push_back(q);
+    q << 0.2, (-50 + 8 * k) * kDeg, -0.5;
+    s2.q.push_back(q);
+  }
+  for (auto* s : {&s1, &s2})
+    for (const auto& q : s->q)
+      s->p_meas.push_back((T_meas_base * arm.T_base_tool(q)).t + 1e-5 * Vec3(rng.Normal(), rng.Normal(), rng.Normal()));
+  const CircleRegistration c = RegisterByAxisCircles(arm, s1, s2);
+  EXPECT_LT(RotationAngle(c.T_meas_base.R, T_meas_base.R), 0.05 * kDeg);
+  EXPECT_LT((c.T_meas_base.t - T_meas_base.t).norm(), 1e-3);
 }
 
 }  // namespace

@@ -129,7 +129,7 @@ TEST(HtmlReport, EmbedsEveryFigureAndShowsTablesReportsAndInputs) {
   EXPECT_NE(html.find("rig: {cameras: 4}"), std::string::npos);
   // Bad files are named on the page, with the problem.
   EXPECT_NE(html.find("broken.svg: not an SVG document"), std::string::npos);
-  EXPECT_NE(html.find("ragged.csv: not shown as a table: line 3 has 1 cells"), std::string::npos);
+  EXPECT_NE(html.find("ragged.csv: not shown as a table: line 3: expected 2 columns as in the header, found 1"), std::string::npos);
   EXPECT_NE(html.find("images/ (1 files, not embedded)"), std::string::npos);
   EXPECT_EQ(html.find("partial-123"), std::string::npos);
   // Nothing outside the page: no URL but the SVG namespace inside the (encoded) figures.

@@ -17,7 +17,7 @@
 namespace mcms {
 
 struct RobotCalibrationJob {
-  std::filesystem::path measurements;   // CSV or YAML (calib/robot_measurements.h ReadRobotLog)
+  std::filesystem::path measurements;   // CSV or YAML (model/robot_measurements.h ReadRobotLog)
   std::filesystem::path robot;          // robot description (YAML or URDF); empty = the built-in default
   ChainSelection chain;                 // of a URDF robot
   // Calibrated robot (required): a URDF (.urdf, or whenever the robot was read from one: the

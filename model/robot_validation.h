@@ -6,7 +6,7 @@
 // Where the instrument stood (issue 51): a laser tracker, total station or motion-capture
 // system is set up anew for each session, or for each station of one. The robot stays
 // frozen; only its placement in the instrument's frame is found again:
-//  - a log with stations (calib/robot_measurements.h: a `station` column, or a dataset read
+//  - a log with stations (model/robot_measurements.h: a `station` column, or a dataset read
 //    as published) places each station from its stationing rows (every row of the station
 //    where the log gives no roles) by the rigid transform that best maps the model's
 //    predictions onto the measurements (RigidFit), and scores its evaluation rows;
@@ -22,7 +22,7 @@
 // Scores are per point of the measured body over the scored rows: 3-D error mean, median,
 // RMS, 95th percentile and max, and the 95th percentiles of the horizontal (the
 // instrument's xy) and vertical (|z|) errors, which is what a gravity-aligned instrument's
-// users quote; point 1 per posture group (calib/robot_measurements.h PostureGroups) and per
+// users quote; point 1 per posture group (model/robot_measurements.h PostureGroups) and per
 // station.
 // JSON: {"log", "rows", "scored_rows", "models": [{"model", "points": [{"point", "rows",
 //   "mean_mm", "median_mm", "rms_mm", "p95_mm", "max_mm", "p95_xy_mm", "p95_z_mm"}],
@@ -36,7 +36,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
-#include "calib/robot_measurements.h"
+#include "model/robot_measurements.h"
 #include "core/pose_math.h"
 
 namespace mcms {

@@ -1,4 +1,4 @@
-#include "audit/camera_audit_job.h"
+#include "jobs/camera_audit_job.h"
 
 #include <algorithm>
 #include <cmath>

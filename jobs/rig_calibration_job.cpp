@@ -1,4 +1,4 @@
-#include "calib/rig_calibration_job.h"
+#include "jobs/rig_calibration_job.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "calib/robot_measurements.h"
+#include "model/robot_measurements.h"
 
 #include <algorithm>
 #include <array>
@@ -14,6 +14,7 @@
 #include <Eigen/Dense>
 #include <yaml-cpp/yaml.h>
 
+#include "core/format.h"
 #include "core/limits.h"
 #include "core/error.h"
 #include "core/io.h"
@@ -28,12 +29,6 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
-
-std::string Num4(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 
 std::string Lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -68,11 +63,7 @@ std::vector<double> ReadList(const YAML::Node& n, const std::string& where) {
 
 // ---- CSV -------------------------------------------------------------------------
 
-// The joint columns of a CSV: per joint its column and the factor to SI.
-struct JointColumns {
-  std::vector<int> column;
-  std::vector<double> scale;
-};
+}  // namespace
 
 JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::set<int>* used) {
   const std::string src = t.source.string();
@@ -88,12 +79,12 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
       if (t.header[c] == name) return static_cast<int>(c);
     return -1;
   };
-  // Numbered columns q1_rad.. (q<i>_deg, q<i>_m): how many the log has.
+  // Numbered columns q1_rad.. (q<i>_deg, q<i>_m): the highest number the log has (a
+  // missing one below it is named below, not counted).
   int numbered = 0;
-  for (int i = 1;; ++i) {
+  for (int i = 1; i <= kMaxRobotJoints + 1; ++i) {
     const std::string q = std::string("q").append(std::to_string(i));  // (GCC 12 -Wrestrict misfires on "q" + ...)
-    if (Find(q + "_rad") < 0 && Find(q + "_deg") < 0 && Find(q + "_m") < 0) break;
-    numbered = i;
+    if (Find(q + "_rad") >= 0 || Find(q + "_deg") >= 0 || Find(q + "_m") >= 0) numbered = i;
   }
   // A robot whose URDF names its joints q<k> itself (q6 .. q1 down the chain, say): its
   // q<k> columns are its joint names, read by name, never by their number.
@@ -137,17 +128,18 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
         if (!act[i].name.empty() && Find(act[i].name + suffix) >= 0)
           Throw(src, ": joint ", act[i].name, " has two columns, 'q", i + 1, "...' and '", act[i].name + suffix,
                 "'; give one");
-    if (numbered != n)
+    const std::string joints =
+        robot.HasMimicJoints() ? " actuated joints (its mimic joints follow them)" : " joints";
+    if (numbered > n)
       Throw(src, ": ", numbered, " joint columns (q1 .. q", numbered, ") but robot '", robot.Name(), "' has ", n,
-            robot.HasMimicJoints() ? " actuated joints (its mimic joints follow them)" : " joints",
-            "; give the robot description the log was measured with (--robot)");
+            joints, "; give the robot description the log was measured with (--robot)");
     for (int i = 0; i < n; ++i) {
       Take(i, std::string("q").append(std::to_string(i + 1)), "");
       if (jc.column[i] < 0)
-        Throw(src, ": no column for joint ", i + 1, " (q", i + 1, act[i].type == JointType::kRevolute
-                                                                     ? "_rad or q" + std::to_string(i + 1) + "_deg"
-                                                                     : "_m",
-              ")");
+        Throw(src, ": no column for joint ", i + 1, act[i].name.empty() ? "" : " ('" + act[i].name + "')", " (q", i + 1,
+              act[i].type == JointType::kRevolute ? "_rad or q" + std::to_string(i + 1) + "_deg" : "_m", "); robot '",
+              robot.Name(), "' has ", n, joints, numbered < n ? ": give the robot description the log was measured "
+                                                                "with (--robot), or the missing column" : "");
     }
     return jc;
   }
@@ -181,6 +173,8 @@ JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::s
       }
   return jc;
 }
+
+namespace {
 
 RobotLog ReadCsvLog(const std::filesystem::path& path, const RobotModel& robot) {
   const CsvTable t = ReadCsv(path);
@@ -1155,6 +1149,57 @@ void WriteRobotMeasurements(const std::filesystem::path& path, const std::vector
   out << YAML::EndSeq << YAML::EndMap;
   const std::string text = std::string(out.c_str()) + "\n";
   WriteFileAtomically(path, [&](std::ostream& o) { o << text; });
+}
+
+void CheckRobotMeasurements(const RobotModel& robot, const std::vector<RobotMeasurement>& ms, const char* who) {
+  if (ms.empty()) Throw(who, ": no measurements given; give joint values and measured positions");
+  const bool six = ms[0].R_meas_tool.has_value();
+  for (size_t i = 0; i < ms.size(); ++i) {
+    const RobotMeasurement& m = ms[i];
+    // "<who>: measurement 5" plus where it was read from, when known.
+    const std::string at = m.source.empty() ? std::string() : " (" + m.source + ")";
+    if (m.q.size() != robot.NumJoints())
+      Throw(who, ": measurement ", i + 1, at, " has ", m.q.size(), " joint values but robot '", robot.Name(), "' has ",
+            robot.NumJoints(), " joints; give one value per joint");
+    std::string why;
+    if (!robot.WithinLimits(m.q, &why))
+      Throw(who, ": measurement ", i + 1, at, ": ", why, "; remove the measurement or correct the joint limits");
+    if (!m.p_meas.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite position");
+    for (const Vec3& p : m.other_points)
+      if (!p.allFinite()) Throw(who, ": measurement ", i + 1, at, " has a non-finite point");
+    if (m.NumPoints() != ms[0].NumPoints())
+      Throw(who, ": measurement ", i + 1, at, " has ", m.NumPoints(), " points but measurement 1 has ",
+            ms[0].NumPoints(), "; every measurement measures the same points");
+    if (m.R_meas_tool.has_value() != six)
+      Throw(who, ": measurement ", i + 1, " is ", m.R_meas_tool ? "6-D" : "3-D", " but measurement 1 is ",
+            six ? "6-D" : "3-D", "; give orientations for all measurements or for none");
+  }
+}
+
+Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements) {
+  CheckRobotMeasurements(robot, measurements, "robot calibration (starting registration)");
+  const int n = static_cast<int>(measurements.size());
+  if (n < 3) Throw("InitialBaseGuess: ", n, " measurements; at least 3 non-collinear positions are needed");
+  Eigen::Matrix3Xd src(3, n), dst(3, n);
+  for (int i = 0; i < n; ++i) {
+    src.col(i) = robot.T_base_tool(measurements[i].q).t;
+    dst.col(i) = measurements[i].p_meas;
+  }
+  const Vec3 cs = src.rowwise().mean(), cd = dst.rowwise().mean();
+  double spread = 0.0;
+  const Pose T = RigidFit(src, dst, &spread);
+  if (!(spread >= 1e-9)) {
+    const double spread_meas = (dst.colwise() - cd).norm() / std::sqrt(n);
+    const double spread_model = (src.colwise() - cs).norm() / std::sqrt(n);
+    const char* why = spread_meas < 1e-6    ? "every measured position is the same (the same row repeated?)"
+                      : spread_model < 1e-6 ? "the logged joints put the tool at the same place in every row (are "
+                                              "the joint columns filled, in the unit their headers give?)"
+                                            : "the measured positions, or the tool positions of the logged "
+                                              "joints, lie on one line";
+    Throw("the starting registration cannot be found: ", why,
+          "; give measurements spread over the workspace, or a starting base transform");
+  }
+  return T;
 }
 
 }  // namespace mcms

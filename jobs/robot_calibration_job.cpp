@@ -1,4 +1,4 @@
-#include "calib/robot_calibration_job.h"
+#include "jobs/robot_calibration_job.h"
 
 #include <numbers>
 #include <chrono>
@@ -9,7 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "calib/robot_validation.h"
+#include "model/robot_validation.h"
 #include "core/error.h"
 #include "core/limits.h"
 #include "core/io.h"

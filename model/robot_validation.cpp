@@ -1,4 +1,4 @@
-#include "calib/robot_validation.h"
+#include "model/robot_validation.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-// Robot measurements as measured (calib/robot_measurements.h): CSV logs with joint columns
+// Robot measurements as measured (model/robot_measurements.h): CSV logs with joint columns
 // named as the URDF names them, one point or K points of a rigid body, the other session's
 // posture groups; the bad inputs of a real log each named; and a URDF robot calibrated from
 // four points of a rigid body, its calibrated URDF written back.
@@ -12,8 +12,8 @@
 #include <nlohmann/json.hpp>
 
 #include "calib/robot_calibration.h"
-#include "calib/robot_calibration_job.h"
-#include "calib/robot_measurements.h"
+#include "jobs/robot_calibration_job.h"
+#include "model/robot_measurements.h"
 #include "core/random.h"
 #include "model/urdf.h"
 #include "tests/test_util.h"

@@ -15,11 +15,13 @@
 #include <cmath>
 #include <filesystem>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "core/io.h"
 #include "core/pose_math.h"
 #include "model/robot_model.h"
 
@@ -106,6 +108,19 @@ struct RobotLog {
 // not understood.
 RobotLog ReadRobotLog(const std::filesystem::path& path, const RobotModel& robot);
 
+// The joint columns of a CSV log, the one reader of them (robot logs here, `mcms fuse`'s
+// joint log in fusion/sensor_logs.h): per actuated joint (a mimic joint's driver) its
+// column and the factor to SI, found as q1_rad .. qN_rad (q<i>_deg; q<i>_m for a prismatic
+// joint) or by the robot's joint names (bare, _rad, _deg, _m); the columns used are added
+// to `used`. InputError naming the file: a joint missing (by number and name), more
+// numbered columns than joints, a joint given twice, a unit for the other joint type, a
+// URDF joint outside the chain.
+struct JointColumns {
+  std::vector<int> column;
+  std::vector<double> scale;
+};
+JointColumns FindJointColumns(const CsvTable& t, const RobotModel& robot, std::set<int>* used);
+
 // Checks a log made in code or read: joint counts, limits (a reading may pass one by
 // RobotModel::kLimitSlack of the joint's range; beyond, the likely unit is named when a
 // value would fit in another one), finite values, time order, all rows of one kind;
@@ -153,5 +168,15 @@ RobotLog KeepPoints(const RobotLog& log, const std::vector<int>& keep, const std
 std::vector<RobotMeasurement> ReadRobotMeasurements(const std::filesystem::path& path);
 // Writes calib-robot's layout, atomically, 17 significant digits (points 2..K not written).
 void WriteRobotMeasurements(const std::filesystem::path& path, const std::vector<RobotMeasurement>& m);
+
+// Every measurement usable by a fit of `robot`: one joint value per joint within its
+// limits, finite positions, the same number of points and the same kind (3-D or 6-D) in
+// each. InputError naming `who` and the measurement.
+void CheckRobotMeasurements(const RobotModel& robot, const std::vector<RobotMeasurement>& ms, const char* who);
+
+// A starting registration when none is known: the rigid transform (Umeyama/Kabsch) that
+// best maps the nominal tool positions T_base_tool(q_i).t onto the measured positions.
+// InputError when fewer than 3 measurements or the positions are collinear.
+Pose InitialBaseGuess(const RobotModel& robot, const std::vector<RobotMeasurement>& measurements);
 
 }  // namespace mcms
