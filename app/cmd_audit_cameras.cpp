@@ -32,10 +32,7 @@ int RunAudit(const AuditArgs& a) {
   job.rate_hz = a.rate;
   job.quiet = a.quiet;
   job.tracker = a.tracker.Settings();
-  RunCameraAuditJob(job, [](const std::string& s) {
-    std::printf("%s", s.c_str());
-    std::fflush(stdout);
-  });
+  RunCameraAuditJob(job, CommandOutput("audit cameras", a.quiet));
   return 0;
 }
 

@@ -32,9 +32,7 @@ int RunAuditFusion(const AuditFusionArgs& a) {
   job.json = a.json;
   job.output = a.output;
   job.false_alarm = a.false_alarm;
-  std::function<void(const std::string&)> progress;
-  if (!a.quiet) progress = [](const std::string& s) { std::fprintf(stderr, "audit fusion: %s\n", s.c_str()); };
-  RunFusionAuditJob(job, [](const std::string& s) { std::printf("%s", s.c_str()); }, progress);
+  RunFusionAuditJob(job, CommandOutput("audit fusion", a.quiet));
   return 0;
 }
 

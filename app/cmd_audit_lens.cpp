@@ -35,8 +35,7 @@ int RunAuditLens(const AuditLensArgs& a) {
   job.options.spline_nx = a.spline_nx;
   job.options.spline_ny = a.spline_ny;
   job.options.threads = a.threads;
-  if (!a.quiet) job.options.progress = [](const std::string& s) { std::fprintf(stderr, "audit lens: %s\n", s.c_str()); };
-  RunLensAuditJob(job, [](const std::string& s) { std::printf("%s", s.c_str()); });
+  RunLensAuditJob(job, CommandOutput("audit lens", a.quiet));
   return 0;
 }
 

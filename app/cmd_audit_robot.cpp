@@ -41,9 +41,7 @@ int RunAuditRobot(const AuditRobotArgs& a) {
   if (!a.base_guess.empty()) job.options.base_guess = PoseFromArgs(a.base_guess, "audit robot", "--base-guess");
   std::string why;
   if (!job.options.IsValid(&why)) Throw("audit robot: ", why);
-  if (!a.quiet) job.options.progress = [](const std::string& s) { std::fprintf(stderr, "audit robot: %s\n", s.c_str()); };
-  const std::string report = RunRobotAuditJob(job);
-  std::printf("%s", report.c_str());
+  RunRobotAuditJob(job, CommandOutput("audit robot", a.quiet));
   if (!a.output.empty())
     std::printf("wrote %s (report.txt, report.json, robot.yaml%s, residuals.csv, plots/%s%s)\n", a.output.c_str(),
                 std::filesystem::exists(std::filesystem::path(a.output) / "robot.urdf") ? ", robot.urdf" : "",

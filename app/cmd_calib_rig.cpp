@@ -35,7 +35,7 @@ int RunCalibRig(const CalibRigArgs& a) {
   job.quiet = a.quiet;
   job.limits = a.limits;
   job.allow_poor_fit = a.allow_poor_fit;
-  RunRigCalibrationJob(job, [](const std::string& s) { std::printf("%s", s.c_str()); });
+  RunRigCalibrationJob(job, CommandOutput("calib-rig", a.quiet));
   return 0;
 }
 

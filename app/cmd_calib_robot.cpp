@@ -90,9 +90,7 @@ int RunCalibRobot(const CalibRobotArgs& a) {
   job.max_iterations = a.max_iterations;
   job.allow_poor_fit = a.allow_poor_fit;
   job.registration_only = a.registration_only;
-  if (!a.quiet) job.progress = [](const std::string& line) { std::fprintf(stderr, "calib-robot: %s\n", line.c_str()); };
-  const std::string report = RunRobotCalibrationJob(job);
-  std::fputs(report.c_str(), stdout);
+  RunRobotCalibrationJob(job, CommandOutput("calib-robot", a.quiet));
   return 0;
 }
 

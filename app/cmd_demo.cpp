@@ -51,10 +51,7 @@ McmsCommand demo_command([](CLI::App& app) {
                           args->out = *out;
                           args->camera_model = ReadCameraErrorModel(*camera_model);
                           args->iso9283 = !*no_iso;
-                          RunDemo(*args, [](const std::string& text) {
-                            std::fputs(text.c_str(), stdout);
-                            std::fflush(stdout);
-                          });
+                          RunDemo(*args, CommandOutput("demo", true));
                           if (*html) {
                             const auto page = std::filesystem::path(*out) / "report.html";
                             const HtmlReportContents c = WriteHtmlReport({*out}, page);

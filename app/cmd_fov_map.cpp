@@ -96,7 +96,7 @@ int RunFovMap(const FovArgs& a) {
       Throw("--plane-distances: expected two positive distances in metres, found '", a.plane_distances, "'");
   }
   job.quiet = a.quiet;
-  RunFovMapJob(job, stdout);
+  RunFovMapJob(job, CommandOutput("fov-map", a.quiet));
   if (a.html) {
     const std::filesystem::path page = std::filesystem::path(a.out) / "report.html";
     const HtmlReportContents c = WriteHtmlReport({a.out}, page);

@@ -60,6 +60,17 @@ CLI::Validator NumberAtLeast(bool strictly_positive) {
 
 CLI::Validator PositiveNumber() { return NumberAtLeast(true); }
 
+JobOutput CommandOutput(const std::string& command, bool quiet) {
+  JobOutput out;
+  out.print = [](const std::string& s) {
+    std::fputs(s.c_str(), stdout);
+    std::fflush(stdout);
+  };
+  if (!quiet)
+    out.progress = [command](const std::string& s) { std::fprintf(stderr, "%s: %s\n", command.c_str(), s.c_str()); };
+  return out;
+}
+
 Pose PoseFromArgs(const std::vector<double>& v, const std::string& who, const std::string& option) {
   if (v.size() != 7) Throw(who, ": ", option, " takes 7 numbers x y z qw qx qy qz (m, unit quaternion), got ", v.size());
   static const char* const kNames[7] = {"x", "y", "z", "qw", "qx", "qy", "qz"};

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/pose_math.h"
+#include "jobs/job.h"
 
 namespace mcms::app {
 
@@ -36,6 +37,10 @@ int RunSelected(CLI::App& app);
 // A pose given as 7 numbers x y z qw qx qy qz (--base-guess, --tool-guess): InputError
 // naming `who` and `option` unless finite, the position within core/limits.h's robot size,
 // and the quaternion of unit norm.
+// What a command's job prints (jobs/job.h): its report on stdout (flushed), its progress
+// lines on stderr as "<command>: <line>" unless quiet.
+JobOutput CommandOutput(const std::string& command, bool quiet);
+
 Pose PoseFromArgs(const std::vector<double>& v, const std::string& who, const std::string& option);
 
 }  // namespace mcms::app

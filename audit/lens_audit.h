@@ -1,7 +1,7 @@
 // The lens mode of the model audit (issue 11, `mcms audit lens MODEL.cameramodel`): does
 // a richer lens model than the nominal one (the model a .cameramodel was solved with)
 // earn its place on the chessboard observations stored in the file's
-// optimization_inputs (calib/mrcal_optimization_inputs.h)?
+// optimization_inputs (vision/mrcal_file.h)?
 //
 // Every fit is libmrcal's own solver (mrcal_optimize), with mrcal's regularisation, on
 // one camera (the file's icam_intrinsics; each of its board observations gets its own
@@ -34,7 +34,7 @@
 #include <string>
 #include <vector>
 
-#include "calib/mrcal_optimization_inputs.h"
+#include "vision/mrcal_file.h"
 #include "audit/audit_report.h"
 
 namespace mcms {

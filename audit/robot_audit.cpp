@@ -11,6 +11,7 @@
 
 #include "audit/model_selection.h"
 #include "audit/robot_audit_problem.h"
+#include "audit/robot_audit_residuals.h"
 #include "audit/robot_audit_selection.h"
 #include "core/format.h"
 #include "core/error.h"
@@ -82,170 +83,6 @@ std::vector<std::vector<Vec3>> PointPredictions(const Problem& pv, const Eigen::
     }
   }
   return e;
-}
-
-// ---------------------------------------------------------------------------------
-// Residual tests of the nominal fit
-
-// A joint as reports name it: "joint 3", or a URDF chain's joint by its name.
-std::string JointText(const RobotModel& robot, int j) {
-  return Extension{Effect::kJointOffset, j, 0}.Where(robot);
-}
-
-// The covariate an effect depends on, for plots.
-std::string CovariateOf(const RobotModel& robot, const Extension& e, bool has_temperature) {
-  const int n = robot.NumJoints();
-  switch (e.effect) {
-    case Effect::kGravityCompliance:
-      return JointText(robot, e.index) + " gravity torque";
-    case Effect::kBacklash:
-      return JointText(robot, e.index) + " move direction";
-    case Effect::kThermalDrift:
-      return e.variant == 1 && has_temperature ? "temperature" : "time";
-    case Effect::kGeometry:
-    case Effect::kClockOffset:
-      return "time";
-    case Effect::kLinkLength:
-    case Effect::kLinkTwist:
-      return JointText(robot, std::min(e.index + 1, n - 1)) + " angle";
-    default:
-      return JointText(robot, e.index) + " angle";
-  }
-}
-
-struct Covariate {
-  std::string name;
-  std::vector<double> v;
-};
-
-std::vector<Covariate> Covariates(const RobotModel& robot, const RobotLog& log, const Problem& s) {
-  std::vector<Covariate> cv;
-  const int n = robot.NumJoints();
-  const size_t N = log.rows.size();
-  Covariate t{"time", {}};
-  for (const auto& r : log.rows) t.v.push_back(r.time_s);
-  cv.push_back(t);
-  for (int j = 0; j < n; ++j) {
-    Covariate a{JointText(robot, j) + " angle", {}};
-    Covariate g{JointText(robot, j) + " gravity torque", {}};
-    Covariate d{JointText(robot, j) + " move direction", {}};
-    for (size_t i = 0; i < N; ++i) {
-      a.v.push_back(log.rows[i].q[j]);
-      g.v.push_back(s.rows[i].c.gravity_torque[j]);
-      d.v.push_back(s.rows[i].c.move_direction[j]);
-    }
-    cv.push_back(a);
-    cv.push_back(g);
-    cv.push_back(d);
-  }
-  if (log.has_temperature) {
-    Covariate c{"temperature", {}};
-    for (const auto& r : log.rows) c.v.push_back(r.temperature_c);
-    cv.push_back(c);
-  }
-  return cv;
-}
-
-// Groups of rows with the same joint values (repeats of a pose).
-std::vector<std::vector<int>> RepeatGroups(const RobotLog& log, const Eigen::VectorXd& tol) {
-  const int N = log.rows.size();
-  std::vector<int> order(N);
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](int a, int b) { return log.rows[a].q[0] < log.rows[b].q[0]; });
-  std::vector<int> group(N, -1);
-  std::vector<std::vector<int>> groups;
-  for (int ii = 0; ii < N; ++ii) {
-    const int a = order[ii];
-    if (group[a] >= 0) continue;
-    group[a] = groups.size();
-    groups.push_back({a});
-    for (int jj = ii + 1; jj < N; ++jj) {
-      const int b = order[jj];
-      if (log.rows[b].q[0] - log.rows[a].q[0] > tol[0]) break;
-      if (group[b] < 0 && ((log.rows[b].q - log.rows[a].q).cwiseAbs().array() <= tol.array()).all()) {
-        group[b] = group[a];
-        groups.back().push_back(b);
-      }
-    }
-  }
-  return groups;
-}
-
-// Residual tests of a fit (the nominal one; the final one for what remains unexplained).
-// Returns the lack-of-fit statistic (chi-square per dof of the pose means against the
-// scatter of the repeats), NaN without repeats. `num_tests`: how many tests were run.
-double TestResiduals(const RobotLog& log, const Problem& s, const FitResult& nominal, const std::vector<Covariate>& cov,
-                     double alpha, int num_params, const Eigen::VectorXd& repeat_tolerance, AuditReport* rep,
-                     int* num_tests = nullptr, int* num_failed = nullptr) {
-  double lack_of_fit = std::nan("");
-  const int N = log.rows.size(), m = s.m;
-  const Eigen::MatrixXd W = (WhiteningOf(nominal.noise) * nominal.R.transpose()).transpose();  // N x m
-  std::vector<AuditTest> tests;
-  // Lack of fit against the scatter of repeated poses.
-  const auto groups = RepeatGroups(log, repeat_tolerance);
-  const int G = groups.size();
-  const int df_pe = N - G;
-  if (df_pe >= 2 * m + 2 && m * G - num_params > 0) {
-    Eigen::MatrixXd Spe = Eigen::MatrixXd::Zero(m, m);
-    std::vector<Eigen::VectorXd> mean(G);
-    for (int g = 0; g < G; ++g) {
-      mean[g] = Eigen::VectorXd::Zero(m);
-      for (int i : groups[g]) mean[g] += nominal.R.row(i).transpose();
-      mean[g] /= groups[g].size();
-      for (int i : groups[g]) {
-        const Eigen::VectorXd d = nominal.R.row(i).transpose() - mean[g];
-        Spe += d * d.transpose();
-      }
-    }
-    Spe /= df_pe;
-    Spe.diagonal().array() += 1e-12 * Spe.trace() / m + 1e-30;
-    Eigen::LLT<Eigen::MatrixXd> llt(Spe);
-    double chi2 = 0;
-    for (int g = 0; g < G; ++g) chi2 += groups[g].size() * llt.matrixL().solve(mean[g]).squaredNorm();
-    const double d1 = m * G - num_params, d2 = static_cast<double>(m) * df_pe;
-    const double F = (chi2 / d1);
-    lack_of_fit = F;
-    const double p = FisherSurvival(F, d1, d2);
-    tests.push_back({"lack of fit against repeated poses (F, " + std::to_string(G) + " poses)", F, p, false});
-  } else {
-    rep->notes.push_back(
-        "no repeated poses (or too few): the noise is estimated from the residuals with the model, "
-        "so the nominal model's chi-square cannot be tested on its own");
-  }
-  // Lag-1 autocorrelation in time and trends against every covariate, per component.
-  const char* comp[6] = {"x", "y", "z", "rx", "ry", "rz"};
-  for (int k = 0; k < m; ++k) {
-    const std::vector<double> w(W.col(k).data(), W.col(k).data() + N);
-    tests.push_back(AutocorrelationTest(std::string("autocorrelation in time (") + comp[k] + ")", w));
-    for (const auto& c : cov)
-      if (auto t = TrendTest("trend vs " + c.name + " (" + comp[k] + ")", c.v, w)) tests.push_back(*t);
-  }
-  const double per = alpha / std::max<size_t>(1, tests.size());
-  for (auto& t : tests) t.failed = t.p_value < per;
-  if (num_tests) *num_tests = static_cast<int>(tests.size());
-  if (num_failed) *num_failed = static_cast<int>(std::count_if(tests.begin(), tests.end(), [](const AuditTest& t) { return t.failed; }));
-  // Report the failed tests and the strongest few of the rest.
-  std::vector<AuditTest> shown;
-  int failed = 0;
-  for (const auto& t : tests)
-    if (t.failed) shown.push_back(t), ++failed;
-  std::sort(shown.begin(), shown.end(), [](const AuditTest& a, const AuditTest& b) { return a.p_value < b.p_value; });
-  // The ten strongest failures are shown; the rest are counted.
-  if (shown.size() > 10) {
-    shown.resize(10);
-    rep->notes.push_back(std::to_string(failed - 10) + " more residual tests failed (the ten strongest are shown)");
-  }
-  std::vector<AuditTest> rest;
-  for (const auto& t : tests)
-    if (!t.failed) rest.push_back(t);
-  std::sort(rest.begin(), rest.end(), [](const AuditTest& a, const AuditTest& b) { return a.p_value < b.p_value; });
-  for (size_t i = 0; i < rest.size() && i < 3; ++i) shown.push_back(rest[i]);
-  rep->tests = shown;
-  char buf[160];
-  std::snprintf(buf, sizeof buf, "%zu residual tests at a family-wise false-alarm rate of %.3g (each at %.3g)",
-                tests.size(), alpha, per);
-  rep->notes.push_back(buf);
-  return lack_of_fit;
 }
 
 // ---------------------------------------------------------------------------------
@@ -471,7 +308,7 @@ std::string MassesNote(const RobotModel& robot, const RobotLog& log, const std::
   char b[600];
   if (robot.HasMasses()) {
     double total = 0;
-    for (const Joint& j : robot.Joints()) total += j.mass_kg;
+    for (const Joint& j : robot.Joints()) total += *j.mass_kg;
     std::snprintf(b, sizeof b,
                   "gravity compliance: the links' masses are the robot file's (%.3g kg in all; the tool %.3g kg), "
                   "so each joint's gravity torque is known and only its compliance is fitted (>= 0, sagging the "
@@ -488,37 +325,70 @@ std::string MassesNote(const RobotModel& robot, const RobotLog& log, const std::
   return b;
 }
 
-}  // namespace
-
-RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& o,
-                            const std::vector<RobotLog>& validate) {
-  std::string why;
-  if (!o.IsValid(&why)) Throw("robot audit options: ", why);
-  CheckRobotLog(log, robot, kMinRobotMeasurements);
-  CheckRobotLogPlausible(log, robot);
-  for (const RobotLog& v : validate) {
-    CheckRobotLogPlausible(v, robot);
-    if (v.NumPoints() != log.NumPoints() || v.six_dof() != log.six_dof())
-      Throw(v.source.string(), ": measures ", v.NumPoints(), v.six_dof() ? " point(s) with an orientation" : " point(s)",
-            " but the fitted log ", log.source.string(), " measures ", log.NumPoints(),
-            log.six_dof() ? " with an orientation" : "", "; a frozen model is scored on the same kind of measurement");
+// The robot audit's state, through its phases in order (AuditRobot): 1. the problem, the
+// nominal fit, one Jacobian and the residual tests; 2. the selection over the catalog;
+// 3. the final model (pruning, named only what predicts, what remains); 4. the report;
+// 5. the other sessions scored frozen.
+struct RobotAuditRun {
+  RobotAuditRun(const RobotModel& robot_in, const RobotLog& log_in, const RobotAuditOptions& o_in,
+                const std::vector<RobotLog>& validate_in, RobotAuditResult* result_in)
+      : robot(robot_in), log(log_in), o(o_in), validate(validate_in), result(*result_in), rep(result_in->report),
+        say([&o_in](const std::string& s) {
+          if (o_in.progress) o_in.progress(s);
+        }) {
+    rep.mode = "robot";
+    rep.rms_unit = "m";
   }
-  const int max_folds = std::max(RobotAuditOptions{}.folds, static_cast<int>(log.rows.size()) / 4);
-  if (o.folds > max_folds)
-    Throw("--folds ", o.folds, ": ", log.source.empty() ? std::string("the robot log") : log.source.string(), " has ",
-          log.rows.size(), " measurements, enough for at most ", max_folds,
-          " folds of the time-blocked cross-validation (each needs at least 4 measurements)");
-  const auto say = [&](const std::string& s) {
-    if (o.progress) o.progress(s);
-  };
-  RobotAuditResult result;
-  AuditReport& rep = result.report;
-  rep.mode = "robot";
-  rep.rms_unit = "m";
+  void NominalFitAndTests();
+  void Selection();
+  void FinalModel();
+  void Report();
+  void OtherSessions();
 
+  // The model's free parameters: the base, and the terms of every finding kept by `keep`.
+  std::vector<int> TermsOf(const std::function<bool(const Finding&)>& keep) const {
+    std::vector<int> t = model_base;
+    for (const Finding& f : sel.findings)
+      if (!f.dropped && keep(f)) t = Union(t, f.terms);
+    return t;
+  }
+  // The selection's model refitted with free parameters F (the others at the nominal).
+  FitResult Refit(const std::vector<int>& F) const {
+    Eigen::VectorXd th = sel.cur.theta;
+    for (int p = pb.NumBase(); p < pb.P; ++p)
+      if (std::find(F.begin(), F.end(), p) == F.end()) th[p] = pb.theta0[p];
+    return FitProfiled(pb, F, th, sel.cur.noise);
+  }
+  bool IsWhole(const Finding& f) const { return opts[f.option].geometric && opts[f.option].tier == 1; }
+  bool IsSingle(const Finding& f) const { return opts[f.option].geometric && opts[f.option].tier == 0; }
+
+  const RobotModel& robot;
+  const RobotLog& log;
+  const RobotAuditOptions& o;
+  const std::vector<RobotLog>& validate;
+  RobotAuditResult& result;
+  AuditReport& rep;
+  const std::function<void(const std::string&)> say;
+
+  Problem pb;
+  std::vector<Option> geo_opts, other_opts;  // the catalog: geometric terms, the other effects
+  std::vector<int> base_free;                // registration and tool, less what is not identifiable
+  FitResult nominal;
+  double logN = 0, alpha_tests = 0, alpha_selection = 0;
+  std::vector<Covariate> cov;
+  std::set<std::string> not_identifiable;
+  Identifiable ident;
+  std::vector<Option> opts;     // the selection's candidates
+  SelectionResult sel;
+  std::vector<int> model_base;  // what every model of the selection frees
+  std::optional<AuditEffect> unconfirmed_geometry;
+  FitResult fin;                // the final model
+};
+
+void RobotAuditRun::NominalFitAndTests() {
   // 1. The problem, the nominal fit, one Jacobian, the residual tests.
-  Problem pb = MakeProblem(robot, log, o);
-  std::vector<Option> geo_opts, other_opts;
+  pb = MakeProblem(robot, log, o);
+  // geo_opts, other_opts: the catalog
   MakeLayout(&pb, log, o, &geo_opts, &other_opts, &rep.notes);
   rep.notes.push_back(MassesNote(robot, log, other_opts));
   {
@@ -542,7 +412,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   const Eigen::MatrixXd noise0 = FitNominal(&pb);
   say("linearising " + std::to_string(pb.P) + " parameters over " + std::to_string(pb.N) + " measurements");
   Linearize(&pb);
-  std::vector<int> base_free = pb.BaseParams();
+  base_free = pb.BaseParams();
   // A registration or tool parameter these poses cannot identify is held where it starts
   // (the robot file's tool): a free one wanders along the degeneracy.
   Identifiable ident0 = GeometryIdentifiability(pb, noise0, o.identifiability_tolerance);
@@ -551,22 +421,24 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     pb.theta0[p] = 0.0;
     rep.notes.push_back("held at the robot file's value, not identifiable from these measurements: " + why);
   }
-  const FitResult nominal = FitModel(pb, base_free, pb.theta0, noise0);
+  nominal = FitModel(pb, base_free, pb.theta0, noise0);
   const int N = pb.N;
-  const double logN = std::log(static_cast<double>(N));
+  logN = std::log(static_cast<double>(N));
   rep.nominal_n = static_cast<long>(N) * pb.m;
-  const std::vector<Covariate> cov = Covariates(robot, log, pb);
-  const double alpha_tests = o.false_alarm / 2.0;
+  cov = Covariates(robot, log, pb);
+  alpha_tests = o.false_alarm / 2.0;
   const double lof =
       TestResiduals(log, pb, nominal, cov, alpha_tests, static_cast<int>(base_free.size()),
                     JitterTolerance(robot, o.repeat_tolerance), &rep);
   rep.nominal_chi2_per_dof = std::isfinite(lof) ? lof : 1.0;
+}
 
+void RobotAuditRun::Selection() {
   // 2. Greedy selection over the catalog: the DH parameters these poses identify one by
   //    one and all at once ("geometry first": a real robot has all of them a little off),
   //    the other effects confirmed on top of the whole geometry.
-  std::set<std::string> not_identifiable;
-  Identifiable ident = GeometryIdentifiability(pb, nominal.noise, o.identifiability_tolerance);
+  // not_identifiable: the catalog's effects these measurements cannot identify
+  ident = GeometryIdentifiability(pb, nominal.noise, o.identifiability_tolerance);
   // The whole geometry's fit: a parameter it drives to its bound (a placement off by more
   // than any calibration finds, where the poses barely see it and an unmodelled cause pulls)
   // is held at the robot file's value, and the rest fitted again. Where that fit is far from
@@ -597,7 +469,7 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       Linearize(&pb, &g.theta);
     }
   }
-  std::vector<Option> opts;
+  opts.clear();
   for (const Option& op : geo_opts)
     if (std::find(ident.params.begin(), ident.params.end(), op.terms.front()) != ident.params.end()) opts.push_back(op);
   if (Wanted(o, Effect::kGeometry) && ident.params.size() > 1) {
@@ -605,10 +477,10 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     opts.push_back(g);
   }
   opts.insert(opts.end(), other_opts.begin(), other_opts.end());
-  const double alpha_selection = o.false_alarm / 2.0;
+  alpha_selection = o.false_alarm / 2.0;
   const std::vector<int> geometry_terms = GeometryWanted(o) ? ident.params : std::vector<int>{};
   const RobotAuditOptions& so = o;
-  SelectionResult sel =
+  sel =
       RunSelection(pb, opts, geometry_terms, nominal, so, alpha_selection, &not_identifiable, &rep.notes,
                    &rep.nested, say);
 
@@ -619,8 +491,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
   //     Every real robot has its geometry a little off, and a physical effect fitted
   //     without it soaks up geometric error: the non-geometric effects are selected again
   //     on top of it, and the final model includes it.
-  std::vector<int> model_base = base_free;
-  std::optional<AuditEffect> unconfirmed_geometry;
+  model_base = base_free;
+  unconfirmed_geometry.reset();
   const auto FreeAll = [](const FitResult& f, const std::vector<int>& terms) {
     for (int t : terms)
       if (std::find(f.free.begin(), f.free.end(), t) == f.free.end()) return false;
@@ -667,24 +539,12 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       }
     }
   }
-  const auto IsWhole = [&](const Finding& f) { return opts[f.option].geometric && opts[f.option].tier == 1; };
-  const auto IsSingle = [&](const Finding& f) { return opts[f.option].geometric && opts[f.option].tier == 0; };
+}
 
+void RobotAuditRun::FinalModel() {
   // 3. Backward pruning: geometric findings that the later effects make unnecessary.
   say("final fit");
-  FitResult fin = sel.cur;
-  const auto TermsOf = [&](const std::function<bool(const Finding&)>& keep) {
-    std::vector<int> t = model_base;
-    for (const Finding& f : sel.findings)
-      if (!f.dropped && keep(f)) t = Union(t, f.terms);
-    return t;
-  };
-  const auto Refit = [&](const std::vector<int>& F) {
-    Eigen::VectorXd th = sel.cur.theta;
-    for (int p = pb.NumBase(); p < pb.P; ++p)
-      if (std::find(F.begin(), F.end(), p) == F.end()) th[p] = pb.theta0[p];
-    return FitProfiled(pb, F, th, sel.cur.noise);
-  };
+  fin = sel.cur;
   std::string effects;
   for (const Finding& f : sel.findings)
     if (!opts[f.option].geometric) effects += (effects.empty() ? "" : ", ") + opts[f.option].key;
@@ -793,7 +653,9 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     for (const AuditTest& t : after.tests)
       if (t.failed) rep.tests_after.push_back(t);
   }
+}
 
+void RobotAuditRun::Report() {
   // 4. The report.
   std::vector<Extension> named;
   bool geometry_named = false;
@@ -834,8 +696,8 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       // The whole geometry's gain over the nominal, with the single terms named before it.
       geometry_named = true;
       if (nominal_cv.row_ll.size() == 0) nominal_cv = CrossValidate(pb, nominal, nominal.noise);
-      const FitResult g = Refit(TermsOf(IsSingle));
-      const FitResult gw = Refit(Union(TermsOf(IsSingle), ident.params));
+      const FitResult g = Refit(TermsOf([&](const Finding& x) { return IsSingle(x); }));
+      const FitResult gw = Refit(Union(TermsOf([&](const Finding& x) { return IsSingle(x); }), ident.params));
       const HeldOut gcv = CrossValidate(pb, gw, nominal.noise);
       e.heldout_rms_before = nominal_cv.rms;
       e.heldout_rms_after = gcv.rms;
@@ -884,7 +746,9 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
     result.plots.push_back(
         EffectPlotOf(pb, log, cov, fin, opts[f.option].key, IsWhole(f) ? ident.params : f.terms, opts[f.option].ext));
   }
+}
 
+void RobotAuditRun::OtherSessions() {
   // 5. Other sessions, frozen: the registration only, the whole identifiable geometry, the
   //    final model.
   if (!validate.empty()) {
@@ -971,6 +835,36 @@ RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const 
       rep.validation.push_back(s);
     }
   }
+}
+
+}  // namespace
+
+RobotAuditResult AuditRobot(const RobotModel& robot, const RobotLog& log, const RobotAuditOptions& o,
+                            const std::vector<RobotLog>& validate) {
+  std::string why;
+  if (!o.IsValid(&why)) Throw("robot audit options: ", why);
+  CheckRobotLog(log, robot, kMinRobotMeasurements);
+  CheckRobotLogPlausible(log, robot);
+  for (const RobotLog& v : validate) {
+    CheckRobotLogPlausible(v, robot);
+    if (v.NumPoints() != log.NumPoints() || v.six_dof() != log.six_dof())
+      Throw(v.source.string(), ": measures ", v.NumPoints(), v.six_dof() ? " point(s) with an orientation" : " point(s)",
+            " but the fitted log ", log.source.string(), " measures ", log.NumPoints(),
+            log.six_dof() ? " with an orientation" : "", "; a frozen model is scored on the same kind of measurement");
+  }
+  const int max_folds = std::max(RobotAuditOptions{}.folds, static_cast<int>(log.rows.size()) / 4);
+  if (o.folds > max_folds)
+    Throw("--folds ", o.folds, ": ", log.source.empty() ? std::string("the robot log") : log.source.string(), " has ",
+          log.rows.size(), " measurements, enough for at most ", max_folds,
+          " folds of the time-blocked cross-validation (each needs at least 4 measurements)");
+
+  RobotAuditResult result;
+  RobotAuditRun run(robot, log, o, validate, &result);
+  run.NominalFitAndTests();
+  run.Selection();
+  run.FinalModel();
+  run.Report();
+  run.OtherSessions();
   return result;
 }
 

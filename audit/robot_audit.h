@@ -64,6 +64,7 @@
 #include <Eigen/Core>
 
 #include "audit/robot_audit_types.h"
+#include "audit/tilt_sensor_audit.h"
 #include "model/robot_validation.h"
 
 namespace mcms {
@@ -72,6 +73,22 @@ namespace mcms {
 // mimic joints: its actuated joints by name, as its logs record them),x_a_m,y_a_m,z_a_m,
 // x_b_m,y_b_m,z_b_m,difference_mm,separation_sigma (atomically).
 void WriteNextPoses(const std::filesystem::path& path, const RobotAuditResult& result, const RobotModel& robot);
+
+// The audit's report text: the log and the robot, the nominal fit, the report
+// (AuditReport::Text), the extended model, the tilt sensors' audits and the poses that
+// would separate an undecided pair.
+std::string RobotAuditText(const RobotAuditResult& result, const RobotLog& log, const RobotModel& robot,
+                           const std::vector<TiltSensorAuditResult>& tilt);
+// report.json: the audit (AuditReport::ToJson), with "tilt_sensors" when the log has them.
+void WriteRobotAuditJson(const std::filesystem::path& path, const RobotAuditResult& result,
+                         const std::vector<TiltSensorAuditResult>& tilt);
+// The audit's output folder's contents into `dir` (an empty folder; the job writes it as a
+// whole, core/output_folder.h): report.txt (`report`), robot.yaml (and robot.urdf for a URDF
+// robot), residuals.csv, validation.csv, plots/effect<k>.svg and validation<k>.svg,
+// next_poses.csv, tilt_residuals.csv and report.json.
+void WriteRobotAuditFolder(const std::filesystem::path& dir, const RobotAuditResult& result, const RobotLog& log,
+                           const RobotModel& robot, const std::vector<TiltSensorAuditResult>& tilt,
+                           const std::string& report);
 
 // `validate`: other sessions measured in the same frame, scored frozen (RobotAuditResult::
 // validation; also in the report's JSON and text).

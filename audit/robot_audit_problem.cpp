@@ -1,3 +1,7 @@
+// Long file: the robot audit's forward model is templated over Ceres' Jet, and every autodiff
+// functor over it (registration, all parameters, the free parameters, the nominal fit) and
+// the fits that run them stay in this one translation unit: autodiff compiles slowly, and
+// a second unit would instantiate the templates again (docs/performance.md).
 #include "audit/robot_audit_problem.h"
 
 #include <algorithm>
@@ -307,7 +311,7 @@ Problem MakeProblem(const RobotModel& robot, const RobotLog& log, const RobotAud
     r.c.reference_temperature_c = o.reference_temperature_c;
     r.c.move_direction = dir;
     // The arm's own weight acts whether or not the log has a payload column.
-    const double payload = log.has_payload ? lr.payload_kg : 0.0;
+    const double payload = log.has_payload ? lr.payload_kg.value_or(0.0) : 0.0;
     r.c.gravity_torque = masses ? GravityTorque(robot, lr.q, payload)
                                 : Eigen::VectorXd(GravityTorquePerKg(robot, lr.q) * (log.has_payload ? payload : 1.0));
     r.c.gravity_lever = GravityLever(robot, lr.q);

@@ -363,7 +363,7 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     const Vec3 u = (frames[ref.frame].R * ref.R_frame_link * lr.accel[ref_k].second).normalized();
     r.R_world_base = Eigen::Quaterniond::FromTwoVectors(u, Vec3::UnitZ()).toRotationMatrix();
     r.R_base_link = frames[sensor.frame].R;
-    r.moment = CarriedMoment(robot, lr.q, sensor.frame, log.has_payload ? lr.payload_kg : 0.0);
+    r.moment = CarriedMoment(robot, lr.q, sensor.frame, log.has_payload ? lr.payload_kg.value_or(0.0) : 0.0);
     r.length = (frames[sensor.frame].t - frames[ref.frame].t).norm();
     if (telescopic) r.travel_left = std::max(0.0, bending->upper - lr.q[res.bending_joint]);  // q: chain values
     r.z = TiltsOf(lr.accel[sensor_k].second);

@@ -89,6 +89,8 @@ std::pair<std::string, std::map<std::string, std::string>> ReadManifest(const st
 
 }  // namespace
 
+std::string RecordedOutputKind(const std::filesystem::path& folder) { return ReadManifest(folder).first; }
+
 void RequireOwnEarlierOutput(const std::filesystem::path& file, const std::function<bool(const std::string&)>& ours,
                              const std::string& what, const std::string& described, const std::string& advice) {
   std::error_code ec;

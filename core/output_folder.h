@@ -29,6 +29,9 @@ void WriteFolderAtomically(const std::filesystem::path& folder, const std::vecto
 // and folder under it now. For an output written in place rather than by
 // WriteFolderAtomically (the demo), called when the run is done.
 void RecordOutputFolder(const std::filesystem::path& folder, const std::string& kind);
+// The kind of run `folder`/.mcms-output records ("audit robot", "demo", ...); "" when the
+// folder keeps no record (or a record without its first line).
+std::string RecordedOutputKind(const std::filesystem::path& folder);
 // The refusal test of WriteFolderAtomically alone, for checking before long work.
 void RequireReplaceableFolder(const std::filesystem::path& folder, const std::vector<std::string>& marker_files,
                               const std::string& kind, const std::string& what);

@@ -80,7 +80,7 @@ void WriteCameraAuditFolder(const std::filesystem::path& out, const CameraRig& r
   audit.report.WriteJson(out / "report.json");
 }
 
-void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const std::string&)>& print) {
+void RunCameraAuditJob(const CameraAuditJob& a, const JobOutput& out) {
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   namespace fs = std::filesystem;
   const fs::path dir = a.recording;
@@ -99,7 +99,7 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
   const ImageSequence seq = ScanImageSequence({dir / "images", dir / "frames.csv", a.rate_hz}, rig);
   std::vector<std::string> notes;
   Tracker tracker(rig, target, a.tracker.Options(seq, rig, &notes));
-  for (const auto& line : notes) print(line + "\n");
+  for (const auto& line : notes) out.Print(line + "\n");
   Progress progress("track", seq.frames.size(), a.quiet);
   const auto results = TrackImageSequence(
       seq, tracker, [&](size_t d, size_t) { progress.Update(d); }, a.tracker.threads);
@@ -112,11 +112,11 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
     for (const auto& r : results) {
       if (r.status == FrameStatus::kOk || r.reason.find(images) == std::string::npos) continue;
       if (named++ < 20)
-        print("frame " + std::to_string(r.frame) + " " + ToString(r.status) + ": " + r.reason + "\n");
+        out.Print("frame " + std::to_string(r.frame) + " " + ToString(r.status) + ": " + r.reason + "\n");
       else
         ++more;
     }
-    if (more > 0) print("... and " + std::to_string(more) + " more frames with unreadable images\n");
+    if (more > 0) out.Print("... and " + std::to_string(more) + " more frames with unreadable images\n");
   }
   // No pose at all: the rig does not describe these images (camera folders swapped, the
   // wrong rig or target); say so, as `mcms track` does, not "too few frames".
@@ -125,21 +125,21 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
           (dir / "images").string(), results.empty() ? std::string() : " (first frame: " + results.front().reason + ")",
           "; check that the image folders are those of ", (dir / "rig.yaml").string(),
           "'s cameras (two folders swapped?) and that target.yaml is the target seen");
-  print(CheckPoseResiduals(results).Describe() + "\n");
+  out.Print(CheckPoseResiduals(results).Describe() + "\n");
   const CameraAuditResult audit = AuditCameraModel(rig, target, results, a.audit, [&](const std::string& line) {
     if (!a.quiet) std::fprintf(stderr, "audit: %s\n", line.c_str());
   });
-  print(audit.report.Text());
+  out.Print(audit.report.Text());
   if (audit.report.effects.empty() && audit.report.undecided.empty())
-    print("every camera is consistent with the rest of the rig\n");
+    out.Print("every camera is consistent with the rest of the rig\n");
   if (!a.json.empty()) {
     audit.report.WriteJson(a.json);
-    print("wrote the audit report to " + a.json.string() + "\n");
+    out.Print("wrote the audit report to " + a.json.string() + "\n");
   }
   if (!a.output.empty()) {
     WriteFolderAtomically(a.output, {"report.json"}, "audit cameras", "audit cameras -o",
                           [&](const fs::path& out) { WriteCameraAuditFolder(out, rig, audit); });
-    print("wrote the report, the whitened residuals and their plots to " + a.output.string() + "\n");
+    out.Print("wrote the report, the whitened residuals and their plots to " + a.output.string() + "\n");
   }
   bool noise = false, target_changes = false;
   for (const auto& t : audit.terms) {
@@ -161,22 +161,22 @@ void RunCameraAuditJob(const CameraAuditJob& a, const std::function<void(const s
           "noise model); no repaired target written");
   if (!a.repaired_target.empty() && target_changes) {
     audit.ExtendedTarget(target).Write(a.repaired_target);
-    print("wrote the target with the ball positions found to " + a.repaired_target.string() + "\n");
+    out.Print("wrote the target with the ball positions found to " + a.repaired_target.string() + "\n");
   }
   if (!a.repaired_target.empty() && audit.report.effects.empty())
-    print("no effect named: no repaired target written (" + a.repaired_target.string() + ")\n");
+    out.Print("no effect named: no repaired target written (" + a.repaired_target.string() + ")\n");
   if (!a.repaired_rig.empty() && audit.ChangesRig()) {
     audit.ExtendedRig(rig).Write(a.repaired_rig);
-    print("wrote the rig extended by the effects found to " + a.repaired_rig.string() + "\n");
+    out.Print("wrote the rig extended by the effects found to " + a.repaired_rig.string() + "\n");
     for (const auto& t : audit.terms) {
       const Effect e = t.extension.effect;
       if (e == Effect::kCameraTimeOffset || e == Effect::kPixelNoiseScale || e == Effect::kTargetGeometry)
-        print("  not in the rig file: " + t.extension.Label(rig.names) + "\n");
+        out.Print("  not in the rig file: " + t.extension.Label(rig.names) + "\n");
       if (e == Effect::kCameraMoved && std::isfinite(t.from_time_s)) {
         char b[200];
         std::snprintf(b, sizeof b, "  %s: the rig has its pose after the move (from t = %.3f s)\n",
                       rig.names[t.extension.index].c_str(), t.from_time_s);
-        print(b);
+        out.Print(b);
       }
     }
   }

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "audit/camera_audit.h"
+#include "jobs/job.h"
 #include "tracking/noise_estimate.h"
 
 namespace mcms {
@@ -23,7 +24,7 @@ struct CameraAuditJob {
 
 // `print` receives the text to show. InputError (nothing written) on bad input; every
 // output is checked writable before the work, every repaired file before any is written.
-void RunCameraAuditJob(const CameraAuditJob& job, const std::function<void(const std::string&)>& print);
+void RunCameraAuditJob(const CameraAuditJob& job, const JobOutput& out);
 
 // The output folder's contents: report.txt, report.json, residuals.csv (every camera's
 // whitened leave-one-out residuals with their covariates) and plots/<camera>.svg (the

@@ -9,6 +9,7 @@
 #include <cstdio>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/io.h"
 #include "core/parallel.h"
 #include "core/random.h"
@@ -27,16 +28,6 @@ namespace mcms {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string Format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-std::string Format(const char* fmt, ...) {
-  char buf[4096];
-  va_list ap;
-  va_start(ap, fmt);
-  std::vsnprintf(buf, sizeof buf, fmt, ap);
-  va_end(ap);
-  return buf;
-}
 
 // Renders (in parallel, in chunks) and tracks (in order) every frame of the scenario.
 std::vector<FrameResult> RenderAndTrack(const Scenario& sc, int threads, bool quiet) {
@@ -164,7 +155,8 @@ bool DemoOptions::IsValid(std::string* why) const {
   return true;
 }
 
-DemoResult RunDemo(const DemoOptions& o, const std::function<void(const std::string&)>& print) {
+DemoResult RunDemo(const DemoOptions& o, const JobOutput& job_out) {
+  const std::function<void(const std::string&)> print = [&job_out](const std::string& s) { job_out.Print(s); };
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   std::string why;
   if (!o.IsValid(&why)) Throw("demo: ", why);

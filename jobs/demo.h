@@ -32,6 +32,7 @@
 
 #include "synthetic/camera_error_model.h"
 #include "jobs/iso9283_experiment.h"
+#include "jobs/job.h"
 #include "jobs/lab_experiment.h"
 
 namespace mcms {
@@ -60,7 +61,8 @@ struct DemoResult {
 };
 
 // InputError on invalid options or an unusable output folder (checked before the
-// simulation). `print` receives the text to show, as it becomes available.
-DemoResult RunDemo(const DemoOptions& options, const std::function<void(const std::string&)>& print);
+// simulation). out.print receives the text to show, as it becomes available (jobs/job.h;
+// the one job that returns a result: the tests read its figures).
+DemoResult RunDemo(const DemoOptions& options, const JobOutput& out);
 
 }  // namespace mcms

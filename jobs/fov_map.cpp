@@ -343,10 +343,24 @@ std::vector<size_t> PickSimulationPoints(const FovMap& map, int points) {
   return out;
 }
 
+bool FovSimulationOptions::IsValid(std::string* why) const {
+  std::string w;
+  if (repeats < 2)
+    w = "--repeats: the Monte Carlo needs at least 2 repeats per point, got " + std::to_string(repeats);
+  else if (points < 1)
+    w = "--points: at least 1 point, got " + std::to_string(points);
+  else if (threads < 0 || threads > kMaxThreads)
+    w = "threads must be 0 to " + std::to_string(kMaxThreads) + ", got " + std::to_string(threads);
+  else if (std::string t; !tracker.IsValid(&t))
+    w = "tracker options: " + t;
+  if (why) *why = w;
+  return w.empty();
+}
+
 std::vector<FovSimulatedPoint> SimulateFovPoints(const FovMap& map, const std::vector<size_t>& grid_indices,
                                                  const FovSimulationOptions& options,
                                                  const std::function<void(size_t, size_t)>& progress) {
-  if (options.repeats < 2) Throw("--repeats: the Monte Carlo needs at least 2 repeats per point, got ", options.repeats);
+  if (std::string why; !options.IsValid(&why)) Throw(why);
   for (size_t i : grid_indices)
     MCMS_CHECK(i < map.points.size(), "SimulateFovPoints: grid index out of range");
   std::vector<FovSimulatedPoint> out(grid_indices.size());

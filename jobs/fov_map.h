@@ -120,6 +120,9 @@ struct FovSimulationOptions {
   uint64_t seed = 1;
   int threads = 1;
   TrackerOptions tracker;  // detector noise options: the map's noise model unless set
+  // False with the reason (fewer than 1 point or 2 repeats, threads out of range, tracker
+  // options invalid).
+  bool IsValid(std::string* why) const;
 };
 // Picks `points` trackable grid points spread over the map (evenly in grid order).
 std::vector<size_t> PickSimulationPoints(const FovMap& map, int points);

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/format.h"
 #include "core/io.h"
 #include "core/output_folder.h"
 #include "jobs/fov_map_lab.h"
@@ -33,7 +34,7 @@ MeasuredReport AnalyseMeasuredAgainstRig(const MeasuredPoints& measured, const M
   return AnalyseMeasured(measured, lines, rig, predict, lab, options);
 }
 
-void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
+void RunFovMapJob(const FovMapJob& a, const JobOutput& sink) {
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   if (a.output.empty()) Throw("fov-map: give an output folder with -o DIR");
   const fs::path out = a.output;
@@ -99,19 +100,18 @@ void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
     }
   }
 
-  std::fprintf(out_text, "mcms fov-map: %zu cameras, target '%s' (%zu balls, radius %.1f mm), grid %s (%zu points), %d threads\n",
+  sink.Print(Format("mcms fov-map: %zu cameras, target '%s' (%zu balls, radius %.1f mm), grid %s (%zu points), %d threads\n",
               sc.rig.size(), sc.target.name.c_str(), sc.target.balls_target.size(), 1e3 * sc.target.ball_radius,
-              mo.grid.ToString().c_str(), mo.grid.size(), mo.threads);
+              mo.grid.ToString().c_str(), mo.grid.size(), mo.threads));
   const BlobDetectorOptions det = mo.noise.Detector();
-  std::fprintf(out_text, "pixel noise: balls %g DN over %g DN, blur %g px, gain %g e-/DN, background pixel noise %.3f DN\n",
+  sink.Print(Format("pixel noise: balls %g DN over %g DN, blur %g px, gain %g e-/DN, background pixel noise %.3f DN\n",
               ro.ball_dn * ro.exposure, ro.background_dn * ro.exposure, ro.blur_sigma_px, det.gain_e_per_dn,
-              det.read_noise_dn);
-  std::fflush(out_text);
+              det.read_noise_dn));
 
   Progress progress("fov-map predict", mo.grid.size(), a.quiet);
   const FovMap map = ComputeFovMap(sc.rig, sc.target, mo, [&](size_t d, size_t) { progress.Update(d); });
   progress.Finish();
-  std::fprintf(out_text, "%s", FovMapSummary(map).c_str());
+  sink.Print(FovMapSummary(map));
 
   std::vector<FovSimulatedPoint> sim;
   if (a.simulate > 0) {
@@ -124,16 +124,16 @@ void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
     Progress sp("fov-map simulate", pick.size() * a.repeats, a.quiet);
     sim = SimulateFovPoints(map, pick, so, [&](size_t d, size_t) { sp.Update(d); });
     sp.Finish();
-    std::fprintf(out_text, "Monte Carlo (%d rendered and tracked frames per point), sigma in mm, predicted / simulated:\n", a.repeats);
+    sink.Print(Format("Monte Carlo (%d rendered and tracked frames per point), sigma in mm, predicted / simulated:\n", a.repeats));
     int consistent = 0;
     for (const auto& s : sim) {
       const Vec3 pp = s.predicted_sigma_p * 1e3, ss = s.simulated_sigma_p * 1e3;
-      std::fprintf(out_text, "  (%6.3f, %6.3f, %6.3f) m  x %.4f / %.4f  y %.4f / %.4f  z %.4f / %.4f  d %.4f / %.4f  tracked %d/%d  %s\n",
+      sink.Print(Format("  (%6.3f, %6.3f, %6.3f) m  x %.4f / %.4f  y %.4f / %.4f  z %.4f / %.4f  d %.4f / %.4f  tracked %d/%d  %s\n",
                   s.p_rig.x(), s.p_rig.y(), s.p_rig.z(), pp.x(), ss.x(), pp.y(), ss.y(), pp.z(), ss.z(), pp.norm(), ss.norm(),
-                  s.tracked, s.tracked + s.lost, s.AllConsistent() ? "consistent (99 % chi-square band, 6 axes)" : "OUTSIDE the 99 % band");
+                  s.tracked, s.tracked + s.lost, s.AllConsistent() ? "consistent (99 % chi-square band, 6 axes)" : "OUTSIDE the 99 % band"));
       consistent += s.AllConsistent();
     }
-    std::fprintf(out_text, "  %d of %zu points consistent on all six axes\n", consistent, sim.size());
+    sink.Print(Format("  %d of %zu points consistent on all six axes\n", consistent, sim.size()));
   }
 
   std::optional<MeasuredReport> report;
@@ -143,7 +143,7 @@ void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
     mao.plane_last_distance_m = a.plane_last_distance_m;
     if (!a.quiet) std::fprintf(stderr, "fov-map: fitting the measured data (with leave-one-out and layout variants)\n");
     report = AnalyseMeasuredAgainstRig(*measured, lines ? &*lines : nullptr, sc.rig, sc.target, mo, mao);
-    std::fprintf(out_text, "%s", report->text.c_str());
+    sink.Print(report->text);
   }
 
   WriteFolderAtomically(out, kFovMapMarkers, "fov-map", "fov-map -o", [&](const fs::path& dir) {
@@ -151,8 +151,8 @@ void RunFovMapJob(const FovMapJob& a, std::FILE* out_text) {
     if (report) WriteMeasuredReport(*report, dir);
   });
   if (report && !a.json.empty()) WriteMeasuredJson(*report, a.json);
-  std::fprintf(out_text, "wrote %s/map.csv, heat maps per z plane, sigma_vs_distance.svg, region.txt%s%s\n", out.string().c_str(),
-              sim.empty() ? "" : ", simulated.csv", report ? ", measured.csv, measured_fit.txt" : "");
+  sink.Print(Format("wrote %s/map.csv, heat maps per z plane, sigma_vs_distance.svg, region.txt%s%s\n", out.string().c_str(),
+              sim.empty() ? "" : ", simulated.csv", report ? ", measured.csv, measured_fit.txt" : ""));
 }
 
 }  // namespace mcms

@@ -12,6 +12,7 @@
 #include "audit/repeatability.h"
 #include "core/pose_math.h"
 #include "jobs/fov_map.h"
+#include "jobs/job.h"
 
 namespace mcms {
 
@@ -43,8 +44,8 @@ struct FovMapJob {
   bool quiet = false;                              // no progress on stderr
 };
 
-// Runs the job, printing its report to `out_text`. InputError naming the input (and
-// nothing written) on bad input; outputs are checked writable before the work.
-void RunFovMapJob(const FovMapJob& job, std::FILE* out_text);
+// Runs the job, giving its report to out.print. InputError naming the input (and nothing
+// written) on bad input; outputs are checked writable before the work.
+void RunFovMapJob(const FovMapJob& job, const JobOutput& out);
 
 }  // namespace mcms

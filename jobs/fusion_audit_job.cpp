@@ -10,8 +10,8 @@
 
 namespace mcms {
 
-void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const std::string&)>& print,
-                       const std::function<void(const std::string&)>& progress) {
+void RunFusionAuditJob(const FusionAuditJob& a, const JobOutput& out) {
+  const std::function<void(const std::string&)>& progress = out.progress;
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   const FusionSetup setup = ReadFusionSetup(a.setup);  // (and the robot file it names: an input too)
   RequireOutputsSpareInputs({{a.output, "audit fusion -o", true}, {a.json, "audit fusion --json"}},
@@ -68,7 +68,7 @@ void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const s
     }
   }
   text += r.report.Text();
-  print(text);
+  out.Print(text);
   if (!a.output.empty()) {
     WriteFolderAtomically(a.output, {"report.json"}, "audit fusion", "audit fusion -o",
                           [&](const std::filesystem::path& dir) {
@@ -77,11 +77,11 @@ void RunFusionAuditJob(const FusionAuditJob& a, const std::function<void(const s
                             if (!r.next_poses.empty()) WriteNextPoses(dir / "next_poses.csv", r, robot);
                             r.report.WriteJson(dir / "report.json");
                           });
-    print("wrote " + a.output + "\n");
+    out.Print("wrote " + a.output + "\n");
   }
   if (!a.json.empty()) {
     r.report.WriteJson(a.json);
-    print("wrote " + a.json + "\n");
+    out.Print("wrote " + a.json + "\n");
   }
 }
 

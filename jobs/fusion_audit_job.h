@@ -6,6 +6,7 @@
 #include <string>
 
 #include "audit/fusion_log_audit.h"
+#include "jobs/job.h"
 
 namespace mcms {
 
@@ -20,8 +21,7 @@ struct FusionAuditJob {
   std::string json, output;                         // empty: not written
   double false_alarm = 0.01;
 };
-// `print` receives the report text; `progress` (may be empty) the audits' progress lines.
-void RunFusionAuditJob(const FusionAuditJob& job, const std::function<void(const std::string&)>& print,
-                       const std::function<void(const std::string&)>& progress = {});
+// out.print receives the report text, out.progress (may be empty) the audits' progress lines.
+void RunFusionAuditJob(const FusionAuditJob& job, const JobOutput& out);
 
 }  // namespace mcms

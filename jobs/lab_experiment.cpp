@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/error.h"
 #include "core/random.h"
 #include "jobs/evaluation.h"
 
@@ -79,7 +80,15 @@ SensorLogs LabSensorLogs(const LabScenario& lab, const std::vector<FrameResult>&
   return logs;
 }
 
+bool LabExperimentOptions::IsValid(std::string* why) const {
+  const bool ok = std::isfinite(kf_angular_psd) && std::isfinite(kf_linear_psd) && kf_angular_psd >= 0 &&
+                  kf_linear_psd >= 0;
+  if (!ok && why) *why = "the KF's process noise densities must be finite and >= 0";
+  return ok;
+}
+
 FusionSetup LabFusionSetup(const LabScenario& lab, const LabExperimentOptions& options) {
+  if (std::string why; !options.IsValid(&why)) Throw("lab experiment options: ", why);
   FusionSetup s;
   s.source = "lab scenario";
   s.robot = lab.nominal;

@@ -48,6 +48,8 @@ struct LabExperimentOptions {
   // 0.1 um, a robot standing still; 1e-12 would already be 10 um, as large as the camera's
   // error, and the filter would discount its own past measurements accordingly.
   double kf_angular_psd = 1e-16, kf_linear_psd = 1e-16;
+  // False with the reason (a process noise that is negative or not finite).
+  bool IsValid(std::string* why) const;
 };
 
 // The experiment runs the one fusion path (fusion/stream_fusion.h) that `mcms fuse` runs:

@@ -6,7 +6,7 @@
 
 namespace mcms {
 
-void RunLensAuditJob(const LensAuditJob& job, const std::function<void(const std::string&)>& print) {
+void RunLensAuditJob(const LensAuditJob& job, const JobOutput& out) {
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   std::string why;
   if (!job.options.IsValid(&why)) Throw("audit lens: ", why);
@@ -15,16 +15,18 @@ void RunLensAuditJob(const LensAuditJob& job, const std::function<void(const std
   if (!job.output.empty()) RequireReplaceableFolder(job.output, {"report.json"}, "audit lens", "audit lens -o");
   if (!job.json.empty()) RequireWritableFile(job.json, "audit lens --json");
   const MrcalOptimizationInputsData data = ReadMrcalOptimizationInputs(job.model);
-  const LensAuditResult r = AuditLens(data, job.options);
-  print(r.report.Text());
+  LensAuditOptions options = job.options;
+  if (out.progress) options.progress = out.progress;
+  const LensAuditResult r = AuditLens(data, options);
+  out.Print(r.report.Text());
   if (!job.output.empty()) {
     WriteLensAuditFiles(r, job.output);
-    print("wrote " + job.output.string() + " (report.txt, report.json, residuals.csv, plots/" + r.camera + ".svg" +
+    out.Print("wrote " + job.output.string() + " (report.txt, report.json, residuals.csv, plots/" + r.camera + ".svg" +
           (r.chosen > 0 ? ", " + r.camera + ".cameramodel" : std::string()) + ")\n");
   }
   if (!job.json.empty()) {
     r.report.WriteJson(job.json);
-    print("wrote " + job.json.string() + "\n");
+    out.Print("wrote " + job.json.string() + "\n");
   }
 }
 

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "audit/lens_audit.h"
+#include "jobs/job.h"
 
 namespace mcms {
 
@@ -16,6 +17,6 @@ struct LensAuditJob {
   std::filesystem::path model, output, json;  // output, json: empty = not written
   LensAuditOptions options;
 };
-void RunLensAuditJob(const LensAuditJob& job, const std::function<void(const std::string&)>& print);
+void RunLensAuditJob(const LensAuditJob& job, const JobOutput& out);
 
 }  // namespace mcms

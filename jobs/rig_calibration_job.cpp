@@ -12,6 +12,7 @@
 #include "calib/calibration_board.h"
 #include "calib/mrcal_optimization_inputs.h"
 #include "core/error.h"
+#include "core/format.h"
 #include "core/io.h"
 #include "core/output_folder.h"
 
@@ -39,21 +40,6 @@ bool IsImage(const fs::path& p) {
   std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   static const std::set<std::string> kExt = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm"};
   return kExt.count(e) > 0;
-}
-
-// printf into `print`.
-std::string Format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-std::string Format(const char* fmt, ...) {
-  va_list ap;
-  va_start(ap, fmt);
-  va_list copy;
-  va_copy(copy, ap);
-  const int n = std::vsnprintf(nullptr, 0, fmt, copy);
-  va_end(copy);
-  std::string s(n > 0 ? n : 0, '\0');
-  if (n > 0) std::vsnprintf(s.data(), n + 1, fmt, ap);
-  va_end(ap);
-  return s;
 }
 
 struct Detected {
@@ -225,7 +211,8 @@ void ReportSolution(const RigCalibrationJob& a, const CameraCalibrationResult& r
 
 }  // namespace
 
-void RunRigCalibrationJob(const RigCalibrationJob& a, const std::function<void(const std::string&)>& print) {
+void RunRigCalibrationJob(const RigCalibrationJob& a, const JobOutput& sink) {
+  const std::function<void(const std::string&)> print = [&sink](const std::string& s) { sink.Print(s); };
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   const CalibrationBoard board = CalibrationBoard::Read(a.board);
   CameraCalibrationOptions options;

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "calib/camera_calibration.h"
+#include "jobs/job.h"
 
 namespace mcms {
 
@@ -32,6 +33,6 @@ struct RigCalibrationJob {
 
 // `print` receives the report (stdout of the command); progress and the solver's log go
 // to stderr unless quiet. InputError naming the input on bad input, nothing written.
-void RunRigCalibrationJob(const RigCalibrationJob& job, const std::function<void(const std::string&)>& print);
+void RunRigCalibrationJob(const RigCalibrationJob& job, const JobOutput& out);
 
 }  // namespace mcms

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "audit/robot_audit.h"
+#include "jobs/job.h"
 
 namespace mcms {
 
@@ -22,7 +23,8 @@ struct RobotAuditJob {
   std::vector<std::filesystem::path> validate;  // other sessions, scored frozen
   RobotAuditOptions options;
 };
-// Returns the report text.
-std::string RunRobotAuditJob(const RobotAuditJob& job);
+// out.print receives the report text, out.progress (may be empty) the audit's progress
+// lines (job.options.progress is used when out.progress is empty).
+void RunRobotAuditJob(const RobotAuditJob& job, const JobOutput& out);
 
 }  // namespace mcms

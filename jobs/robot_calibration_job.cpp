@@ -93,7 +93,7 @@ std::string ErrorStatsText(const ErrorStats& s) {
   return out;
 }
 
-std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
+void RunRobotCalibrationJob(const RobotCalibrationJob& job, const JobOutput& out) {
   const RunInputsRecord run_inputs;  // what it reads through its inputs is an input too
   if (job.output.empty()) Throw("calib-robot: the output robot file is missing; give -o ROBOT.yaml (or ROBOT.urdf)");
   // Refuse outputs that are inputs, and unwritable outputs, before the solve, not after it.
@@ -149,7 +149,7 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     for (const RobotLog* l : logs) CheckRobotLogPlausible(*l, robot);
   }
   const auto say = [&](const std::string& line) {
-    if (job.progress) job.progress(line);
+    out.Progress(line);
   };
 
   RobotCalibrationOptions opt;
@@ -163,7 +163,7 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   // The iteration count is not known in advance: a line at most every half second.
   using Clock = std::chrono::steady_clock;
   auto last = Clock::now();
-  if (job.progress)
+  if (out.progress)
     opt.progress = [&](int iteration, double cost) {
       if (Clock::now() - last < std::chrono::milliseconds(500)) return;
       last = Clock::now();
@@ -266,8 +266,8 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
   if (!problems.empty() && !job.allow_poor_fit)
     Throw("calib-robot: the calibration of ", job.measurements.string(), " is not trustworthy:", list,
           "\nno output written (--allow-poor-fit writes it anyway, with this warning)");
-  if (!problems.empty() && job.progress)
-    job.progress("WARNING: the calibration is not trustworthy (written because of --allow-poor-fit):" + list);
+  if (!problems.empty())
+    out.Progress("WARNING: the calibration is not trustworthy (written because of --allow-poor-fit):" + list);
 
   std::ostringstream rep;
   rep << "# mcms calib-robot report\n";
@@ -392,7 +392,7 @@ std::string RunRobotCalibrationJob(const RobotCalibrationJob& job) {
     WriteUrdf(job.output, r.robot, JointComments(robot, r));
   else
     r.robot.Write(job.output);
-  return report;
+  out.Print(report);
 }
 
 }  // namespace mcms

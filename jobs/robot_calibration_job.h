@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "calib/robot_calibration.h"
+#include "jobs/job.h"
 #include "core/pose_math.h"
 
 namespace mcms {
@@ -47,13 +48,12 @@ struct RobotCalibrationJob {
   // registered (a wrong minimum) is refused and nothing is written, unless this is set (then
   // it is written with the warning in the report and on stderr).
   bool allow_poor_fit = false;
-  // Progress lines (may be empty).
-  std::function<void(const std::string&)> progress;
 };
 
-// Runs the job; returns the report text (also written to `report` when given). InputError
-// naming the input when anything is wrong; outputs are checked writable before the solve.
-std::string RunRobotCalibrationJob(const RobotCalibrationJob& job);
+// Runs the job; out.print receives the report text (also written to `report` when given),
+// out.progress (may be empty) its progress lines. InputError naming the input when anything
+// is wrong; outputs are checked writable before the solve.
+void RunRobotCalibrationJob(const RobotCalibrationJob& job, const JobOutput& out);
 
 // Where the errors-against-joint-angle plot goes: "err.svg" -> "err-joints.svg".
 std::filesystem::path JointPlotPath(const std::filesystem::path& plot);

@@ -259,7 +259,7 @@ Eigen::VectorXd GravityTorque(const RobotModel& robot, const Eigen::VectorXd& q,
   Eigen::VectorXd tau = Eigen::VectorXd::Zero(n);
   for (int k = 1; k <= n; ++k) {
     const Joint& j = robot.Joints()[k - 1];
-    if (j.mass_kg > 0) AddPointTorque(robot, frames, k, frames[k] * j.com_m, g, j.mass_kg, tau);
+    if (j.mass_kg > 0) AddPointTorque(robot, frames, k, frames[k] * j.com_m, g, *j.mass_kg, tau);
   }
   const ToolMass& tm = robot.Tool();
   if (tm.mass_kg > 0) AddPointTorque(robot, frames, n, frames[n] * tm.com_m, g, tm.mass_kg, tau);
@@ -303,7 +303,7 @@ Vec3 CarriedMoment(const RobotModel& robot, const Eigen::VectorXd& q, int frame,
   Vec3 M = Vec3::Zero();
   for (int k = frame + 1; k <= n; ++k) {
     const Joint& j = robot.Joints()[k - 1];
-    if (j.mass_kg > 0) M += (frames[k] * j.com_m - o).cross(j.mass_kg * g);
+    if (j.mass_kg > 0) M += (frames[k] * j.com_m - o).cross(*j.mass_kg * g);
   }
   const ToolMass& tm = robot.Tool();
   if (tm.mass_kg > 0) M += (frames[n] * tm.com_m - o).cross(tm.mass_kg * g);

@@ -112,7 +112,7 @@ struct Extension {
 // What one measurement knows besides the joint values: the covariates an effect depends on.
 struct MeasurementContext {
   double time_s = 0.0;
-  double temperature_c = std::nan("");   // NaN when the log has no temperature
+  std::optional<double> temperature_c;   // empty when the log has no temperature
   double reference_temperature_c = 20.0; // temperature at which the DH table holds
   // Per joint: the sign (+1, -1, 0) of the last move's direction (backlash), and the
   // gravity torque on it (N m): of the robot's own masses and the payload when the robot
@@ -182,7 +182,7 @@ void AddRobotCorrectionT(const RobotModel& robot, const Extension& e, const T* p
         using std::exp;
         s = p[0] * (1.0 - exp(-c.time_s / p[1]));
       } else {
-        s = p[0] * (std::isfinite(c.temperature_c) ? c.temperature_c - c.reference_temperature_c : 0.0);
+        s = p[0] * (c.temperature_c ? *c.temperature_c - c.reference_temperature_c : 0.0);
       }
       const int g = robot.GeometryParamsPerJoint();
       for (int k = 0; k < robot.NumJoints(); ++k) {

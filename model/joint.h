@@ -16,6 +16,7 @@
 #include <limits>
 #include <string>
 #include <utility>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -70,10 +71,10 @@ struct Joint {
   std::vector<Vec6> error_motion_sin, error_motion_cos;
   int Harmonics() const { return static_cast<int>(error_motion_sin.size()); }
   // Mass of the link this joint moves (link i, whose DH frame is frame i) and its centre
-  // of mass in frame i (m), from CAD or a data sheet. NaN = not given: a robot gives a
+  // of mass in frame i (m), from CAD or a data sheet. Empty = not given: a robot gives a
   // mass for every joint or for none (RobotModel::HasMasses). Used for the gravity torque
   // that deflects compliant joints (model/extensions.h GravityTorque).
-  double mass_kg = std::numeric_limits<double>::quiet_NaN();
+  std::optional<double> mass_kg;
   Vec3 com_m = Vec3::Zero();
   // URDF placement (ChainConvention::kUrdf; the DH parameters above are then 0, but for
   // theta_offset (revolute) and d (prismatic), which offset the joint's zero as in DH).

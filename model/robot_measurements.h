@@ -41,8 +41,8 @@ struct RobotMeasurement {
   std::vector<Vec3> other_points;    // points 2..K of the same rigid body (empty: one point)
   std::optional<Mat3> R_meas_tool;   // measured orientation of the tool (a pose)
   double time_s = 0.0;
-  double temperature_c = std::nan("");
-  double payload_kg = std::nan("");
+  std::optional<double> temperature_c;  // given when the log has the column (has_temperature)
+  std::optional<double> payload_kg;     // given when the log has the column (has_payload)
   // Joint velocities at the measurement (empty = at rest): with them the audit tests a
   // clock offset between the joint log and the instrument (`audit fusion`).
   Eigen::VectorXd qdot;

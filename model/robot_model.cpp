@@ -281,7 +281,7 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
       // The link's mass and centre of mass (in this joint's DH frame i): the arm's own
       // weight, which deflects compliant joints.
       j.mass_kg = in.Number(jn["mass_kg"], label + " mass_kg");
-      if (j.mass_kg < 0) in.Fail(jn["mass_kg"], label, ": mass_kg must be >= 0 (a mass), got ", j.mass_kg);
+      if (*j.mass_kg < 0) in.Fail(jn["mass_kg"], label, ": mass_kg must be >= 0 (a mass), got ", *j.mass_kg);
       if (jn["com_m"]) {
         const auto v = in.Numbers(jn["com_m"], 3, label + " com_m");
         j.com_m = Vec3(v[0], v[1], v[2]);
@@ -298,7 +298,7 @@ RobotModel ParseRoot(const YAML::Node& root, const YamlReader& in) {
     joints.push_back(j);
   }
   int with_mass = 0;
-  for (const Joint& j : joints) with_mass += !std::isnan(j.mass_kg);
+  for (const Joint& j : joints) with_mass += j.mass_kg.has_value();
   if (with_mass > 0 && with_mass < static_cast<int>(joints.size()))
     in.Fail(list, "mass_kg is given for ", with_mass, " of ", joints.size(),
             " joints; give every link's mass (0 for a massless one) or none");
@@ -337,8 +337,8 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
     for (int h = 0; h < j.Harmonics(); ++h)
       if (!j.error_motion_sin[h].allFinite() || !j.error_motion_cos[h].allFinite())
         Throw(who, ": ", JointLabel(joints_, i), " error motion harmonic ", h + 1, " is not finite");
-    if (!std::isnan(j.mass_kg) && !(std::isfinite(j.mass_kg) && j.mass_kg >= 0))
-      Throw(who, ": ", JointLabel(joints_, i), " mass_kg is ", j.mass_kg, "; expected a finite mass >= 0");
+    if (j.mass_kg && !(std::isfinite(*j.mass_kg) && *j.mass_kg >= 0))
+      Throw(who, ": ", JointLabel(joints_, i), " mass_kg is ", *j.mass_kg, "; expected a finite mass >= 0");
     if (!j.com_m.allFinite()) Throw(who, ": ", JointLabel(joints_, i), " com_m is not finite");
     // Limits (core/limits.h): no robot is larger, no encoder noisier, no link heavier.
     const std::string at = who + ": " + JointLabel(joints_, i);
@@ -348,7 +348,7 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
     CheckMagnitude(j.com_m.lpNorm<Eigen::Infinity>(), kMaxRobotLengthM, at + " com_m (largest coordinate)", "m");
     CheckMagnitude(j.encoder_sigma, kMaxEncoderSigma, at + " encoder_sigma",
                    j.type == JointType::kRevolute ? "rad" : "m");
-    if (!std::isnan(j.mass_kg)) CheckMagnitude(j.mass_kg, kMaxMassKg, at + " mass_kg", "kg");
+    if (j.mass_kg) CheckMagnitude(*j.mass_kg, kMaxMassKg, at + " mass_kg", "kg");
   }
   {
     // The whole chain stretched out: no robot reaches farther than a rig measures.
@@ -364,7 +364,7 @@ RobotModel::RobotModel(std::string name, ChainConvention convention, std::vector
         Throw(who, ": joints ", k + 1, " and ", i + 1, " are both named '", joints_[i].name,
               "'; a log names its joint columns by them, so each name must be unique");
   int with_mass = 0;
-  for (const Joint& j : joints_) with_mass += !std::isnan(j.mass_kg);
+  for (const Joint& j : joints_) with_mass += j.mass_kg.has_value();
   if (with_mass > 0 && with_mass < NumJoints())
     Throw(who, ": mass_kg is given for ", with_mass, " of ", NumJoints(),
           " joints; give every link's mass (0 for a massless one) or none");
@@ -452,7 +452,7 @@ Eigen::VectorXd RobotModel::ActuatedValues(const Eigen::VectorXd& q) const {
 
 bool RobotModel::HasMasses() const {
   for (const Joint& j : joints_)
-    if (std::isnan(j.mass_kg)) return false;
+    if (!j.mass_kg) return false;
   return true;
 }
 
@@ -552,8 +552,8 @@ std::string RobotModel::ToYaml() const {
           << std::vector<double>{j.lower, j.upper};
     }
     out << YAML::Key << (rev ? "encoder_sigma_rad" : "encoder_sigma_m") << YAML::Value << j.encoder_sigma;
-    if (!std::isnan(j.mass_kg)) {
-      out << YAML::Key << "mass_kg" << YAML::Value << j.mass_kg;
+    if (j.mass_kg) {
+      out << YAML::Key << "mass_kg" << YAML::Value << *j.mass_kg;
       out << YAML::Key << "com_m" << YAML::Value << YAML::Flow
           << std::vector<double>{j.com_m.x(), j.com_m.y(), j.com_m.z()};
     }

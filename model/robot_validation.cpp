@@ -158,8 +158,19 @@ std::vector<Pose> MeasuredTiltCorrections(const RobotModel& robot, const RobotLo
   return out;
 }
 
+bool PlacementOptions::IsValid(std::string* why) const {
+  std::string w;
+  if (!noise.allFinite() || noise.llt().info() != Eigen::Success)
+    w = "the position noise covariance must be finite and positive definite";
+  else if (!(false_alarm > 0 && false_alarm < 0.5))
+    w = "false_alarm must be in (0, 0.5), got " + std::to_string(false_alarm);
+  if (why) *why = w;
+  return w.empty();
+}
+
 ModelScore ScoreModel(const std::string& model, const RobotLog& log, const std::vector<std::vector<Vec3>>& predicted,
                       const std::vector<PostureGroup>& groups, const PlacementOptions& o) {
+  if (std::string why; !o.IsValid(&why)) Throw("placement options: ", why);
   ModelScore m;
   m.model = model;
   const int N = static_cast<int>(log.rows.size());

@@ -81,6 +81,9 @@ struct PlacementOptions {
   Mat3 noise = Mat3::Identity() * 1e-8;  // the fit's position noise covariance (m^2)
   double false_alarm = 0.01;
   bool fit_per_station = false;  // the fit placed the robot per station of its own
+  // False with the reason (a noise covariance that is not finite and positive definite, a
+  // false-alarm rate outside (0, 0.5)).
+  bool IsValid(std::string* why) const;
 };
 
 // The score of one model on `log` from its predictions (per row, each point, in the

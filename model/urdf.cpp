@@ -296,7 +296,7 @@ std::string DhChainUrdf(const RobotModel& robot, const std::map<std::string, std
     const Pose origin = tail * s.origin;
     tail = s.tail;
     x << "  <link name=\"" << link << "\">\n";
-    if (masses && j.mass_kg > 0) x << InertialXml(j.mass_kg, tail * j.com_m);
+    if (masses && j.mass_kg > 0) x << InertialXml(*j.mass_kg, tail * j.com_m);
     x << "  </link>\n";
     const bool rev = j.type == JointType::kRevolute;
     const bool open = !std::isfinite(j.lower) || !std::isfinite(j.upper);

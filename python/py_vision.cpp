@@ -1,5 +1,7 @@
 // Python bindings: camera models and rigs, triangulation, the five-ball tracker, the
 // camera audit and the field-of-view prediction.
+// Long file: one translation unit on purpose (python/CMakeLists.txt: pybind11 is heavy to
+// compile, and every binding here shares the argument converters above the bindings).
 #include <cmath>
 #include <limits>
 #include <opencv2/core.hpp>

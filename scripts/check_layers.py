@@ -6,8 +6,13 @@ jobs, app. A file of a layer may include the project's headers of its own layer 
 the layers below it, never above; and no two modules (a header with its source) of one
 layer include each other (a module is a header with its source, and X_internal.h belongs to
 module X). Every job (a file named *_job.h/.cpp, or one declaring a `Run...Job(` function) sits
-on the jobs floor, jobs/. python/, bench/, fuzz/ and tests/ sit on top and may include any layer. Exit status 1, with one line per broken rule (file, line, what it includes and
-why that is upward or mutual), when a rule is broken.
+on the jobs floor, jobs/, declared with the one signature `void RunXJob(const XJob& job,
+const JobOutput& out);` (jobs/job.h). The audit stands on model/ and includes nothing from calib/ (both
+read the robot's measurements from model/; neither climbs into the other). No source file
+is longer than 900 lines unless a line `// Long file: <why>` in its first 30 lines says why
+(one concern per file). python/, bench/, fuzz/ and tests/ sit on top and may include any
+layer. Exit status 1, with one line per broken rule (file, line, what it includes and why
+that is upward or mutual), when a rule is broken.
 
   scripts/check_layers.py [ROOT]      # the tree at ROOT (default: this checkout)
   scripts/check_layers.py --self-test # shows that an upward and a mutual include fail
@@ -23,6 +28,11 @@ LAYERS = ["core", "vision", "model", "tracking", "calib", "fusion", "synthetic",
 TOP = ["python", "bench", "fuzz", "tests"]
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([a-z_]+)/([A-Za-z0-9_]+)\.h"')
 JOB = re.compile(r'^[A-Za-z_][\w:<>, ]*\s(Run\w*Job)\s*\(')
+MAX_LINES = 900
+LONG_REASON = re.compile(r'^\s*(//|#)\s*Long file:\s*\S')
+# (layer, layer it must not include) beyond the floors' order: the audit confronts the
+# model with measurements; it never calls the calibration that fits it.
+FORBIDDEN = {("audit", "calib"): "the audit includes nothing from calib/ (it stands on model/)"}
 
 
 def check(root):
@@ -45,26 +55,37 @@ def check(root):
                 if layer in rank and layer not in ("jobs", "app") and re.search(r"_job\.(h|cpp)$", name):
                     problems.append(f"{rel}: a job outside the jobs floor (move it to jobs/)")
                 with open(path, encoding="utf-8", errors="replace") as f:
-                    for number, line in enumerate(f, 1):
-                        j = JOB.match(line)
-                        if j and layer in rank and layer not in ("jobs", "app"):
-                            problems.append(f"{rel}:{number}: declares the job {j.group(1)} outside the jobs floor "
-                                            f"(jobs/)")
-                        m = INCLUDE.match(line)
-                        if not m:
-                            continue
-                        to_layer, to_module = m.group(1), m.group(2)
-                        if to_layer not in rank and to_layer not in TOP:
-                            continue
-                        if layer in rank and to_layer in rank and rank[to_layer] > rank[layer]:
-                            problems.append(f"{rel}:{number}: includes {to_layer}/{to_module}.h, an upper layer "
-                                            f"({layer} is below {to_layer}; layers bottom to top: {' '.join(LAYERS)})")
-                        if layer in rank and to_layer in TOP:
-                            problems.append(f"{rel}:{number}: includes {to_layer}/{to_module}.h; {to_layer}/ sits on "
-                                            f"top of every layer")
-                        target = to_layer + "/" + re.sub(r"_internal$", "", to_module)
-                        if layer in rank and target != module:
-                            module_deps.setdefault(module, set()).add(target)
+                    lines = f.readlines()
+                if len(lines) > MAX_LINES and not any(LONG_REASON.match(x) for x in lines[:30]):
+                    problems.append(f"{rel}: {len(lines)} lines, over {MAX_LINES}, with no '// Long file: <why>' in "
+                                    f"its first 30 lines (split it by concern, or say why not)")
+                for number, line in enumerate(lines, 1):
+                    j = JOB.match(line)
+                    if j and layer in rank and layer not in ("jobs", "app"):
+                        problems.append(f"{rel}:{number}: declares the job {j.group(1)} outside the jobs floor "
+                                        f"(jobs/)")
+                    if j and layer == "jobs" and name.endswith("_job.h") and not re.match(
+                            r"^void Run\w*Job\(const \w+Job& \w+, const JobOutput& \w+\);", line):
+                        problems.append(f"{rel}:{number}: the job {j.group(1)} is not declared as every job is: "
+                                        f"void RunXJob(const XJob& job, const JobOutput& out); (jobs/job.h)")
+                    m = INCLUDE.match(line)
+                    if not m:
+                        continue
+                    to_layer, to_module = m.group(1), m.group(2)
+                    if to_layer not in rank and to_layer not in TOP:
+                        continue
+                    if layer in rank and to_layer in rank and rank[to_layer] > rank[layer]:
+                        problems.append(f"{rel}:{number}: includes {to_layer}/{to_module}.h, an upper layer "
+                                        f"({layer} is below {to_layer}; layers bottom to top: {' '.join(LAYERS)})")
+                    if (layer, to_layer) in FORBIDDEN:
+                        problems.append(f"{rel}:{number}: includes {to_layer}/{to_module}.h: "
+                                        f"{FORBIDDEN[(layer, to_layer)]}")
+                    if layer in rank and to_layer in TOP:
+                        problems.append(f"{rel}:{number}: includes {to_layer}/{to_module}.h; {to_layer}/ sits on "
+                                        f"top of every layer")
+                    target = to_layer + "/" + re.sub(r"_internal$", "", to_module)
+                    if layer in rank and target != module:
+                        module_deps.setdefault(module, set()).add(target)
     for a, deps in sorted(module_deps.items()):
         for b in sorted(deps):
             if a < b and a in module_deps.get(b, set()):
@@ -111,6 +132,32 @@ def self_test():
         print("self-test, audit/stray_job.h declaring RunStrayJob:\n  " + ("\n  ".join(
             p for p in stray if "stray" in p) or "(nothing found)"))
         ok = ok and sum("stray_job.h" in p and "jobs floor" in p for p in stray) == 2
+        # A job of another signature.
+        with open(os.path.join(tmp, "jobs", "stray_job.h"), "w") as f:
+            f.write("#pragma once\nstd::string RunStrayJob(const StrayJob& job);\n")
+        other = [p for p in check(tmp) if "stray_job.h" in p]
+        print("self-test, jobs/stray_job.h returning a string:\n  " + ("\n  ".join(other) or "(nothing found)"))
+        ok = ok and any("not declared as every job is" in p for p in other)
+        os.remove(os.path.join(tmp, "jobs", "stray_job.h"))
+        # The audit climbing into calib.
+        with open(os.path.join(tmp, "audit", "stray_job.h"), "w") as f:
+            f.write('#pragma once\n#include "calib/robot_calibration.h"\n')
+        climb = [p for p in check(tmp) if "stray_job.h:2" in p]
+        print("self-test, audit/stray_job.h including calib/robot_calibration.h:\n  " + ("\n  ".join(climb) or
+                                                                                        "(nothing found)"))
+        ok = ok and any("nothing from calib" in p for p in climb)
+        os.remove(os.path.join(tmp, "audit", "stray_job.h"))
+        # A long file without its reason, then with it.
+        long_file = os.path.join(tmp, "core", "stray_long.cpp")
+        with open(long_file, "w") as f:
+            f.write("// one concern too many\n" + "int x;\n" * (MAX_LINES + 1))
+        long_found = [p for p in check(tmp) if "stray_long.cpp" in p]
+        print("self-test, core/stray_long.cpp of " + str(MAX_LINES + 2) + " lines:\n  " +
+              ("\n  ".join(long_found) or "(nothing found)"))
+        ok = ok and any("over 900" in p for p in long_found)
+        with open(long_file, "w") as f:
+            f.write("// Long file: one table, generated\n" + "int x;\n" * (MAX_LINES + 1))
+        ok = ok and not any("stray_long.cpp" in p for p in check(tmp))
     print("self-test " + ("passed" if ok else "FAILED"))
     return 0 if ok else 1
 
@@ -126,7 +173,8 @@ def main():
         print(f"{len(problems)} include rule(s) broken (docs/architecture.md)")
         return 1
     print("include rules hold: " + " <- ".join(LAYERS) + " (no upward include, no two modules of a layer "
-          "including each other, every job in jobs/)")
+          "including each other, every job in jobs/ with one signature, audit nothing from calib, no file over "
+          f"{MAX_LINES} lines without its reason)")
     return 0
 
 

@@ -265,7 +265,7 @@ double DeflectionError(const RobotModel& robot, const RobotModel& massed, const 
     double d = 0;
     for (const auto& [name, v] : e.parameters) {
       const int col = name == "c_m_tool" ? 2 * n : (name[4] == 'o' ? 0 : n) + std::stoi(name.substr(5)) - 1;
-      d += v * L(joint, col) * (col == 2 * n && log.has_payload ? row.payload_kg : 1.0);
+      d += v * L(joint, col) * (col == 2 * n && log.has_payload ? *row.payload_kg : 1.0);
     }
     const double truth = spec.compliance[joint] * GravityTorque(massed, row.q, spec.payload_kg)[joint];
     err += (d - truth) * (d - truth);

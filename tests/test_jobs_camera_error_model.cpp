@@ -116,7 +116,7 @@ TEST(CameraErrorModel, DemoWithPaperCameraMatchesPrediction) {
   o.quiet = true;
   o.threads = 2;
   o.camera_model = PaperCameraErrorModel();
-  const DemoResult r = RunDemo(o, [](const std::string&) {});
+  const DemoResult r = RunDemo(o, {});
   ASSERT_EQ(r.lab.summary.size(), 4u);
   const auto& cam = r.lab.summary[0];
   EXPECT_EQ(cam.name, "camera");

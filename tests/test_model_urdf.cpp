@@ -115,9 +115,9 @@ TEST(Urdf, LinksCarryTheWholeSubtreeBeyondThem) {
   ASSERT_TRUE(r.HasMasses());
   // The lift carries its own 6 kg and the head on it (1.2 kg); j6's link its own 0.3 kg and
   // the hand (0.8) and finger (0.1) beyond the tip.
-  EXPECT_NEAR(r.Joints()[0].mass_kg, 7.2, 1e-12);
-  EXPECT_NEAR(r.Joints()[6].mass_kg, 1.2, 1e-12);
-  EXPECT_NEAR(r.Joints()[1].mass_kg, 2.5, 1e-12);
+  EXPECT_NEAR(*r.Joints()[0].mass_kg, 7.2, 1e-12);
+  EXPECT_NEAR(*r.Joints()[6].mass_kg, 1.2, 1e-12);
+  EXPECT_NEAR(*r.Joints()[1].mass_kg, 2.5, 1e-12);
   EXPECT_EQ(r.Tool().mass_kg, 0.0);
 }
 
@@ -128,7 +128,7 @@ TEST(Urdf, GravityTorqueIsMinusTheDerivativeOfThePotentialEnergy) {
   const auto V = [&](const Eigen::VectorXd& q) {
     const std::vector<Pose> F = r.LinkFrames(q);
     double v = 0;
-    for (int i = 0; i < r.NumJoints(); ++i) v += r.Joints()[i].mass_kg * 9.80665 * (F[i + 1] * r.Joints()[i].com_m).z();
+    for (int i = 0; i < r.NumJoints(); ++i) v += *r.Joints()[i].mass_kg * 9.80665 * (F[i + 1] * r.Joints()[i].com_m).z();
     Eigen::VectorXd out(1);
     out << v;
     return out;
@@ -141,7 +141,7 @@ TEST(Urdf, GravityTorqueIsMinusTheDerivativeOfThePotentialEnergy) {
                                                       << -dV.transpose();
     // The prismatic lift carries every link above it: its torque is their weight.
     double above = 0;
-    for (const Joint& j : r.Joints()) above += j.mass_kg;
+    for (const Joint& j : r.Joints()) above += j.mass_kg.value_or(0.0);
     EXPECT_NEAR(tau[0], -above * 9.80665, 1e-9);
   }
 }
@@ -191,7 +191,7 @@ TEST(Urdf, CalibratedUrdfParsesAndReproducesTheCalibratedModel) {
     EXPECT_LT((back.T_base_tool(q).t - cal.T_base_tool(q).t).norm(), 1e-9);
     EXPECT_LT((back.T_base_tool(q).R - cal.T_base_tool(q).R).norm(), 1e-9);
   }
-  EXPECT_NEAR(back.Joints()[0].mass_kg, 7.2, 1e-12);
+  EXPECT_NEAR(*back.Joints()[0].mass_kg, 7.2, 1e-12);
 }
 
 TEST(Urdf, DhRobotsWrittenAsUrdfHaveTheSameKinematicsAndWeight) {
@@ -356,9 +356,9 @@ TEST(Urdf, RealTiagoUrdfLoads) {
   EXPECT_EQ(r.Urdf()->base_link, "base_footprint");
   ASSERT_TRUE(r.HasMasses());
   // The hand and its fingers hang beyond wrist_ft_tool_link: arm_7's link carries them.
-  EXPECT_GT(r.Joints()[7].mass_kg, 0.5);
+  EXPECT_GT(r.Joints()[7].mass_kg.value_or(0.0), 0.5);
   double total = 0;
-  for (const Joint& j : r.Joints()) total += j.mass_kg;
+  for (const Joint& j : r.Joints()) total += j.mass_kg.value_or(0.0);
   EXPECT_GT(total, 15.0);  // torso, head and arm
 }
 
@@ -456,7 +456,7 @@ TEST(Urdf, DeepChainsAreRefusedByNameNotByTheStack) {
   ok += "<link name=\"l9000\"/></robot>";
   const RobotModel r = ParseUrdf(ok, "long.urdf", {"", "l9000"});
   EXPECT_EQ(r.NumJoints(), 1);
-  EXPECT_NEAR(r.Joints()[0].mass_kg, 8999.0, 1e-9);
+  EXPECT_NEAR(*r.Joints()[0].mass_kg, 8999.0, 1e-9);
   const RobotModel t = ParseUrdf(ok, "long.urdf");
   EXPECT_EQ(t.Urdf()->tip_link, "l9000");
 }

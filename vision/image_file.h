@@ -61,6 +61,8 @@ struct ImageFileOptions {
   std::optional<std::array<int, 2>> expected_size;
   // Every file through cv::imread (benchmarks and tests compare the readers with it).
   bool opencv_only = false;
+  // False with the reason (an expected size that is not positive).
+  bool IsValid(std::string* why) const;
 };
 
 // Reads one camera frame. On failure an empty Mat and the reason in *problem, naming the
