@@ -15,6 +15,7 @@
 
 #include "core/error.h"
 #include "core/io.h"
+#include "core/output_folder.h"
 #include "core/svg_plot.h"
 #include "jobs/html_report.h"
 #include "tests/test_util.h"
@@ -594,6 +595,21 @@ TEST(SvgPlot, GridPlacesEachPlotInItsCell) {
   for (int i = 0; i < 5; ++i) EXPECT_EQ(Count(svg, ">panel " + std::to_string(i) + "<"), 1u) << i;
   EXPECT_THROW(PlotGridSvg({}, 3), InternalError);
   EXPECT_THROW(PlotGridSvg(plots, 0), InternalError);
+}
+
+// Issue 54: the command that wrote a folder is the one its .mcms-output records, not a guess
+// from its files' names; a folder without a record is still recognised by its files.
+TEST(HtmlReport, TheCommandIsTheOneTheFolderRecords) {
+  const fs::path d = test::ScratchDir("html_report_recorded_kind");
+  // Files a tracker would write, in a folder calib-rig wrote (its record says so).
+  test::WriteText(d / "poses.csv", "frame,time_s,status,x_m,y_m,z_m,qw,qx,qy,qz\n0,0,ok,0,0,1,1,0,0,0\n");
+  EXPECT_EQ(ReportOn(d).kind, "track");  // no record: guessed from the files
+  RecordOutputFolder(d, "calib-rig");
+  EXPECT_EQ(ReportOn(d).kind, "calib-rig");
+  RecordOutputFolder(d, "audit lens");  // every audit mode is an audit
+  EXPECT_EQ(ReportOn(d).kind, "audit");
+  RecordOutputFolder(d, "render");  // a command without a first screen of its own: the files decide
+  EXPECT_EQ(ReportOn(d).kind, "track");
 }
 
 }  // namespace
