@@ -333,7 +333,7 @@ bool Geometric(const std::string& name) {
 RobotModel WithoutMasses(const RobotModel& r) {
   std::vector<Joint> j = r.Joints();
   for (Joint& x : j) {
-    x.mass_kg = std::nan("");  // not given
+    x.mass_kg.reset();  // not given
     x.com_m = Vec3::Zero();
   }
   RobotModel out = r.WithJoints(j);
