@@ -14,6 +14,7 @@
 
 #include "audit/model_selection.h"
 #include "core/error.h"
+#include "core/format.h"
 #include "core/io.h"
 #include "core/statistics.h"
 #include "model/urdf.h"
@@ -417,6 +418,7 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
       double ll = 0, cv = 0;
       std::vector<double> rows_ll, cv_rows;
       Extension e;
+      int k = 0;  // its free parameters
     };
     std::vector<Tried> tried;
     for (const Extension& e : catalog) {
@@ -431,16 +433,34 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
       t.m.held.push_back(std::vector<bool>(e.NumParameters(), false));
       t.m = a.Fit(t.m, all, nullptr, &t.S);
       const std::vector<bool>& held = t.m.held.back();
-      if (std::find(held.begin(), held.end(), true) != held.end()) {
-        // Telescopic play's overlap (its third parameter) held at an end of its search.
-        const bool overlap = e.effect == Effect::kSegmentPlay && e.variant == 1 && held[2] &&
-                             std::count(held.begin(), held.end(), true) == 1;
-        rep.notes.push_back(Label(e) + (overlap ? ": the overlap the data ask for lies outside 0.01-3 m: held at the "
-                                                  "end and not named"
-                                                : ": the data ask for a negative value (a link bending against its "
-                                                  "load): held at 0 and not named"));
+      const int n_held = static_cast<int>(std::count(held.begin(), held.end(), true));
+      // Telescopic play's overlap (its third parameter) held at the short end of its search:
+      // the stations' heights do not place it (none near full extension), the play grows
+      // as 1 / travel^2 over those seen. It still competes, its two amplitudes fitted at
+      // that overlap, the overlap held and not named. At the long end the play hardly
+      // changes with the extension: the constant play's part, and not named.
+      const bool overlap_held = e.effect == Effect::kSegmentPlay && e.variant == 1 && held[2] && n_held == 1;
+      if (overlap_held && t.m.p.back()[2] > kOverlapLo * 1.0001) {
+        rep.notes.push_back(Label(e) + ": the overlap the data ask for lies beyond 3 m (a play that hardly grows "
+                            "with the extension): held at the end and not named");
         continue;
       }
+      if (n_held > 0 && !overlap_held) {
+        rep.notes.push_back(Label(e) + ": the data ask for a negative value (a link bending against its load): held "
+                            "at 0 and not named");
+        continue;
+      }
+      if (overlap_held) {
+        double least_travel = std::numeric_limits<double>::infinity();
+        for (int i = 0; i < N; ++i) least_travel = std::min(least_travel, a.row(i).travel_left);
+        const std::string note =
+            Label(e) + Format(": the stations do not place the overlap left at full extension (its likelihood is "
+                              "highest at the end of its 0.01-3 m search; the highest station leaves %.3g m of travel): "
+                              "held at %.3g m, the play's amplitudes fitted for it",
+                              least_travel, t.m.p.back()[2]);
+        if (std::find(rep.notes.begin(), rep.notes.end(), note) == rep.notes.end()) rep.notes.push_back(note);
+      }
+      t.k = e.NumParameters() - n_held;
       t.ll = a.LogLik(t.m, t.S, all, &t.rows_ll);
       rep.nested.Record(2 * (t.ll - cur_ll), cur_ll);
       tried.push_back(std::move(t));
@@ -448,7 +468,7 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     if (tried.empty()) break;
     std::vector<SelectionCandidate> sel(tried.size());
     for (size_t i = 0; i < tried.size(); ++i) {
-      sel[i].k = tried[i].e.NumParameters();
+      sel[i].k = tried[i].k;
       sel[i].lr = std::max(0.0, 2 * (tried[i].ll - cur_ll));
       sel[i].row_loglik = tried[i].rows_ll;
     }
@@ -500,14 +520,14 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
         const double ll = a.LogLik(both, S_both, all, nullptr);
         rep.nested.Record(2 * (ll - t0.ll), t0.ll);
         rep.nested.Record(2 * (ll - t1.ll), t1.ll);
-        const bool adds0 = 2 * (ll - t1.ll) > ChiSquareThreshold(t0.e.NumParameters(), rule.alpha);
-        const bool adds1 = 2 * (ll - t0.ll) > ChiSquareThreshold(t1.e.NumParameters(), rule.alpha);
+        const bool adds0 = 2 * (ll - t1.ll) > ChiSquareThreshold(t0.k, rule.alpha);
+        const bool adds1 = 2 * (ll - t0.ll) > ChiSquareThreshold(t1.k, rule.alpha);
         if (!bound && adds0 && adds1) {
           std::vector<double> rows_cv;
           const double cv = a.HeldOut(both, o.folds, S_cur, &rows_cv);
           const double best_single = std::max(t0.cv, t1.cv);
           if (cv > best_single) {
-            const double k = t0.e.NumParameters() + t1.e.NumParameters();
+            const double k = t0.k + t1.k;
             const double bic = 2 * (ll - cur_ll) - k * rule.ln_n;
             rep.effects.push_back(Effect_(t0.e, both, cv - *cur_cv, bic));
             rep.effects.push_back(Effect_(t1.e, both, cv - *cur_cv, bic));
@@ -545,6 +565,11 @@ TiltSensorAuditResult AuditOne(const RobotModel& robot, const RobotLog& log, con
     AuditEffect& ef = rep.effects[k];
     const auto names = cur.ext[k].ParameterNames();
     for (size_t j = 0; j < names.size(); ++j) {
+      if (cur.held[k][j]) {  // a telescopic play's overlap the stations do not place
+        ef.labels.push_back({names[j], Format("%.4g (held at the end of its search: the data do not place it)",
+                                              cur.p[k][j])});
+        continue;
+      }
       ef.parameters.push_back({names[j], cur.p[k][j]});
       ef.sigma.push_back({names[j], sig[k][j]});
       const bool telescopic_play = cur.ext[k].effect == Effect::kSegmentPlay && cur.ext[k].variant == 1;

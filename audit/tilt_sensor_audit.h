@@ -21,8 +21,10 @@
 // Candidates (audit/model_selection.h, one rule for every mode): inclinometer_bias (2) and
 // inclinometer_misalignment (variant 1: the sensor turned about its own vertical, 1) of
 // the upper sensor, link_compliance (2), segment_play (1; telescopic: 3, its overlap o
-// profiled over 0.01-3 m and held, not named, at either end) and axis_tilt (2) of the link
-// carrying it (compliance and play >= 0: a link bends with its load, never against it). A
+// profiled over 0.01-3 m: where no station comes near full extension it ends at 0.01 and
+// is held there, not named, the play competing with its two amplitudes; at 3 m the play
+// hardly grows with the extension, the constant play's part, and is not tried) and
+// axis_tilt (2) of the link carrying it (compliance and play >= 0: a link bends with its load, never against it). A
 // mount tilted about the sensor's x or y reads as a bias to first order and is named as
 // one. Two candidates tied in a step are named together when, fitted together, each adds
 // to the other and the pair gains held-out. Folds for held-out gains: contiguous blocks of rows. Residual
